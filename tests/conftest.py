@@ -1,0 +1,23 @@
+"""Shared pytest fixtures."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+#: Real flight logs carried with the project (MIT, see data/flight_logs/README.md).
+FLIGHT_LOGS = REPO / "data" / "flight_logs"
+X500_LOG = FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
+QUAD4001_LOG = FLIGHT_LOGS / "px4_quad4001_v6c_stab_hover_2026-03-09.ulg"
+#: Logs not carried here (other licences): $HIL_FLIGHT_LOGS or the workspace's shared folder.
+EXTERNAL_FLIGHT_LOGS = Path(os.environ.get("HIL_FLIGHT_LOGS", REPO.parent / "shared" / "flight_logs"))
+
+
+@pytest.fixture
+def auriol_log() -> Path:
+    """The GPL-licensed X8 high-rate log; the test skips when it is not on this machine."""
+    path = EXTERNAL_FLIGHT_LOGS / "px4_octoX8_auriol_v6xrt_highrate_groundrun_2024-10-29.ulg"
+    if not path.is_file():
+        pytest.skip(f"external flight log not found: {path}")
+    return path
