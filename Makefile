@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 hil-sim: $(STAMP)
-	$(BIN)/python -m quad_model.demo
+	$(BIN)/python -m rig.open_loop_demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

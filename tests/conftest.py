@@ -1,4 +1,4 @@
-"""Shared pytest fixtures."""
+"""Shared pytest fixtures: where the real flight logs are."""
 
 import os
 from pathlib import Path
@@ -8,10 +8,22 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 #: Real flight logs carried with the project (MIT, see data/flight_logs/README.md).
 FLIGHT_LOGS = REPO / "data" / "flight_logs"
-X500_LOG = FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
-QUAD4001_LOG = FLIGHT_LOGS / "px4_quad4001_v6c_stab_hover_2026-03-09.ulg"
 #: Logs not carried here (other licences): $HIL_FLIGHT_LOGS or the workspace's shared folder.
-EXTERNAL_FLIGHT_LOGS = Path(os.environ.get("HIL_FLIGHT_LOGS", REPO.parent / "shared" / "flight_logs"))
+EXTERNAL_FLIGHT_LOGS = Path(
+    os.environ.get("HIL_FLIGHT_LOGS", REPO.parent / "shared" / "flight_logs")
+)
+
+
+@pytest.fixture
+def x500_log() -> Path:
+    """Holybro X500 V2 outdoor flight (airframe 4019): hover, mission, manoeuvres, land."""
+    return FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
+
+
+@pytest.fixture
+def quad4001_log() -> Path:
+    """Generic quad X (airframe 4001), Stabilized hover, motors-stopped noise floor first."""
+    return FLIGHT_LOGS / "px4_quad4001_v6c_stab_hover_2026-03-09.ulg"
 
 
 @pytest.fixture
