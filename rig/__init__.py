@@ -1,1 +1,1 @@
-"""The closed-loop rig: lockstep orchestration, PX4's simulator MAVLink API, scenarios, faults, logs."""
+"""The closed-loop rig: lockstep orchestration, PX4's simulator MAVLink API, faults, logs."""

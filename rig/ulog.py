@@ -1,0 +1,223 @@
+"""Streaming ULog writer: PX4's log format, written as the run goes.
+
+pyulog (the reader the whole project uses) can only write back a log it holds entirely in
+memory, so a run that crashes or is interrupted would lose everything. This writer
+streams instead: the definitions section first, then each data message as it comes, flushed
+at least every ``flush_interval_s`` of wall time, so a killed process leaves a file pyulog
+reads up to the last flush. Format: https://docs.px4.io/main/en/dev_log/ulog_file_format
+(little endian; header, definitions, data).
+
+Topics use PX4's uORB names and fields (``vehicle_attitude.q[4]`` ...), so a rig log, a PX4
+SITL log and a real flight log are read by the same credibility test plan.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+
+_MAGIC = b"ULog\x01\x12\x35"
+_FILE_VERSION = 1
+_TYPES = {  # ULog type → struct code
+    "int8_t": "b", "uint8_t": "B", "int16_t": "h", "uint16_t": "H",
+    "int32_t": "i", "uint32_t": "I", "int64_t": "q", "uint64_t": "Q",
+    "float": "f", "double": "d", "bool": "?", "char": "c",
+}  # fmt: skip
+_FIELD = re.compile(r"^(?P<type>[a-z0-9_]+)(\[(?P<n>\d+)\])?$")
+#: PX4's log levels (syslog): the level byte of a logged string.
+LOG_LEVELS = {"emerg": 0, "alert": 1, "crit": 2, "err": 3, "warn": 4, "notice": 5, "info": 6,
+              "debug": 7}  # fmt: skip
+
+
+class ULogWriteError(ValueError):
+    """A topic, field or value that cannot be written as ULog."""
+
+
+@dataclass(frozen=True)
+class _Topic:
+    name: str
+    msg_id: int
+    fields: tuple[tuple[str, int], ...]  # (name, array length or 0), timestamp excluded
+    packer: struct.Struct
+
+
+def _parse_fields(topic: str, fields: Sequence[tuple[str, str]]) -> list[tuple[str, str, int]]:
+    parsed = []
+    for field_type, field_name in fields:
+        match = _FIELD.match(field_type)
+        if not match or match["type"] not in _TYPES:
+            raise ULogWriteError(
+                f"topic {topic!r}: field {field_name!r} has unknown type {field_type!r}"
+            )
+        if field_name == "timestamp":
+            raise ULogWriteError(f"topic {topic!r}: 'timestamp' is implicit, do not declare it")
+        parsed.append((match["type"], field_name, int(match["n"] or 0)))
+    return parsed
+
+
+class ULogWriter:
+    """Write a ULog file incrementally.
+
+    All topic formats are declared up front (the format places definitions before data);
+    instances of a topic (``multi_id``) are subscribed on first use.
+
+    Parameters
+    ----------
+    path
+        Output file; its folder is created.
+    topics
+        ``{topic: [(type, field), ...]}`` with ULog types such as ``"float"`` or
+        ``"float[4]"``. The ``uint64_t timestamp`` field (µs) is added first.
+    info
+        Information messages (``sys_name``, ``ver_hw``, ...), written as ``char[n]`` strings.
+    parameters
+        Initial parameter values: ``int`` → ``int32_t``, ``float`` → ``float``.
+    start_time_us
+        The header timestamp.
+    flush_interval_s
+        Wall-clock period after which buffered data is flushed to the OS.
+
+    Examples
+    --------
+    >>> import tempfile, pyulog
+    >>> path = Path(tempfile.mkdtemp()) / "demo.ulg"
+    >>> with ULogWriter(path, {"vehicle_air_data": [("float", "baro_alt_meter")]}) as log:
+    ...     log.write("vehicle_air_data", 1000, baro_alt_meter=488.0)
+    >>> pyulog.ULog(str(path)).get_dataset("vehicle_air_data").data["baro_alt_meter"][0]
+    np.float32(488.0)
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        topics: Mapping[str, Sequence[tuple[str, str]]],
+        *,
+        info: Mapping[str, str] | None = None,
+        parameters: Mapping[str, int | float] | None = None,
+        start_time_us: int = 0,
+        flush_interval_s: float = 0.5,
+    ) -> None:
+        self.path = Path(path)
+        self._flush_interval_s = flush_interval_s
+        self._topics: dict[str, _Topic] = {}
+        self._subscriptions: dict[tuple[str, int], int] = {}
+        definitions = bytearray()
+        definitions += _message(b"B", bytes(16) + bytes(24))  # no compat/incompat flags
+        for msg_id, (name, fields) in enumerate(topics.items()):
+            parsed = _parse_fields(name, fields)
+            text = f"{name}:uint64_t timestamp;" + "".join(
+                f"{t}[{n}] {f};" if n else f"{t} {f};" for t, f, n in parsed
+            )
+            definitions += _message(b"F", text.encode())
+            code = "<Q" + "".join(f"{n or ''}{_TYPES[t]}" if t != "char" else f"{n or 1}s"
+                                  for t, _, n in parsed)  # fmt: skip
+            self._topics[name] = _Topic(
+                name, msg_id, tuple((f, n) for _, f, n in parsed), struct.Struct(code)
+            )
+        for key, value in (info or {}).items():
+            encoded = str(value).encode()
+            definitions += _key_value(b"I", f"char[{len(encoded)}] {key}", encoded)
+        for name, value in (parameters or {}).items():
+            definitions += _parameter(name, value)
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, "wb")  # noqa: SIM115 - kept open for streaming, closed in close()
+        self._file.write(_MAGIC + bytes([_FILE_VERSION]) + struct.pack("<Q", start_time_us))
+        self._file.write(definitions)
+        self._file.flush()
+        self._last_flush = time.monotonic()
+
+    def write(self, topic: str, timestamp_us: int, multi_id: int = 0, **values: object) -> None:
+        """Append one sample of ``topic``; every declared field must be given."""
+        spec = self._topics.get(topic)
+        if spec is None:
+            raise ULogWriteError(f"topic {topic!r} was not declared when the log was opened")
+        key = (topic, multi_id)
+        if key not in self._subscriptions:
+            msg_id = len(self._subscriptions)
+            self._subscriptions[key] = msg_id
+            self._file.write(_message(b"A", struct.pack("<BH", multi_id, msg_id) + topic.encode()))
+        flat: list[object] = [int(timestamp_us)]
+        for name, length in spec.fields:
+            try:
+                value = values[name]
+            except KeyError:
+                raise ULogWriteError(f"topic {topic!r}: field {name!r} missing") from None
+            if length:
+                array = np.asarray(value).ravel()
+                if array.dtype.kind in "SU":  # char[n]: one string
+                    flat.append(str(value).encode())
+                    continue
+                if array.size != length:
+                    raise ULogWriteError(
+                        f"topic {topic!r}: field {name!r} needs {length} values, got {array.size}"
+                    )
+                flat.extend(array.tolist())
+            else:
+                flat.append(value.item() if isinstance(value, np.generic) else value)
+        if len(values) != len(spec.fields):
+            extra = sorted(set(values) - {name for name, _ in spec.fields})
+            raise ULogWriteError(f"topic {topic!r}: unknown fields {extra}")
+        try:
+            payload = spec.packer.pack(*flat)
+        except struct.error as error:
+            raise ULogWriteError(f"topic {topic!r}: {error}") from None
+        self._file.write(_message(b"D", struct.pack("<H", self._subscriptions[key]) + payload))
+        self._maybe_flush()
+
+    def log(self, level: str, timestamp_us: int, text: str) -> None:
+        """Append a logged string (shown by Flight Review and pyulog as a log message)."""
+        body = struct.pack("<BQ", LOG_LEVELS[level] + ord("0"), timestamp_us) + text.encode()
+        self._file.write(_message(b"L", body))
+        self._maybe_flush()
+
+    def set_parameter(self, name: str, value: int | float) -> None:
+        """Record a parameter change during the run (as PX4 logs ``param set``)."""
+        self._file.write(_parameter(name, value))
+        self._maybe_flush()
+
+    def flush(self) -> None:
+        self._file.flush()
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        if not self._file.closed:
+            self._file.flush()
+            self._file.close()
+
+    def __enter__(self) -> ULogWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def _maybe_flush(self) -> None:
+        if time.monotonic() - self._last_flush >= self._flush_interval_s:
+            self.flush()
+
+
+def _message(kind: bytes, body: bytes) -> bytes:
+    return struct.pack("<HB", len(body), kind[0]) + body
+
+
+def _key_value(kind: bytes, key: str, value: bytes) -> bytes:
+    encoded = key.encode()
+    return _message(kind, bytes([len(encoded)]) + encoded + value)
+
+
+def _parameter(name: str, value: int | float) -> bytes:
+    if isinstance(value, bool | int | np.integer):
+        return _key_value(b"P", f"int32_t {name}", struct.pack("<i", int(value)))
+    return _key_value(b"P", f"float {name}", struct.pack("<f", float(value)))
