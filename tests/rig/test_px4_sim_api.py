@@ -1,0 +1,43 @@
+"""The shared PX4 simulator-API facts match PX4's numbers (PX4_SIM_CONTRACT.md)."""
+
+import pytest
+
+from rig.px4_sim_api import HilSensorFields, Ports, mavlink
+
+
+def test_fields_updated_masks_are_px4s():
+    assert HilSensorFields.ACCEL == 0x007
+    assert HilSensorFields.GYRO == 0x038
+    assert HilSensorFields.MAG == 0x1C0
+    assert HilSensorFields.BARO == 0x1A00
+    assert HilSensorFields.DIFF_PRESSURE == 0x400
+
+
+@pytest.mark.parametrize(
+    ("instance", "sim", "gcs", "api_local", "api_remote", "sysid"),
+    [(0, 4560, 18570, 14580, 14540, 1), (3, 4563, 18573, 14583, 14543, 4)],
+)
+def test_ports_per_instance(instance, sim, gcs, api_local, api_remote, sysid):
+    ports = Ports(instance)
+    assert (ports.simulator_tcp, ports.gcs_local_udp, ports.gcs_remote_udp) == (sim, gcs, 14550)
+    assert (ports.api_local_udp, ports.api_remote_udp, ports.system_id) == (
+        api_local,
+        api_remote,
+        sysid,
+    )
+
+
+def test_bad_instance_is_rejected():
+    with pytest.raises(ValueError, match=r"instance must be in 0\.\.99, got -1"):
+        Ports(-1)
+
+
+def test_dialect_is_mavlink2_with_hil_sensor_id_extension():
+    assert mavlink.WIRE_PROTOCOL_VERSION == "2.0"
+    link = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    msg = link.hil_sensor_encode(
+        1, 0, 0, -9.81, 0, 0, 0, 0.2, 0, 0.4, 955.0, 0, 0, 15.0, 0x1FFF, id=2
+    )
+    (decoded,) = mavlink.MAVLink(None).parse_buffer(msg.pack(link))
+    assert decoded.id == 2
+    assert decoded.zacc == pytest.approx(-9.81)
