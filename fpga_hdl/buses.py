@@ -1,0 +1,124 @@
+"""Bus protocols shared by every autopilot-side driver, and their transaction-level buses.
+
+A driver (``mpu6000.driver``, ``ms5611.driver``, ``ist8310.driver``) is written once
+against :class:`SpiBus` or :class:`I2cBus`, the way Glasgow applets are written against
+an interface. Two kinds of bus implement each protocol:
+
+- the pin-level bus masters in ``fpga_hdl.cosim`` drive the generated Verilog under
+  cocotb (real SCLK/SCL edges, real timing);
+- the transaction-level buses here call the pure-Python chip models directly, so a
+  campaign can run the same register maps without a simulator.
+
+Because both run the very same driver code, a test can compare the bytes they return.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Protocol, runtime_checkable
+
+
+class BusError(Exception):
+    """Base class of bus failures a driver may see (a misaddressed or silent chip)."""
+
+
+class I2cNack(BusError):
+    """The target did not acknowledge: wrong address, muted chip, or a refused byte.
+
+    ``byte_index`` is 0 for the address byte, 1.. for the written data bytes.
+    """
+
+    def __init__(self, address: int, byte_index: int = 0) -> None:
+        self.address = address
+        self.byte_index = byte_index
+        what = "address" if byte_index == 0 else f"write byte {byte_index}"
+        super().__init__(f"I2C target 0x{address:02X} did not acknowledge the {what}")
+
+
+class UnknownDevice(BusError):
+    """An SPI transfer named a chip select that is not wired on this bus."""
+
+
+class SpiBus(Protocol):
+    """Full-duplex SPI: chip select asserted around ``tx``, the same number of bytes back."""
+
+    async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes: ...
+
+
+class I2cBus(Protocol):
+    """I2C combined transfer: write ``write`` (may be empty), then read ``read_len`` bytes.
+
+    A write followed by a read uses a repeated START between them, as PX4's
+    ``I2C::transfer`` does. Raises :class:`I2cNack` when the target does not acknowledge.
+    """
+
+    async def write_read(
+        self, address: int, write: bytes, read_len: int, *, scl_hz: float
+    ) -> bytes: ...
+
+
+@runtime_checkable
+class SpiDeviceModel(Protocol):
+    """A transaction-level SPI chip: one call per chip-select assertion."""
+
+    def transfer(self, tx: bytes) -> bytes: ...
+
+
+@runtime_checkable
+class I2cDeviceModel(Protocol):
+    """A transaction-level I2C chip; raises :class:`I2cNack` for a refused data byte."""
+
+    def write_read(self, write: bytes, read_len: int) -> bytes: ...
+
+
+def check_clock_hz(name: str, value_hz: float) -> None:
+    """Reject a bus clock that no real master could produce (zero, negative, NaN, inf)."""
+    if not (math.isfinite(value_hz) and value_hz > 0):
+        raise ValueError(f"{name} must be a positive finite frequency in Hz, not {value_hz!r}")
+
+
+class TlmSpiBus:
+    """:class:`SpiBus` over pure-Python chip models, keyed by chip-select name."""
+
+    def __init__(self, devices: Mapping[str, SpiDeviceModel]) -> None:
+        self.devices = dict(devices)
+
+    async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
+        check_clock_hz("sclk_hz", sclk_hz)
+        try:
+            model = self.devices[device]
+        except KeyError:
+            raise UnknownDevice(
+                f"no SPI device {device!r} on this bus; wired: {', '.join(sorted(self.devices))}"
+            ) from None
+        rx = model.transfer(bytes(tx))
+        if len(rx) != len(tx):
+            raise BusError(f"SPI model {device!r} returned {len(rx)} bytes for {len(tx)} sent")
+        return rx
+
+
+class TlmI2cBus:
+    """:class:`I2cBus` over pure-Python chip models, keyed by 7-bit address."""
+
+    def __init__(self, devices: Mapping[int, I2cDeviceModel]) -> None:
+        for address in devices:
+            if not 0 <= address <= 0x7F:
+                raise ValueError(f"I2C address must be 7-bit (0x00..0x7F), not 0x{address:X}")
+        self.devices = dict(devices)
+
+    async def write_read(
+        self, address: int, write: bytes, read_len: int, *, scl_hz: float
+    ) -> bytes:
+        check_clock_hz("scl_hz", scl_hz)
+        if read_len < 0:
+            raise ValueError(f"read_len must be >= 0, not {read_len}")
+        model = self.devices.get(address)
+        if model is None:
+            raise I2cNack(address)
+        rx = model.write_read(bytes(write), read_len)
+        if len(rx) != read_len:
+            raise BusError(
+                f"I2C model 0x{address:02X} returned {len(rx)} bytes for {read_len} requested"
+            )
+        return rx

@@ -1,0 +1,1 @@
+"""cocotb side of the co-simulation: the runner and the pin-level bus masters."""

