@@ -1,0 +1,54 @@
+"""Fixtures of the rig tests: a free SITL instance and the test-double autopilot process."""
+
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from rig.errors import AutopilotNotConnected
+from rig.link import LinkTimeouts, SimulatorLink
+from rig.px4_sim_api import Ports
+
+DOUBLE = Path(__file__).with_name("autopilot_double.py")
+#: Short bounds so a broken test fails in seconds, not minutes.
+TEST_TIMEOUTS = LinkTimeouts(connect_s=10, answer_s=2)
+
+
+@pytest.fixture
+def listening_link() -> Iterator[Callable[..., SimulatorLink]]:
+    """Open a SimulatorLink on the first free instance in 60..99 (other suites use low ones)."""
+    links: list[SimulatorLink] = []
+
+    def open_link(timeouts: LinkTimeouts = TEST_TIMEOUTS, **kw):
+        for instance in range(60, 100):
+            try:
+                link = SimulatorLink(Ports(instance), timeouts, **kw)
+            except AutopilotNotConnected:
+                continue
+            links.append(link)
+            return link
+        raise RuntimeError("no free simulator port in 4620..4659")
+
+    yield open_link
+    for link in links:
+        link.close()
+
+
+@pytest.fixture
+def start_double() -> Iterator[Callable[..., subprocess.Popen]]:
+    """Start the test-double autopilot (see autopilot_double.py) against a port."""
+    processes: list[subprocess.Popen] = []
+
+    def start(port: int, behaviour: str = "px4", *args: str) -> subprocess.Popen:
+        process = subprocess.Popen(
+            [sys.executable, str(DOUBLE), "--port", str(port), "--behaviour", behaviour, *args]
+        )
+        processes.append(process)
+        return process
+
+    yield start
+    for process in processes:
+        process.kill()
+        process.wait()

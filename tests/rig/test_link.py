@@ -1,0 +1,138 @@
+"""The simulator link against a peer process that speaks PX4's side (or misbehaves).
+
+Real PX4 SITL cannot be installed here; the ``px4`` behaviour of the test double does what
+PX4_SIM_CONTRACT.md records of it: connects as the TCP client, sends HEARTBEAT and
+SET_MESSAGE_INTERVAL(HIL_STATE_QUATERNION, 5000 µs), answers nothing while it boots, then
+answers each HIL_SENSOR with ``id = 0`` with one HIL_ACTUATOR_CONTROLS echoing its time.
+"""
+
+import json
+import re
+
+import pytest
+
+from rig.errors import AutopilotNotConnected, AutopilotProtocolError, AutopilotStalled
+from rig.link import LinkTimeouts
+from rig.px4_sim_api import mavlink
+from rig.sim_messages import hil_sensor
+
+FRAME_US = 1000
+
+
+def _frame(link, k):
+    return [hil_sensor(link.mav, k * FRAME_US, accel_mps2=(0, 0, -9.81), gyro_radps=(0, 0, k))]
+
+
+def _run_frames(link, count, start=1):
+    return [link.exchange(k * FRAME_US, _frame(link, k)) for k in range(start, start + count)]
+
+
+def _peer_exit(process):
+    def describe():
+        code = process.poll()
+        return None if code is None else f"exit code {code}"
+
+    return describe
+
+
+def test_px4_like_peer_freewheel_then_one_answer_per_frame(listening_link, start_double, tmp_path):
+    link = listening_link()
+    record = tmp_path / "received.jsonl"
+    start_double(link.ports.simulator_tcp, "px4", "--after", "50", "--record", str(record))
+    link.accept()
+    answers = _run_frames(link, 300)
+
+    first = next(i for i, a in enumerate(answers) if a is not None)
+    assert first >= 50  # the peer was booting: the rig freewheeled, it did not wait
+    assert link.lockstep
+    # From the frame where the first answer arrived, each frame returns its own echo.
+    for k, answer in enumerate(answers[first:], start=first + 1):
+        assert answer.time_us == k * FRAME_US
+        assert not answer.armed
+        assert answer.motors == (0.0, 0.0, 0.0, 0.0)
+    assert link.stats.answers == 300 - first
+    assert link.stats.malformed == 0
+    assert link.state_interval_us == 5000
+    assert link.peer_heartbeat.autopilot == mavlink.MAV_AUTOPILOT_PX4
+
+    link.close()
+    received = [json.loads(line) for line in record.read_text().splitlines()]
+    times = [m["time_usec"] for m in received if m["mavpackettype"] == "HIL_SENSOR"]
+    assert times == [k * FRAME_US for k in range(1, 301)]  # all frames, in order, once
+
+
+def test_lockstep_uses_the_answer_to_each_frame(listening_link, start_double):
+    link = listening_link()
+    start_double(link.ports.simulator_tcp, "px4", "--after", "0", "--throttle", "0.6")
+    link.accept()
+    while not link.lockstep:
+        _run_frames(link, 1, start=link.stats.frames_sent + 1)
+    answer = _run_frames(link, 1, start=link.stats.frames_sent + 1)[0]
+    assert answer.armed
+    assert answer.motors == pytest.approx((0.6, 0.6, 0.6, 0.6))
+    assert answer.time_us == link.stats.frames_sent * FRAME_US
+
+
+def test_hung_autopilot_is_reported_as_the_stalled_side(listening_link, start_double):
+    link = listening_link(LinkTimeouts(connect_s=10, answer_s=0.3))
+    process = start_double(link.ports.simulator_tcp, "hang", "--after", "20")
+    link.peer_exit = _peer_exit(process)
+    link.accept()
+    with pytest.raises(AutopilotStalled) as error:
+        _run_frames(link, 100)
+    assert re.fullmatch(
+        r"the autopilot stalled: no HIL_ACTUATOR_CONTROLS for the frame at t=0\.021000 s "
+        r"within 0\.3 s of wall time \(the rig sent the frame and is waiting; "
+        r"last answer t=0\.020000 s; 0 malformed messages\)",
+        str(error.value),
+    )
+
+
+def test_closed_link_says_px4_never_reconnects(listening_link, start_double):
+    link = listening_link()
+    start_double(link.ports.simulator_tcp, "close", "--after", "10")
+    link.accept()
+    with pytest.raises(AutopilotStalled, match=r"closed the simulator link .*PX4 never reconnects"):
+        _run_frames(link, 100)
+
+
+def test_killed_autopilot_process_is_named(listening_link, start_double):
+    link = listening_link()
+    process = start_double(link.ports.simulator_tcp, "px4", "--after", "0")
+    link.peer_exit = _peer_exit(process)
+    link.accept()
+    _run_frames(link, 20)
+    process.kill()
+    process.wait()
+    with pytest.raises(AutopilotStalled, match=r"autopilot process.*exit code -9"):
+        _run_frames(link, 10, start=21)
+
+
+def test_garbage_is_counted_and_ends_in_a_stall(listening_link, start_double):
+    link = listening_link(LinkTimeouts(connect_s=10, answer_s=0.3))
+    start_double(link.ports.simulator_tcp, "garbage", "--after", "5")
+    link.accept()
+    with pytest.raises(AutopilotStalled, match=r"[1-9]\d* malformed messages"):
+        _run_frames(link, 50)
+
+
+def test_nan_motor_command_is_a_protocol_error(listening_link, start_double):
+    link = listening_link()
+    start_double(link.ports.simulator_tcp, "nan", "--after", "5")
+    link.accept()
+    with pytest.raises(AutopilotProtocolError, match=r"time_usec=6000 has non-finite"):
+        _run_frames(link, 50)
+
+
+def test_nobody_connecting_is_a_clear_error(listening_link):
+    link = listening_link(LinkTimeouts(connect_s=0.2))
+    with pytest.raises(AutopilotNotConnected, match=r"no autopilot connected to TCP .* 0\.2 s"):
+        link.accept("PX4 SITL")
+
+
+def test_freewheel_is_bounded_in_simulated_time(listening_link, start_double):
+    link = listening_link(LinkTimeouts(connect_s=10, first_answer_sim_s=0.05))
+    start_double(link.ports.simulator_tcp, "px4", "--after", "100000")
+    link.accept()
+    with pytest.raises(AutopilotStalled, match=r"sent no HIL_ACTUATOR_CONTROLS in 0\.05 s"):
+        _run_frames(link, 100)
