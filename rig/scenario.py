@@ -1,0 +1,433 @@
+"""Scenario files (TOML): what one rig run flies, and under which conditions.
+
+A scenario names its vehicle (a quad_model vehicle set), the test-bench constraint, the
+environment (location, magnetic field, wind), the start pose, the command script, the
+faults with their start/end times, the duration, the seed, the sensor layer and the rates.
+Every value is checked on load; a bad file fails with one line naming the file, the key
+and the value (:class:`rig.errors.ScenarioError`). The bundled scenarios live in
+``rig/scenarios/``; ``load_scenario("hover")`` finds them by name.
+
+Times are simulated seconds from the start of the run. Units are in the key names.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from quad_model.environment import Environment, GeoPoint, MagneticField, Wind
+from rig.errors import ScenarioError
+
+SCENARIOS_DIR = Path(__file__).parent / "scenarios"
+SENSOR_LAYERS = ("tlm", "rtl")
+CONSTRAINTS = ("free", "gimbal_pitch", "gimbal_roll", "thrust_stand")
+SENSORS = ("accel", "gyro", "mag", "baro")
+CHIPS = ("mpu6000", "ms5611", "ist8310")
+
+#: Command actions and their parameters: ``name → (kind, required)``. Kinds are checked
+#: by :func:`_typed`; the ground-station client (``rig.ground``) turns each into MAVLink.
+ACTIONS: dict[str, dict[str, tuple[str, bool]]] = {
+    "arm": {},
+    "disarm": {},
+    "takeoff": {"altitude_m": ("positive", True)},
+    "land": {},
+    "goto": {"position_ned_m": ("vector3", True), "yaw_deg": ("number", False)},
+    "mission": {"waypoints_ned_m": ("vector3_list", True)},
+    "pitch_sweep": {
+        "duration_s": ("positive", True),
+        "amplitude_deg": ("positive", True),
+        "f_min_radps": ("positive", True),
+        "f_max_radps": ("positive", True),
+        "thrust": ("unit", True),
+        "rate_hz": ("positive", False),
+    },
+    "motor_test": {
+        "motor": ("motor", True),
+        "throttle": ("unit", True),
+        "duration_s": ("positive", True),
+    },
+    "set_param": {"name": ("string", True), "value": ("number", True)},
+}
+
+#: Fault kinds and their parameters (the layer each acts on is in ``rig.faults``).
+FAULT_KINDS: dict[str, dict[str, tuple[str, bool]]] = {
+    "motor_loss": {"motor": ("motor", True)},
+    "motor_degradation": {"motor": ("motor", True), "efficiency": ("unit", True)},
+    "sensor_stuck": {"sensor": ("sensor", True)},
+    "sensor_bias": {"sensor": ("sensor", True), "bias": ("bias", True)},
+    "noise_burst": {"sensor": ("sensor", True), "std": ("positive", True)},
+    "bus_bit_flip": {"chip": ("chip", True), "mask": ("byte", True)},
+    "chip_mute": {"chip": ("chip", True)},
+    "gps_loss": {},
+    "pwm_dropout": {"channel": ("motor", False)},
+}
+
+
+@dataclass(frozen=True)
+class Rates:
+    """Simulation and sensor rates (Hz); one lockstep frame is one IMU period."""
+
+    model_hz: int = 5000
+    imu_hz: int = 1000
+    mag_hz: int = 100
+    baro_hz: int = 50
+    gps_hz: int = 10
+    pwm_hz: int = 400
+
+    @property
+    def frame_us(self) -> int:
+        """One lockstep frame: one IMU period."""
+        return 1_000_000 // self.imu_hz
+
+    def due(self, rate_hz: int, frame: int) -> bool:
+        """Whether a sensor at ``rate_hz`` has a new sample in IMU frame ``frame`` (0-based).
+
+        A rate that does not divide the IMU rate (mag 100 Hz on a 250 Hz IMU) gets the
+        nearest frames, 2 or 3 apart, with the exact average rate, as on a real board.
+        """
+        return frame * rate_hz // self.imu_hz != (frame - 1) * rate_hz // self.imu_hz
+
+
+@dataclass(frozen=True)
+class StartPose:
+    position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    yaw_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Command:
+    """One scripted ground-station action at ``at_s``."""
+
+    at_s: float
+    action: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """One fault, active from ``start_s`` until ``end_s`` (None: until the end)."""
+
+    kind: str
+    start_s: float
+    end_s: float | None = None
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+    def active(self, time_s: float) -> bool:
+        return self.start_s <= time_s and (self.end_s is None or time_s < self.end_s)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    source: str
+    description: str
+    vehicle: str
+    constraint: str
+    environment: Environment
+    start: StartPose
+    duration_s: float
+    seed: int
+    sensor_layer: str
+    rates: Rates
+    commands: tuple[Command, ...]
+    faults: tuple[FaultSpec, ...]
+
+
+_TOP_KEYS = {
+    "name", "description", "vehicle", "constraint", "duration_s", "seed", "sensor_layer",
+    "environment", "start", "rates", "commands", "faults",
+}  # fmt: skip
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a bundled scenario by name (``"hover"``) or any scenario file by path."""
+    path = Path(name_or_path)
+    if path.suffix != ".toml":
+        path = SCENARIOS_DIR / f"{name_or_path}.toml"
+    try:
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        bundled = ", ".join(sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")))
+        raise ScenarioError(f"{path}: no such scenario file (bundled: {bundled})") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise ScenarioError(f"{path}: cannot read ({error})") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ScenarioError(f"{path}: not valid TOML ({error})") from None
+    return scenario_from_dict(document, str(path))
+
+
+def scenario_from_dict(document: Mapping[str, Any], source: str = "<dict>") -> Scenario:
+    """Check and convert a parsed scenario document; raises :class:`ScenarioError`."""
+    where = _Where(source)
+    where.no_unknown_keys(document, _TOP_KEYS, "")
+    duration_s = where.get(document, "duration_s", "positive")
+    rates = _rates(document.get("rates", {}), where)
+    frame_s = rates.frame_us / 1e6
+    commands = tuple(
+        _command(item, f"commands[{i}]", where, duration_s)
+        for i, item in enumerate(where.get(document, "commands", "table_list", default=[]))
+    )
+    faults = tuple(
+        _fault(item, f"faults[{i}]", where, duration_s)
+        for i, item in enumerate(where.get(document, "faults", "table_list", default=[]))
+    )
+    if duration_s < frame_s:
+        where.fail("duration_s", duration_s, f"shorter than one IMU frame ({frame_s} s)")
+    return Scenario(
+        name=where.get(document, "name", "string"),
+        source=source,
+        description=where.get(document, "description", "string", default=""),
+        vehicle=where.get(document, "vehicle", "string"),
+        constraint=where.get(document, "constraint", "string", default="free", choices=CONSTRAINTS),
+        environment=_environment(document.get("environment", {}), where),
+        start=_start(document.get("start", {}), where),
+        duration_s=duration_s,
+        seed=where.get(document, "seed", "seed"),
+        sensor_layer=where.get(
+            document, "sensor_layer", "string", default="tlm", choices=SENSOR_LAYERS
+        ),
+        rates=rates,
+        commands=tuple(sorted(commands, key=lambda c: c.at_s)),
+        faults=faults,
+    )
+
+
+class _Where:
+    """Builds the one-line messages: ``file: key 'a.b' = value: reason``."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, key: str, value: Any, reason: str) -> None:
+        raise ScenarioError(f"{self.source}: key {key!r} = {value!r}: {reason}")
+
+    def no_unknown_keys(self, table: Mapping[str, Any], known: set[str], prefix: str) -> None:
+        if not isinstance(table, Mapping):
+            raise ScenarioError(f"{self.source}: {prefix.rstrip('.') or 'file'} is not a table")
+        for key in table:
+            if key not in known:
+                self.fail(
+                    f"{prefix}{key}", table[key], f"unknown key (known: {', '.join(sorted(known))})"
+                )
+
+    def get(
+        self,
+        table: Mapping[str, Any],
+        key: str,
+        kind: str,
+        *,
+        default: Any = ...,
+        prefix: str = "",
+        choices: tuple[str, ...] = (),
+    ) -> Any:
+        if key not in table:
+            if default is ...:
+                raise ScenarioError(f"{self.source}: key {prefix + key!r} is missing")
+            return default
+        value = _typed(table[key], kind)
+        if value is _BAD:
+            self.fail(prefix + key, table[key], f"expected {_KIND_TEXT[kind]}")
+        if choices and value not in choices:
+            self.fail(prefix + key, value, f"expected one of {', '.join(choices)}")
+        return value
+
+
+_BAD = object()
+_KIND_TEXT = {
+    "number": "a number",
+    "positive": "a positive number",
+    "non_negative": "a number >= 0",
+    "unit": "a number in 0..1",
+    "string": "a string",
+    "seed": "an integer >= 0",
+    "rate": "a positive integer (Hz)",
+    "motor": "a motor index 0..3",
+    "byte": "an integer bit mask 1..255",
+    "vector3": "three numbers",
+    "vector3_list": "a non-empty list of three-number lists",
+    "table_list": "an array of tables",
+    "sensor": f"one of {', '.join(SENSORS)}",
+    "chip": f"one of {', '.join(CHIPS)}",
+    "bias": "a number or three numbers",
+}
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return None
+    return float(value)
+
+
+def _typed(value: Any, kind: str) -> Any:
+    number = _number(value)
+    integer = value if isinstance(value, int) and not isinstance(value, bool) else None
+    checks = {
+        "number": number,
+        "positive": number if number is not None and number > 0 else None,
+        "non_negative": number if number is not None and number >= 0 else None,
+        "unit": number if number is not None and 0 <= number <= 1 else None,
+        "string": value if isinstance(value, str) and value else None,
+        "seed": integer if integer is not None and integer >= 0 else None,
+        "rate": integer if integer is not None and integer > 0 else None,
+        "motor": integer if integer is not None and 0 <= integer <= 3 else None,
+        "byte": integer if integer is not None and 1 <= integer <= 255 else None,
+        "sensor": value if value in SENSORS else None,
+        "chip": value if value in CHIPS else None,
+    }
+    if kind in checks:
+        result = checks[kind]
+        return _BAD if result is None else result
+    if kind == "vector3":
+        return _vector3(value)
+    if kind == "bias":
+        return number if number is not None else _vector3(value)
+    if kind == "vector3_list":
+        if not isinstance(value, list) or not value:
+            return _BAD
+        vectors = [_vector3(v) for v in value]
+        return _BAD if any(v is _BAD for v in vectors) else tuple(vectors)
+    if kind == "table_list":
+        return (
+            value if isinstance(value, list) and all(isinstance(v, dict) for v in value) else _BAD
+        )
+    raise AssertionError(f"unknown kind {kind}")
+
+
+def _vector3(value: Any) -> Any:
+    if not isinstance(value, list) or len(value) != 3:
+        return _BAD
+    numbers = [_number(v) for v in value]
+    return _BAD if None in numbers else tuple(numbers)
+
+
+def _rates(table: Mapping[str, Any], where: _Where) -> Rates:
+    names = ("model_hz", "imu_hz", "mag_hz", "baro_hz", "gps_hz", "pwm_hz")
+    where.no_unknown_keys(table, set(names), "rates.")
+    defaults = Rates()
+    values = {
+        n: where.get(table, n, "rate", default=getattr(defaults, n), prefix="rates.") for n in names
+    }
+    rates = Rates(**values)
+    if rates.model_hz % rates.imu_hz or 1_000_000 % rates.imu_hz:
+        where.fail(
+            "rates.imu_hz", rates.imu_hz,
+            f"must divide rates.model_hz ({rates.model_hz}) and give a whole number of µs",
+        )  # fmt: skip
+    for name in ("mag_hz", "baro_hz", "gps_hz"):
+        if getattr(rates, name) > rates.imu_hz:
+            where.fail(
+                f"rates.{name}", getattr(rates, name), f"exceeds rates.imu_hz ({rates.imu_hz})"
+            )
+    return rates
+
+
+def _environment(table: Mapping[str, Any], where: _Where) -> Environment:
+    keys = {
+        "home",
+        "magnetic_field",
+        "wind_steady_ned_mps",
+        "wind_at_6m_mps",
+        "temperature_offset_k",
+    }
+    where.no_unknown_keys(table, keys, "environment.")
+    default = Environment()
+    home = default.home
+    if "home" in table:
+        t = table["home"]
+        where.no_unknown_keys(t, {"lat_deg", "lon_deg", "alt_amsl_m"}, "environment.home.")
+        home = GeoPoint(*(where.get(t, k, "number", prefix="environment.home.")
+                          for k in ("lat_deg", "lon_deg", "alt_amsl_m")))  # fmt: skip
+        if not (-90 <= home.lat_deg <= 90 and -180 <= home.lon_deg <= 180):
+            where.fail("environment.home", t, "latitude must be in ±90° and longitude in ±180°")
+    field_ = default.magnetic_field
+    if "magnetic_field" in table:
+        t = table["magnetic_field"]
+        names = ("declination_deg", "inclination_deg", "intensity_gauss")
+        where.no_unknown_keys(t, set(names), "environment.magnetic_field.")
+        values = [where.get(t, k, "number", prefix="environment.magnetic_field.") for k in names]
+        field_ = _quad_model_value(where, "environment.magnetic_field", t, MagneticField, *values)
+    wind = Wind(
+        steady_ned_mps=where.get(
+            table, "wind_steady_ned_mps", "vector3", default=(0.0, 0.0, 0.0), prefix="environment."
+        ),
+        wind_at_6m_mps=where.get(
+            table, "wind_at_6m_mps", "non_negative", default=0.0, prefix="environment."
+        ),
+    )
+    offset = where.get(table, "temperature_offset_k", "number", default=0.0, prefix="environment.")
+    return _quad_model_value(
+        where, "environment.home", table.get("home"), Environment, home, field_, wind, offset
+    )
+
+
+def _quad_model_value(where: _Where, key: str, raw: Any, cls: type, *args: Any) -> Any:
+    """Build a quad_model value; its own range checks become scenario errors on ``key``."""
+    try:
+        return cls(*args)
+    except ValueError as error:
+        where.fail(key, raw, str(error))
+
+
+def _start(table: Mapping[str, Any], where: _Where) -> StartPose:
+    where.no_unknown_keys(table, {"position_ned_m", "yaw_deg"}, "start.")
+    position = where.get(
+        table, "position_ned_m", "vector3", default=(0.0, 0.0, 0.0), prefix="start."
+    )
+    if position[2] > 0:
+        where.fail("start.position_ned_m", list(position), "starts below the ground (down > 0)")
+    return StartPose(position, where.get(table, "yaw_deg", "number", default=0.0, prefix="start."))
+
+
+def _params(
+    item: Mapping[str, Any], spec: dict[str, tuple[str, bool]], prefix: str, where: _Where
+) -> dict[str, Any]:
+    params = {}
+    for name, (kind, required) in spec.items():
+        value = where.get(item, name, kind, default=... if required else None, prefix=prefix)
+        if value is not None:
+            params[name] = value
+    return params
+
+
+def _command(item: Mapping[str, Any], key: str, where: _Where, duration_s: float) -> Command:
+    prefix = f"{key}."
+    action = where.get(item, "action", "string", prefix=prefix, choices=tuple(ACTIONS))
+    spec = ACTIONS[action]
+    where.no_unknown_keys(item, {"at_s", "action", *spec}, prefix)
+    at_s = where.get(item, "at_s", "non_negative", prefix=prefix)
+    if at_s >= duration_s:
+        where.fail(
+            prefix + "at_s", at_s, f"not before the end of the run (duration_s = {duration_s})"
+        )
+    params = _params(item, spec, prefix, where)
+    if action == "pitch_sweep" and params["f_min_radps"] >= params["f_max_radps"]:
+        where.fail(prefix + "f_max_radps", params["f_max_radps"], "must exceed f_min_radps")
+    return Command(at_s=at_s, action=action, params=params)
+
+
+def _fault(item: Mapping[str, Any], key: str, where: _Where, duration_s: float) -> FaultSpec:
+    prefix = f"{key}."
+    kind = where.get(item, "kind", "string", prefix=prefix, choices=tuple(FAULT_KINDS))
+    spec = FAULT_KINDS[kind]
+    where.no_unknown_keys(item, {"kind", "start_s", "end_s", *spec}, prefix)
+    start_s = where.get(item, "start_s", "non_negative", prefix=prefix)
+    end_s = where.get(item, "end_s", "positive", default=None, prefix=prefix)
+    if start_s >= duration_s:
+        where.fail(
+            prefix + "start_s",
+            start_s,
+            f"not before the end of the run (duration_s = {duration_s})",
+        )
+    if end_s is not None and end_s <= start_s:
+        where.fail(prefix + "end_s", end_s, f"must be after start_s ({start_s})")
+    params = _params(item, spec, prefix, where)
+    if kind == "sensor_bias":
+        scalar = params["sensor"] == "baro"
+        if scalar != isinstance(params["bias"], float):
+            shape = "one number (Pa)" if scalar else "three numbers (sensor axes)"
+            where.fail(prefix + "bias", item["bias"], f"the {params['sensor']} bias takes {shape}")
+    return FaultSpec(kind=kind, start_s=start_s, end_s=end_s, params=params)

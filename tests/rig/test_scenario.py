@@ -1,0 +1,145 @@
+"""Scenario files: the bundled ones load; each kind of bad input fails with one exact line."""
+
+import tomllib
+
+import pytest
+
+from quad_model.environment import PX4_DEFAULT_HOME
+from rig.errors import ScenarioError
+from rig.scenario import SCENARIOS_DIR, load_scenario, scenario_from_dict
+
+BUNDLED = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+MINIMAL = {"name": "t", "vehicle": "v", "duration_s": 2.0, "seed": 0}
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+def test_bundled_scenarios_load(name):
+    scenario = load_scenario(name)
+    assert scenario.name == name
+    assert scenario.duration_s > 0
+    times = [c.at_s for c in scenario.commands]
+    assert times == sorted(times)
+
+
+def test_required_bundle_is_shipped():
+    assert {
+        "takeoff_hover_land", "level_step", "pitch_sweep_bench", "motor_noise_bench", "hil_sim",
+    } <= set(BUNDLED)  # fmt: skip
+
+
+def test_defaults_are_px4_sitl_home_and_the_contract_rates():
+    scenario = scenario_from_dict(MINIMAL)
+    assert scenario.environment.home == PX4_DEFAULT_HOME
+    assert (scenario.rates.model_hz, scenario.rates.imu_hz) == (5000, 1000)
+    assert (scenario.rates.mag_hz, scenario.rates.baro_hz, scenario.rates.gps_hz) == (100, 50, 10)
+    assert scenario.rates.pwm_hz == 400
+    assert scenario.rates.frame_us == 1000
+    due = [k for k in range(1, 101) if scenario.rates.due(scenario.rates.mag_hz, k)]
+    assert due == [10, 20, 30, 40, 50, 60, 70, 80, 90, 100]
+    assert scenario.sensor_layer == "tlm"
+    assert scenario.constraint == "free"
+
+
+def test_full_document_is_converted():
+    scenario = scenario_from_dict(
+        MINIMAL
+        | {
+            "environment": {
+                "home": {"lat_deg": 40.0, "lon_deg": 116.3, "alt_amsl_m": 50.0},
+                "wind_steady_ned_mps": [1, 2, 0],
+                "wind_at_6m_mps": 3.0,
+            },
+            "start": {"position_ned_m": [1, 2, 0], "yaw_deg": 90},
+            "rates": {"imu_hz": 250},
+            "commands": [
+                {"at_s": 1.5, "action": "takeoff", "altitude_m": 3},
+                {"at_s": 0.5, "action": "arm"},
+            ],
+            "faults": [
+                {"kind": "motor_degradation", "motor": 2, "efficiency": 0.5, "start_s": 1,
+                 "end_s": 1.5},
+            ],
+        }
+    )  # fmt: skip
+    assert scenario.environment.home.lat_deg == 40.0
+    assert scenario.environment.wind.steady_ned_mps == (1.0, 2.0, 0.0)
+    assert scenario.start.position_ned_m == (1.0, 2.0, 0.0)
+    assert scenario.rates.frame_us == 4000
+    # mag 100 Hz on a 250 Hz IMU: samples 2 or 3 frames apart, 100 per 250 frames exactly.
+    due = [k for k in range(1, 251) if scenario.rates.due(100, k)]
+    assert len(due) == 100
+    assert set(map(int.__sub__, due[1:], due[:-1])) == {2, 3}
+    assert [c.action for c in scenario.commands] == ["arm", "takeoff"]  # sorted by time
+    assert scenario.commands[1].params == {"altitude_m": 3.0}
+    fault = scenario.faults[0]
+    assert fault.params == {"motor": 2, "efficiency": 0.5}
+    assert (fault.active(0.99), fault.active(1.0), fault.active(1.49), fault.active(1.5)) == (
+        False, True, True, False,
+    )  # fmt: skip
+
+
+BAD = [
+    ({"duration_s": -1}, "key 'duration_s' = -1: expected a positive number"),
+    ({"duration_s": "10"}, "key 'duration_s' = '10': expected a positive number"),
+    ({"seed": 1.5}, "key 'seed' = 1.5: expected an integer >= 0"),
+    ({"sensor_layer": "fpga"}, "key 'sensor_layer' = 'fpga': expected one of tlm, rtl"),
+    ({"speed": 3}, "key 'speed' = 3: unknown key (known: commands, constraint, description, "
+     "duration_s, environment, faults, name, rates, seed, sensor_layer, start, vehicle)"),
+    ({"rates": {"imu_hz": 300}}, "key 'rates.imu_hz' = 300: must divide rates.model_hz (5000) "
+     "and give a whole number of µs"),
+    ({"rates": {"mag_hz": 2000}}, "key 'rates.mag_hz' = 2000: exceeds rates.imu_hz (1000)"),
+    ({"start": {"position_ned_m": [0, 0, 1]}}, "key 'start.position_ned_m' = [0.0, 0.0, 1.0]: "
+     "starts below the ground (down > 0)"),
+    ({"environment": {"wind_steady_ned_mps": [1, 2]}},
+     "key 'environment.wind_steady_ned_mps' = [1, 2]: expected three numbers"),
+    ({"environment": {"home": {"lat_deg": 95, "lon_deg": 0, "alt_amsl_m": 0}}},
+     "key 'environment.home' = {'lat_deg': 95, 'lon_deg': 0, 'alt_amsl_m': 0}: "
+     "latitude must be in ±90° and longitude in ±180°"),
+    ({"commands": [{"at_s": 1, "action": "flip"}]}, "key 'commands[0].action' = 'flip': "
+     "expected one of arm, disarm, takeoff, land, goto, mission, pitch_sweep, motor_test, "
+     "set_param"),
+    ({"commands": [{"at_s": 1, "action": "takeoff"}]}, "key 'commands[0].altitude_m' is missing"),
+    ({"commands": [{"at_s": 5, "action": "arm"}]},
+     "key 'commands[0].at_s' = 5.0: not before the end of the run (duration_s = 2.0)"),
+    ({"commands": [{"at_s": 1, "action": "arm", "altitude_m": 3}]},
+     "key 'commands[0].altitude_m' = 3: unknown key (known: action, at_s)"),
+    ({"faults": [{"kind": "motor_loss", "motor": 4, "start_s": 1}]},
+     "key 'faults[0].motor' = 4: expected a motor index 0..3"),
+    ({"faults": [{"kind": "chip_mute", "chip": "bmi088", "start_s": 1}]},
+     "key 'faults[0].chip' = 'bmi088': expected one of mpu6000, ms5611, ist8310"),
+    ({"faults": [{"kind": "gps_loss", "start_s": 1, "end_s": 0.5}]},
+     "key 'faults[0].end_s' = 0.5: must be after start_s (1.0)"),
+    ({"faults": [{"kind": "sensor_bias", "sensor": "gyro", "bias": 0.1, "start_s": 1}]},
+     "key 'faults[0].bias' = 0.1: the gyro bias takes three numbers (sensor axes)"),
+    ({"faults": [{"kind": "bus_bit_flip", "chip": "ms5611", "mask": 0, "start_s": 1}]},
+     "key 'faults[0].mask' = 0: expected an integer bit mask 1..255"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("change", "message"), BAD)
+def test_bad_values_name_the_file_key_and_value(change, message):
+    with pytest.raises(ScenarioError) as error:
+        scenario_from_dict(MINIMAL | change, "s.toml")
+    assert str(error.value) == f"s.toml: {message}"
+
+
+def test_missing_required_key():
+    with pytest.raises(ScenarioError, match=r"^s\.toml: key 'vehicle' is missing$"):
+        scenario_from_dict({"name": "t", "duration_s": 1, "seed": 0}, "s.toml")
+
+
+def test_unreadable_files(tmp_path):
+    broken = tmp_path / "broken.toml"
+    broken.write_text("name = \n")
+    with pytest.raises(ScenarioError, match=r"broken\.toml: not valid TOML \(Invalid value"):
+        load_scenario(broken)
+    with pytest.raises(
+        ScenarioError, match=r"nope\.toml: no such scenario file \(bundled: .*hil_sim"
+    ):
+        load_scenario(tmp_path / "nope.toml")
+
+
+def test_bundled_files_are_plain_toml_without_unknown_sections():
+    for path in SCENARIOS_DIR.glob("*.toml"):
+        document = tomllib.loads(path.read_text())
+        assert document["name"] == path.stem
