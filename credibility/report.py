@@ -1,0 +1,477 @@
+"""Rendering an ``Assessment``: a JSON summary for pipelines and one self-contained HTML file.
+
+Plots are drawn with matplotlib's Agg canvas (no display, no pyplot state) and embedded as
+base64 PNG, so the report opens offline and can be mailed as one file.
+"""
+
+import base64
+import hashlib
+import html
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from credibility import indices
+from credibility.assess import (
+    Assessment,
+    FrequencyResult,
+    PerformanceResult,
+    Result,
+    TimeResult,
+)
+from credibility.logs import SignalSpec
+
+PAPER_W_GAMMA = "paper: W_γ = (1 − e^{−γ²}) / (1 − e^{−1}) on min(γ²_real, γ²_sim)"
+CIFER_W_GAMMA = "Tischler & Remple: W_γ = [1.58 (1 − e^{−γ²})]², W_g = 1, W_p = 0.01745"
+
+
+def exit_code(assessment: Assessment) -> int:
+    """0 when η_min ≥ ε_min, 1 when not (the CLI uses 2 for bad input)."""
+    return 0 if assessment.meets_eps_min else 1
+
+
+def _spec(spec: SignalSpec | None) -> dict[str, Any] | None:
+    if spec is None:
+        return None
+    return {
+        "path": spec.path,
+        "scale": spec.scale,
+        "convert": spec.convert,
+        "drop_nan": spec.drop_nan,
+    }
+
+
+def _floats(values: np.ndarray) -> list[float]:
+    return [float(v) for v in values]
+
+
+def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
+    test = result.test
+    common = {
+        "name": test.name,
+        "kind": test.kind,
+        "real": test.roles.real,
+        "sim": test.roles.sim,
+        "compare": list(test.roles.compare),
+        "k_p": test.k_p,
+        "eta": result.eta,
+        "passes_pass_mark": result.eta >= pass_mark,
+    }
+    if isinstance(result, PerformanceResult):
+        return common | {
+            "parameter": test.parameter,
+            "unit": test.unit,
+            "signal": _spec(test.signal),
+            "signal_sim": _spec(test.signal_sim),
+            "segment_s": test.segment_s,
+            "segment_sim_s": test.segment_sim_s,
+            "highpass_hz": test.highpass_hz,
+            "settling_band": test.settling_band if test.parameter == "settling_time" else None,
+            "steady_window_s": test.steady_window_s,
+            "rows": [vars(row) for row in result.rows],
+        }
+    if isinstance(result, TimeResult):
+        align = test.alignment
+        return common | {
+            "unit": test.unit,
+            "signal": _spec(test.signal),
+            "signal_sim": _spec(test.signal_sim),
+            "segment_s": test.segment_s,
+            "n_t": result.n_t,
+            "grid_interval_s": float(result.grid_s[1] - result.grid_s[0]),
+            "smoothing": None
+            if test.smoothing is None
+            else {"method": "Savitzky–Golay", **vars(test.smoothing)},
+            "alignment": {
+                "method": align.method,
+                "signal": _spec(align.signal),
+                "signal_sim": _spec(align.signal_sim),
+                "threshold": align.threshold if align.method == "event" else None,
+                "direction": align.direction if align.method == "event" else None,
+                "max_lag_s": align.max_lag_s,
+            },
+            "threshold": result.threshold,
+            "threshold_rule": result.threshold_rule,
+            "zero_output": {"e_t": result.zero_output_error, "eta_t": result.zero_output_eta},
+            "rows": [
+                {
+                    "role": row.role,
+                    "segment_sim_s": row.segment_s,
+                    "alignment_shift_s": row.alignment_shift_s,
+                    "e_t": row.error,
+                    "eta_t": row.eta,
+                    "theil_u": row.theil_u,
+                }
+                for row in result.rows
+            ],
+        }
+    real = result.real
+    return common | {
+        "input": _spec(test.input),
+        "output": _spec(test.output),
+        "input_sim": _spec(test.input_sim),
+        "output_sim": _spec(test.output_sim),
+        "segment_s": test.segment_s,
+        "segment_sim_s": test.segment_sim_s,
+        "sample_rate_hz": result.sample_rate_hz,
+        "band_hz": test.band_hz,
+        "freqs_hz": _floats(real.freqs_hz),
+        "windows_s": list(real.windows_s),
+        "averages_real": list(real.averages),
+        "overlap": test.overlap,
+        "combination": "inverse random-error variance, ε_r = sqrt(1−γ²)/(|γ| sqrt(2 n_d))",
+        "coherence_min": test.coherence_min,
+        "w_gamma": PAPER_W_GAMMA if test.coherence_weighting else "W_γ ≡ 1",
+        "cifer_w_gamma": CIFER_W_GAMMA,
+        "real_magnitude_db": _floats(real.magnitude_db),
+        "real_coherence": _floats(real.coherence),
+        "rows": [
+            {
+                "role": row.role,
+                "excluded_hz": _floats(row.excluded_hz),
+                "n_f": int(row.included.sum()),
+                "e_mag_db": row.e_mag_db,
+                "e_pha_deg": row.e_pha_deg,
+                "eps_mag_db": row.eps_mag_db,
+                "eps_pha_deg": row.eps_pha_deg,
+                "threshold_rule": row.threshold_rule,
+                "eta_mag": row.eta_mag,
+                "eta_pha": row.eta_pha,
+                "eta_f": row.eta,
+                "cifer_j": row.cifer_j,
+                "magnitude_db": _floats(row.estimate.magnitude_db),
+                "phase_deg": _floats(row.phase_deg),
+                "real_phase_deg": _floats(row.real_phase_deg),
+                "coherence": _floats(row.estimate.coherence),
+                "averages": list(row.estimate.averages),
+            }
+            for row in result.rows
+        ],
+    }
+
+
+def to_dict(assessment: Assessment) -> dict[str, Any]:
+    """Everything the method used and found, as plain JSON types."""
+    plan = assessment.plan
+    return {
+        "package": "hil-rig credibility",
+        "package_version": assessment.package_version,
+        "created_utc": assessment.created_utc,
+        "plan": {
+            "path": str(plan.path),
+            "sha256": hashlib.sha256(plan.text.encode()).hexdigest(),
+            "name": plan.name,
+            "description": plan.description,
+            "pass_mark": plan.pass_mark,
+            "k_e": indices.pass_mark_gain(plan.pass_mark),
+            "eps_min": plan.eps_min,
+            "max_gap_s": plan.max_gap_s,
+            "weights": dict(plan.weights),
+            "weights_source": plan.weights_source,
+            "text": plan.text,
+        },
+        "logs": [
+            {
+                "role": log.role,
+                "path": str(log.path),
+                "sha256": log.sha256,
+                "format": log.format,
+                "warnings": list(log.warnings),
+            }
+            for log in assessment.logs
+        ],
+        "summary": {
+            "means": assessment.means,
+            "eta_all": assessment.eta_all,
+            "eta_min": assessment.eta_min,
+            "eps_min": plan.eps_min,
+            "meets_eps_min": assessment.meets_eps_min,
+            "passes_pass_mark": assessment.passes,
+            "exit_code": exit_code(assessment),
+        },
+        "tests": [_test_dict(r, plan.pass_mark) for r in assessment.results],
+    }
+
+
+# --- plots ---------------------------------------------------------------------------------
+
+
+def _png(figure: Figure) -> str:
+    FigureCanvasAgg(figure)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=96, bbox_inches="tight")
+    encoded = base64.b64encode(buffer.getvalue()).decode("ascii")
+    return f'<img alt="plot" src="data:image/png;base64,{encoded}">'
+
+
+def _time_plot(result: TimeResult) -> str:
+    figure = Figure(figsize=(8.0, 3.4))
+    ax = figure.add_subplot()
+    t, y_e, eps = result.grid_s, result.real_values, result.threshold
+    ax.fill_between(t, y_e - eps, y_e + eps, color="0.85", label=f"real ± ε_t ({eps:.3g})")
+    ax.plot(t, y_e, color="k", lw=1.2, label=f"real ({result.test.roles.real})")
+    for row in result.rows:
+        ax.plot(t, row.values, lw=1.0, label=f"{row.role} (η_t {row.eta:.1%})")
+    ax.set_xlabel("time since t_a [s]")
+    ax.set_ylabel(f"{result.test.signal.path} [{result.test.unit}]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return _png(figure)
+
+
+def _shade_excluded(ax, freqs_hz: np.ndarray, included: np.ndarray) -> None:
+    """Shade each excluded grid point out to the log-midpoints with its neighbours."""
+    edges = np.sqrt(freqs_hz[:-1] * freqs_hz[1:])
+    lower = np.concatenate(([freqs_hz[0]], edges))
+    upper = np.concatenate((edges, [freqs_hz[-1]]))
+    for lo, hi in zip(lower[~included], upper[~included], strict=True):
+        ax.axvspan(lo, hi, color="tab:red", alpha=0.12, lw=0)
+
+
+def _frequency_plot(result: FrequencyResult) -> str:
+    figure = Figure(figsize=(8.0, 7.5))
+    mag, pha, coh = figure.subplots(3, 1, sharex=True)
+    f = result.real.freqs_hz
+    first = result.rows[0]
+    mag.semilogx(f, result.real.magnitude_db, "k", label=f"real ({result.test.roles.real})")
+    pha.semilogx(f, first.real_phase_deg, "k")
+    coh.semilogx(f, result.real.coherence, "k", label="real")
+    for row in result.rows:
+        mag.semilogx(f, row.estimate.magnitude_db, label=f"{row.role} (η_f {row.eta:.1%})")
+        pha.semilogx(f, row.phase_deg)
+        coh.semilogx(f, row.estimate.coherence, label=row.role)
+        _shade_excluded(mag, f, row.included)
+        _shade_excluded(pha, f, row.included)
+        _shade_excluded(coh, f, row.included)
+    coh.axhline(result.test.coherence_min, color="tab:red", ls="--", lw=1, label="ε_co")
+    mag.set_ylabel("magnitude [dB]")
+    pha.set_ylabel("phase [deg]")
+    coh.set_ylabel("coherence γ²")
+    coh.set_ylim(0.0, 1.02)
+    coh.set_xlabel("frequency [Hz]  (shaded: excluded, γ² < ε_co)")
+    mag.legend(fontsize=8)
+    coh.legend(fontsize=8, loc="lower left")
+    for ax in (mag, pha, coh):
+        ax.grid(alpha=0.3, which="both")
+    return _png(figure)
+
+
+# --- HTML ----------------------------------------------------------------------------------
+
+_CSS = """
+body{font-family:system-ui,sans-serif;max-width:980px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:0.6em 0}
+td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}
+th{background:#eee} td:first-child,th:first-child{text-align:left}
+.pass{color:#070;font-weight:bold} .fail{color:#b00;font-weight:bold}
+pre{background:#f6f6f6;padding:0.6em;overflow-x:auto;font-size:0.85em}
+.warn{color:#a60}
+"""
+
+
+def _e(value: Any) -> str:
+    return html.escape(str(value))
+
+
+def _table(header: list[str], rows: list[list[Any]]) -> str:
+    head = "".join(f"<th>{_e(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _verdict(ok: bool, yes: str = "pass", no: str = "fail") -> str:
+    return f'<span class="{"pass" if ok else "fail"}">{yes if ok else no}</span>'
+
+
+def _pct(value: float) -> str:
+    return f"{100.0 * value:.2f} %"
+
+
+def _performance_section(result: PerformanceResult, pass_mark: float) -> str:
+    test = result.test
+    where = "values given in the plan"
+    if test.signal:
+        where = (
+            f"{_e(test.signal.path)}, segment {list(test.segment_s)} s "
+            f"(sim {list(test.segment_sim_s)} s)"
+        )
+    hp = f", {test.highpass_hz:g} Hz high-pass" if test.highpass_hz else ""
+    rows = [
+        [
+            _e(r.role),
+            f"{r.p_e:.6g}",
+            f"{r.p_s:.6g}",
+            f"{r.error:.4g}",
+            f"{r.threshold:.4g} ({_e(r.threshold_rule)})",
+            _pct(r.eta),
+            _verdict(r.eta >= pass_mark),
+        ]
+        for r in result.rows
+    ]
+    header = ["sim", "p_e", "p_s", "e_p", "ε_p", "η_p", "at pass mark"]
+    return (
+        f"<h3>{_e(test.name)} — performance: {_e(test.parameter)} [{_e(test.unit)}]</h3>"
+        f"<p>{where}{hp}; K_p = {test.k_p:g}.</p>" + _table(header, rows)
+    )
+
+
+def _time_section(result: TimeResult, pass_mark: float) -> str:
+    test = result.test
+    smoothing = (
+        f"Savitzky–Golay {test.smoothing.window_s:g} s, order {test.smoothing.polyorder}"
+        if test.smoothing
+        else "none"
+    )
+    align = test.alignment
+    rows = [[_e(test.roles.real), "0", _pct(1.0), "0", "—", "—"]]
+    rows += [
+        [
+            _e(r.role),
+            f"{r.error:.4g}",
+            _pct(r.eta),
+            f"{r.theil_u:.3f}",
+            f"{r.alignment_shift_s:+.4f} s → [{r.segment_s[0]:.3f}, {r.segment_s[1]:.3f}]",
+            _verdict(r.eta >= pass_mark),
+        ]
+        for r in result.rows
+    ]
+    rows.append(["error bounds", f"{result.threshold:.4g}", _pct(pass_mark), "—", "—", "—"])
+    rows.append(
+        [
+            "zero output",
+            f"{result.zero_output_error:.4g}",
+            _pct(result.zero_output_eta),
+            "1.000",
+            "—",
+            "—",
+        ]
+    )
+    header = ["curve", "e_t", "η_t", "Theil U", "alignment shift, sim segment [s]", "at pass mark"]
+    return (
+        f"<h3>{_e(test.name)} — time: {_e(test.signal.path)} [{_e(test.unit)}]</h3>"
+        f"<p>Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s before alignment); "
+        f"n_t = {result.n_t}; ε_t = {result.threshold:.4g} ({_e(result.threshold_rule)}, "
+        f"K_p = {test.k_p:g}); smoothing: {smoothing}; alignment: {_e(align.method)}"
+        f"{f' (max lag {align.max_lag_s:g} s)' if align.method != 'none' else ''}.</p>"
+        + _table(header, rows)
+        + _time_plot(result)
+    )
+
+
+def _frequency_section(result: FrequencyResult, pass_mark: float) -> str:
+    test = result.test
+    real = result.real
+    rows = [
+        [
+            _e(r.role),
+            f"{int(r.included.sum())}/{r.included.size}",
+            f"{r.e_mag_db:.4g} / {r.eps_mag_db:.4g}",
+            _pct(r.eta_mag),
+            f"{r.e_pha_deg:.4g} / {r.eps_pha_deg:.4g}",
+            _pct(r.eta_pha),
+            _pct(r.eta),
+            f"{r.cifer_j:.2f}",
+            _verdict(r.eta >= pass_mark),
+        ]
+        for r in result.rows
+    ]
+    header = [
+        "sim",
+        "n_f",
+        "e_mag / ε_mag [dB]",
+        "η_mag",
+        "e_pha / ε_pha [deg]",
+        "η_pha",
+        "η_f",
+        "CIFER J",
+        "at pass mark",
+    ]
+    excluded = "".join(
+        f"<li>{_e(r.role)}: {', '.join(f'{f:.3g}' for f in r.excluded_hz) or 'none'} Hz</li>"
+        for r in result.rows
+    )
+    return (
+        f"<h3>{_e(test.name)} — frequency: {_e(test.input.path)} → {_e(test.output.path)}</h3>"
+        f"<p>Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s), resampled at "
+        f"{result.sample_rate_hz:g} Hz; {test.n_points} log-spaced points over "
+        f"{list(test.band_hz)} Hz; windows {', '.join(f'{w:.3g}' for w in real.windows_s)} s "
+        f"(real averages {list(real.averages)}, overlap {test.overlap:g}) combined by inverse "
+        f"random-error variance; coherence gate ε_co = {test.coherence_min:g}; "
+        f"η weighting {_e(PAPER_W_GAMMA if test.coherence_weighting else 'W_γ ≡ 1')}; "
+        f"CIFER J with {_e(CIFER_W_GAMMA)}; K_p = {test.k_p:g} "
+        f"({_e(result.rows[0].threshold_rule)}).</p>"
+        + _table(header, rows)
+        + f"<p>Excluded frequencies (γ² &lt; ε_co in either log):</p><ul>{excluded}</ul>"
+        + _frequency_plot(result)
+    )
+
+
+def render_html(assessment: Assessment) -> str:
+    """The whole report as one HTML string."""
+    plan = assessment.plan
+    summary_rows = [
+        [f"η̄_{kind[0]} ({kind})", _pct(value), f"{plan.weights.get(kind, 0.0):g}"]
+        for kind, value in assessment.means.items()
+    ]
+    summary_rows.append(["η_all (eq. (overall))", _pct(assessment.eta_all), "—"])
+    summary_rows.append(["η_min (eq. (worse))", _pct(assessment.eta_min), "—"])
+    sections = []
+    for result in assessment.results:
+        if isinstance(result, PerformanceResult):
+            sections.append(_performance_section(result, plan.pass_mark))
+        elif isinstance(result, TimeResult):
+            sections.append(_time_section(result, plan.pass_mark))
+        else:
+            sections.append(_frequency_section(result, plan.pass_mark))
+    logs = _table(
+        ["role", "file", "format", "SHA-256"],
+        [
+            [_e(log.role), _e(log.path), _e(log.format), f"<code>{log.sha256}</code>"]
+            for log in assessment.logs
+        ],
+    )
+    warnings = "".join(
+        f'<li class="warn">{_e(w)}</li>' for log in assessment.logs for w in log.warnings
+    )
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>Credibility report: {_e(plan.name)}</title>
+<style>{_CSS}</style></head><body>
+<h1>Simulation credibility: {_e(plan.name)}</h1>
+<p>{_e(plan.description)}</p>
+<h2>Summary</h2>
+<p>η_all = <b>{_pct(assessment.eta_all)}</b>:
+{_verdict(assessment.passes, "at or above", "below")} the pass mark {_pct(plan.pass_mark)}
+(K_e = {indices.pass_mark_gain(plan.pass_mark):.4g}).
+η_min = <b>{_pct(assessment.eta_min)}</b>
+{_verdict(assessment.meets_eps_min, "≥", "<")} ε_min = {_pct(plan.eps_min)}: η_all
+{"is" if assessment.meets_eps_min else "is not"} a valid summary of this simulation.</p>
+{_table(["index", "value", "weight α"], summary_rows)}
+<p>Weights: {_e(plan.weights_source)}. Method: Dai, Ke, Quan, Cai, section 3 (equation labels in
+the package docstrings).</p>
+<h2>Tests</h2>
+{"".join(sections)}
+<h2>Provenance</h2>
+<p>hil-rig credibility {_e(assessment.package_version)}, generated {_e(assessment.created_utc)}.
+Plan {_e(plan.path)} (SHA-256 <code>{hashlib.sha256(plan.text.encode()).hexdigest()}</code>).</p>
+{logs}
+{f"<p>Reader warnings:</p><ul>{warnings}</ul>" if warnings else ""}
+<details><summary>Plan text</summary><pre>{_e(plan.text)}</pre></details>
+</body></html>
+"""
+
+
+def write_report(assessment: Assessment, out_dir: Path) -> tuple[Path, Path]:
+    """Write ``<plan>.html`` and ``<plan>.json`` into ``out_dir``; return both paths."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = assessment.plan.path.stem
+    html_path, json_path = out_dir / f"{stem}.html", out_dir / f"{stem}.json"
+    html_path.write_text(render_html(assessment), encoding="utf-8")
+    json_path.write_text(
+        json.dumps(to_dict(assessment), indent=2, ensure_ascii=False), encoding="utf-8"
+    )
+    return html_path, json_path
