@@ -1,0 +1,259 @@
+"""The scenario ground station against a scripted autopilot on the API link (real UDP).
+
+The peer binds 14580+i as PX4 SITL does and answers as PX4's mavlink module does; every
+message the rig sends is parsed by pymavlink (CRC from the definitions) and checked.
+"""
+
+import math
+import socket
+import threading
+
+import pytest
+
+from quad_model.environment import PX4_DEFAULT_HOME
+from quad_model.frames import euler_from_quat, geodetic_to_ned
+from rig.errors import GroundLinkError
+from rig.ground import PX4_MAIN_MODE_OFFBOARD, GroundLink, sweep_pitch_rad
+from rig.px4_sim_api import Ports, mavlink
+
+
+class ScriptedAutopilot(threading.Thread):
+    """Answers COMMAND_LONG, the mission protocol and PARAM_SET like PX4; records all."""
+
+    def __init__(self, ports, refuse=(), statustext=""):
+        super().__init__(daemon=True)
+        self.ports = ports
+        self.refuse = set(refuse)
+        self.statustext = statustext
+        self.received = []
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind(("127.0.0.1", ports.api_local_udp))
+        except OSError:
+            self.sock.close()
+            raise
+        self.sock.settimeout(0.2)
+        self.stopped = threading.Event()
+        self.mav = mavlink.MAVLink(None, ports.system_id, 1)
+        self.mission_count = 0
+
+    def reply(self, *messages, to):
+        for message in messages:
+            self.sock.sendto(message.pack(self.mav), to)
+
+    def run(self):
+        parser = mavlink.MAVLink(None, 0, 0)
+        while not self.stopped.is_set():
+            try:
+                data, sender = self.sock.recvfrom(65536)
+            except TimeoutError:
+                continue
+            for m in parser.parse_buffer(data) or ():
+                self.received.append(m)
+                self.handle(m, sender)
+
+    def handle(self, m, sender):
+        kind = m.get_type()
+        if kind == "COMMAND_LONG":
+            refused = m.command in self.refuse
+            if refused and self.statustext:
+                self.reply(self.mav.statustext_encode(3, self.statustext.encode()), to=sender)
+            result = mavlink.MAV_RESULT_DENIED if refused else mavlink.MAV_RESULT_ACCEPTED
+            self.reply(self.mav.command_ack_encode(m.command, result), to=sender)
+        elif kind == "MISSION_COUNT":
+            self.mission_count = m.count
+            self.reply(self.mav.mission_request_int_encode(245, 190, 0), to=sender)
+        elif kind == "MISSION_ITEM_INT":
+            if m.seq + 1 < self.mission_count:
+                self.reply(self.mav.mission_request_int_encode(245, 190, m.seq + 1), to=sender)
+            else:
+                accepted = mavlink.MAV_MISSION_ACCEPTED
+                self.reply(self.mav.mission_ack_encode(245, 190, accepted), to=sender)
+        elif kind == "PARAM_SET":
+            value = min(m.param_value, 10.0)  # a parameter with a maximum, as PX4 clamps
+            self.reply(
+                self.mav.param_value_encode(m.param_id.encode(), value, m.param_type, 100, 1),
+                to=sender,
+            )
+
+
+@pytest.fixture
+def pair():
+    made = []
+
+    def make(**peer_kw):
+        for instance in range(60, 100):
+            ports = Ports(instance)
+            try:
+                peer = ScriptedAutopilot(ports, **peer_kw)
+            except OSError:
+                continue
+            try:
+                link = GroundLink(ports, PX4_DEFAULT_HOME, ack_timeout_s=2.0)
+            except GroundLinkError:
+                peer.sock.close()
+                continue
+            peer.start()
+            made.append((link, peer))
+            return link, peer
+        raise RuntimeError("no free API-link ports")
+
+    yield make
+    for link, peer in made:
+        link.close()
+        peer.stopped.set()
+        peer.join()
+        peer.sock.close()
+
+
+def test_arm_sends_px4_arm_command_and_returns_on_ack(pair):
+    link, peer = pair()
+    assert link.converse_now("arm", link.arm()) == "arm: accepted"
+    (command,) = peer.received
+    assert command.get_type() == "COMMAND_LONG"
+    assert command.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+    assert command.param1 == 1.0
+    assert (command.target_system, command.target_component) == (link.ports.system_id, 1)
+    assert link.mav.srcSystem == 245
+
+
+def test_takeoff_altitude_is_amsl_as_px4_reads_param7(pair):
+    link, peer = pair()
+    link.converse_now("takeoff", link.takeoff(5.0))
+    (command,) = peer.received
+    assert command.command == mavlink.MAV_CMD_NAV_TAKEOFF
+    assert command.param7 == pytest.approx(PX4_DEFAULT_HOME.alt_amsl_m + 5.0)
+    assert math.isnan(command.param5)
+    assert math.isnan(command.param6)  # NaN lat/lon: take off where you are
+
+
+def test_refusal_quotes_the_autopilot_reason(pair):
+    link, _ = pair(
+        refuse={mavlink.MAV_CMD_COMPONENT_ARM_DISARM}, statustext="Arming denied: no GPS"
+    )
+    with pytest.raises(GroundLinkError) as error:
+        link.converse_now("arm", link.arm())
+    assert str(error.value) == (
+        "the autopilot refused arm: MAV_RESULT_DENIED (2) (Arming denied: no GPS)"
+    )
+
+
+def test_missing_ack_is_a_bounded_wait_with_a_clear_error():
+    for instance in range(60, 100):
+        try:
+            link = GroundLink(Ports(instance), PX4_DEFAULT_HOME, ack_timeout_s=0.2)
+            break
+        except GroundLinkError:
+            continue
+    try:
+        with pytest.raises(
+            GroundLinkError,
+            match=r"^land: no COMMAND_ACK for MAV_CMD_NAV_LAND"
+            r" \(21\) from the autopilot on UDP \d+ within 0\.2 s of wall time",
+        ):
+            link.converse_now("land", link.land())
+    finally:
+        link.close()
+
+
+def test_offboard_setpoint_travels_before_the_mode_switch(pair):
+    link, peer = pair()
+    setpoint = link.position_setpoint((5.0, -1.0, -5.0), None, 12.5)
+    link.converse_now("goto", link.offboard([setpoint], "goto"))
+    first, second = peer.received
+    assert first.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
+    assert (first.x, first.y, first.z) == (5.0, -1.0, -5.0)
+    assert first.coordinate_frame == mavlink.MAV_FRAME_LOCAL_NED
+    assert first.time_boot_ms == 12500
+    ignored = first.type_mask
+    assert ignored & mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE == 0  # position used
+    assert ignored & mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE  # velocity ignored
+    assert ignored & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE  # no yaw given
+    assert second.command == mavlink.MAV_CMD_DO_SET_MODE
+    assert (second.param1, second.param2) == (1.0, PX4_MAIN_MODE_OFFBOARD)
+
+
+def test_attitude_setpoint_carries_the_pitch_as_a_quaternion():
+    for instance in range(60, 100):
+        try:
+            link = GroundLink(Ports(instance), PX4_DEFAULT_HOME)
+            break
+        except GroundLinkError:
+            continue
+    message = link.attitude_setpoint(0.0, math.radians(5.0), 0.0, 0.3, 2.0)
+    link.close()
+    (parsed,) = mavlink.MAVLink(None, 1, 1).parse_buffer(message.pack(link.mav))
+    assert euler_from_quat(parsed.q) == pytest.approx([0.0, math.radians(5.0), 0.0], abs=1e-7)
+    assert parsed.thrust == pytest.approx(0.3)
+    assert parsed.type_mask == 0b111  # body rates ignored, attitude and thrust used
+
+
+def test_mission_upload_protocol_and_start(pair):
+    link, peer = pair()
+    waypoints = [(0, 0, -5), (10, 0, -5), (10, 10, -6)]
+    result = link.converse_now("mission", link.mission(waypoints))
+    assert result == "mission of 3 waypoints: accepted"
+    kinds = [m.get_type() for m in peer.received]
+    assert kinds == ["MISSION_COUNT", *["MISSION_ITEM_INT"] * 3, "COMMAND_LONG"]
+    items = peer.received[1:4]
+    for seq, (item, (north, east, down)) in enumerate(zip(items, waypoints, strict=True)):
+        assert item.seq == seq
+        assert item.frame == mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+        assert item.command == mavlink.MAV_CMD_NAV_WAYPOINT
+        assert item.z == -down  # relative altitude, m
+        back = geodetic_to_ned(item.x / 1e7, item.y / 1e7, 488.0, 47.397742, 8.545594, 488.0)
+        assert back[:2] == pytest.approx([north, east], abs=0.02)  # degE7 ≈ 1.1 cm
+    assert peer.received[-1].command == mavlink.MAV_CMD_MISSION_START
+
+
+def test_param_set_checks_the_echoed_value(pair):
+    link, _ = pair()
+    assert link.converse_now("set_param", link.set_param("MPC_XY_VEL_MAX", 8.0)) == (
+        "MPC_XY_VEL_MAX = 8"
+    )
+    with pytest.raises(GroundLinkError, match=r"kept MPC_XY_VEL_MAX = 10 instead of 12"):
+        link.converse_now("set_param", link.set_param("MPC_XY_VEL_MAX", 12.0))
+
+
+def test_motor_test_uses_one_based_motor_and_percent(pair):
+    link, peer = pair()
+    link.converse_now("motor_test", link.motor_test(0, 0.5, 10.0))
+    (command,) = peer.received
+    assert command.command == mavlink.MAV_CMD_DO_MOTOR_TEST
+    assert (command.param1, command.param2, command.param3, command.param4) == (
+        1.0, mavlink.MOTOR_TEST_THROTTLE_PERCENT, 50.0, 10.0,
+    )  # fmt: skip
+
+
+def test_polling_driver_completes_when_the_ack_arrives(pair):
+    link, _ = pair()
+    link.start("arm", link.arm(), 1.0)
+    result = None
+    for _ in range(2000):
+        result = link.poll(1.0)
+        if result is not None:
+            break
+    assert result == "arm: accepted"
+    assert not link.busy
+
+
+def test_log_chirp_frequency_runs_from_f_min_to_f_max():
+    duration, f0, f1 = 60.0, 0.25, 40.0
+
+    # The instantaneous frequency is the phase derivative: check it numerically at both ends.
+    def phase_rate(t, h=1e-4):
+        a = math.asin(sweep_pitch_rad(t, duration, 1.0, f0, f1))
+        b = math.asin(sweep_pitch_rad(t + h, duration, 1.0, f0, f1))
+        return abs(b - a) / h
+
+    assert phase_rate(0.0) == pytest.approx(f0, rel=1e-3)
+    assert sweep_pitch_rad(-1.0, duration, 1.0, f0, f1) == 0.0
+    assert sweep_pitch_rad(61.0, duration, 1.0, f0, f1) == 0.0
+    # Zero crossings are π/ω apart; near the end ω(t) = f0·(f1/f0)^(t/T) → 40 rad/s.
+    times = [duration - 0.5 + k * 1e-5 for k in range(50000)]
+    values = [sweep_pitch_rad(t, duration, 1.0, f0, f1) for t in times]
+    crossings = [t for t, a, b in zip(times, values, values[1:], strict=False) if a * b < 0]
+    spacing = (crossings[-1] - crossings[-3]) / 2
+    omega_expected = f0 * (f1 / f0) ** (crossings[-2] / duration)
+    assert math.pi / spacing == pytest.approx(omega_expected, rel=1e-3)
+    assert omega_expected == pytest.approx(f1, rel=0.01)
