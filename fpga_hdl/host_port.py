@@ -1,0 +1,239 @@
+"""How the rig loads samples, time and faults into the chips, and reads results back.
+
+Double buffering, in two halves:
+
+1. :class:`HostPort` (rig side). The rig writes 32-bit words into *staging* registers,
+   one word per sample field, in any order and over as many cycles as it likes. Nothing
+   a chip shows changes until ``commit``: in that one cycle every channel written since
+   the last commit is copied to its *offered* register and strobed, and ``now_us`` and
+   the fault words take their new values.
+2. :class:`CoherentLatch` (chip side, inside each chip core). An offered sample becomes
+   *visible* (readable over the bus) only in a cycle with no bus transaction running;
+   one offered during a transaction waits for the transaction's end.
+
+A bus read therefore sees one committed sample from its first byte to its last: the
+rig cannot tear it (staging is invisible) and neither can a commit (the latch defers).
+
+The word map (which address holds which field) is built once by :func:`host_port_map`
+and used by the gateware and by the Python side that drives the port.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from amaranth.hdl import Module, Shape, Signal
+from amaranth.lib import data, wiring
+from amaranth.lib.wiring import In, Out
+
+WORD_BITS = 32
+#: Fault word layout: bits 0..7 XOR mask on sent bytes, bit 8 mute.
+FAULT_MUTE_BIT = 8
+
+
+class CoherentLatch(wiring.Component):
+    """Chip-side half of the double buffer: offered sample → visible when the bus is idle.
+
+    Attributes
+    ----------
+    offered : In(layout)
+        The sample on offer; must stay stable from ``offered_stb`` until copied.
+    offered_stb : In(1)
+        One cycle: ``offered`` holds a new sample.
+    busy : In(1)
+        A bus transaction with this chip is in progress (synchronised to ``sync``).
+    visible : Out(layout)
+        The sample the bus reads; changes only while ``busy`` is low.
+    pending : Out(1)
+        A sample is waiting to become visible.
+    """
+
+    def __init__(self, layout: data.Layout) -> None:
+        super().__init__(
+            {
+                "offered": In(layout),
+                "offered_stb": In(1),
+                "busy": In(1),
+                "visible": Out(layout),
+                "pending": Out(1),
+            }
+        )
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        with m.If(self.pending & ~self.busy):
+            m.d.sync += [self.visible.eq(self.offered), self.pending.eq(0)]
+        with m.If(self.offered_stb):  # a strobe in the copy cycle re-arms: latest wins
+            m.d.sync += self.pending.eq(1)
+        return m
+
+
+@dataclass(frozen=True)
+class HostWord:
+    """One word of the host port: a staged sample field, time, a fault word or a result."""
+
+    address: int
+    channel: str
+    field: str
+    width: int
+    signed: bool
+
+
+@dataclass(frozen=True)
+class HostPortMap:
+    """Addresses of every host-port word; built once by :func:`host_port_map`."""
+
+    writes: tuple[HostWord, ...]
+    reads: tuple[HostWord, ...]
+
+    def write_address(self, channel: str, field: str) -> int:
+        return self._find(self.writes, channel, field).address
+
+    def read_address(self, channel: str, field: str) -> int:
+        return self._find(self.reads, channel, field).address
+
+    @staticmethod
+    def _find(words: tuple[HostWord, ...], channel: str, field: str) -> HostWord:
+        for word in words:
+            if (word.channel, word.field) == (channel, field):
+                return word
+        known = ", ".join(f"{w.channel}.{w.field}" for w in words)
+        raise KeyError(f"no host-port word {channel}.{field}; known: {known}")
+
+    def encode(self, channel: str, field: str, value: int) -> tuple[int, int]:
+        """(address, 32-bit data) writing ``value`` into a staged field, range-checked."""
+        word = self._find(self.writes, channel, field)
+        low = -(1 << (word.width - 1)) if word.signed else 0
+        high = (1 << (word.width - 1)) - 1 if word.signed else (1 << word.width) - 1
+        if not low <= value <= high:
+            raise ValueError(
+                f"host-port value {channel}.{field}={value} outside {low}..{high} "
+                f"({word.width}-bit {'signed' if word.signed else 'unsigned'})"
+            )
+        return word.address, value & ((1 << WORD_BITS) - 1)
+
+
+def host_port_map(
+    samples: Mapping[str, data.StructLayout],
+    faults: tuple[str, ...],
+    results: Mapping[str, Mapping[str, Shape]],
+) -> HostPortMap:
+    """Assign word addresses: ``now_us`` first, then sample fields, faults, results."""
+    writes = [HostWord(0, "time", "now_us", 32, False)]
+    for channel, layout in samples.items():
+        for name, field in layout:
+            shape = Shape.cast(field.shape)
+            if shape.width > WORD_BITS:
+                raise ValueError(f"{channel}.{name} is {shape.width} bits; words hold 32")
+            writes.append(HostWord(len(writes), channel, name, shape.width, shape.signed))
+    for chip in faults:
+        writes.append(HostWord(len(writes), chip, "fault", FAULT_MUTE_BIT + 1, False))
+    reads = []
+    for channel, fields in results.items():
+        for name, shape in fields.items():
+            shape = Shape.cast(shape)
+            reads.append(HostWord(len(reads), channel, name, shape.width, shape.signed))
+    return HostPortMap(tuple(writes), tuple(reads))
+
+
+class HostPort(wiring.Component):
+    """Rig-side half of the double buffer: staged word writes, one atomic commit.
+
+    Parameters
+    ----------
+    samples : mapping of channel name to ``StructLayout``
+        One sample channel per chip (``"imu"``, ``"baro"``, ``"mag"``).
+    faults : tuple of chip names
+        Chips with fault inputs (``fault_mute``, ``fault_flip``).
+    results : mapping of channel name to {field: shape}
+        Values the rig reads back (PWM capture results), one word each.
+
+    Attributes
+    ----------
+    write_addr : In(8), write_data : In(32), write_en : In(1)
+        One staged word per cycle; addresses from :attr:`map`.
+    commit : In(1)
+        One cycle: publish every written channel, ``now_us`` and the fault words.
+    read_addr : In(8)
+        Result word to show on ``read_data``.
+    read_data : Out(32)
+        The addressed result word (combinational), sign-extended when signed.
+    now_us : Out(32)
+        Simulated time in microseconds, as last committed.
+    <channel> : Out(layout), <channel>_stb : Out(1)
+        Offered sample per channel and its one-cycle strobe at commit.
+    <chip>_fault_mute : Out(1), <chip>_fault_flip : Out(8)
+        Fault inputs per chip, as last committed.
+    <channel>_<field> : In(shape)
+        Result inputs, readable through ``read_addr``/``read_data``.
+    """
+
+    def __init__(
+        self,
+        samples: Mapping[str, data.StructLayout],
+        faults: tuple[str, ...],
+        results: Mapping[str, Mapping[str, Shape]],
+    ) -> None:
+        self.map = host_port_map(samples, faults, results)
+        if len(self.map.writes) > 256 or len(self.map.reads) > 256:
+            raise ValueError("the host port addresses at most 256 words each way")
+        self._samples = dict(samples)
+        self._faults = tuple(faults)
+        members = {
+            "write_addr": In(8),
+            "write_data": In(WORD_BITS),
+            "write_en": In(1),
+            "commit": In(1),
+            "read_addr": In(8),
+            "read_data": Out(WORD_BITS),
+            "now_us": Out(32),
+        }
+        for channel, layout in samples.items():
+            members[channel] = Out(layout)
+            members[f"{channel}_stb"] = Out(1)
+        for chip in faults:
+            members[f"{chip}_fault_mute"] = Out(1)
+            members[f"{chip}_fault_flip"] = Out(8)
+        for word in self.map.reads:
+            members[f"{word.channel}_{word.field}"] = In(word.width)
+        super().__init__(members)
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        staged = {
+            w.address: Signal(w.width, name=f"staged_{w.channel}_{w.field}")
+            for w in self.map.writes
+        }
+        dirty = {channel: Signal(name=f"dirty_{channel}") for channel in self._samples}
+        stb_signals = [getattr(self, f"{c}_stb") for c in self._samples]
+        m.d.sync += [stb.eq(0) for stb in stb_signals]
+        with m.If(self.commit):
+            for word in self.map.writes:
+                value = staged[word.address]
+                if word.channel == "time":
+                    m.d.sync += self.now_us.eq(value)
+                elif word.field == "fault":
+                    m.d.sync += [
+                        getattr(self, f"{word.channel}_fault_flip").eq(value[:8]),
+                        getattr(self, f"{word.channel}_fault_mute").eq(value[FAULT_MUTE_BIT]),
+                    ]
+                else:
+                    offered = getattr(self, word.channel)[word.field]
+                    m.d.sync += offered.eq(value)
+            for channel, flag in dirty.items():
+                m.d.sync += [getattr(self, f"{channel}_stb").eq(flag), flag.eq(0)]
+        # After the commit block: a word written in the commit cycle stays staged and dirty.
+        with m.If(self.write_en), m.Switch(self.write_addr):
+            for word in self.map.writes:
+                with m.Case(word.address):
+                    m.d.sync += staged[word.address].eq(self.write_data[: word.width])
+                    if word.channel in dirty:
+                        m.d.sync += dirty[word.channel].eq(1)
+
+        with m.Switch(self.read_addr):
+            for word in self.map.reads:
+                with m.Case(word.address):
+                    value = getattr(self, f"{word.channel}_{word.field}")
+                    m.d.comb += self.read_data.eq(value.as_signed() if word.signed else value)
+        return m

@@ -1,0 +1,153 @@
+"""Generic SPI target (slave) engine for SPI modes 0 and 3, clocked by SCLK itself.
+
+Both emulated SPI chips (InvenSense MPU-6000, TE MS5611) latch SDI on the rising SCLK
+edge and change SDO on the falling edge, MSB first, in mode 0 (SCLK idles low) and in
+mode 3 (SCLK idles high): MPU-6000 product specification PS-MPU-6000A-00 rev 3.4, §9.5
+"SPI operational features"; MS5611-01BA03 datasheet, "SPI mode".
+
+Clocking: the shift engine runs on SCLK edges, as the real chips do, not on an
+oversampling system clock. Why:
+
+- Timing. The MPU-6000 reads sensor registers at up to 20 MHz, a 25 ns half period,
+  and must present SDO within t_VD.SDO = 100 ns of the falling edge (PS-MPU-6000A-00
+  §6.8). An oversampling engine needs a two-flop synchroniser plus an output register,
+  three system-clock periods of delay, which must fit in half an SCLK period: a system
+  clock above 120 MHz. Clocked by SCLK, SDO changes on the falling edge itself.
+- Simulation cost. Only SCLK edges exist while a transfer runs; no system clock has to
+  tick for the bus, so a 15-byte burst costs 240 edges however fast the system clock is.
+
+The engine has three clock domains, all local to the chip that instantiates it:
+
+- ``spi``: SCLK rising edge, reset with the chip. The chip's registers live here. The
+  engine's strobes (``rx_stb`` ...) are combinational, valid at the rising edge that
+  completes a byte, so the chip registers that byte on that same edge.
+- ``spi_rx`` (internal): SCLK rising edge, asynchronously reset while CS is high. Bit
+  and byte counters: a transfer aborted mid-byte is forgotten the moment CS rises.
+- ``spi_tx`` (internal): SCLK falling edge, asynchronously reset while CS is high. The
+  SDO shift register, loaded from ``tx_data`` on the falling edge that starts a data
+  byte (after the byte-0 command/address byte). In mode 3 the leading falling edge
+  after CS falls comes before any rising edge and shifts nothing.
+
+During the first (command) byte SDO sends zeros: neither chip defines SDO there.
+"""
+
+from amaranth.hdl import Cat, ClockDomain, Module, ResetSignal, Signal
+from amaranth.lib import wiring
+from amaranth.lib.cdc import FFSynchronizer
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["CS_SYNC_STAGES", "SpiTarget", "add_spi_domain", "check_sys_clk_for_spi"]
+
+#: Flip-flops between CS and the ``sync`` domain's ``busy`` (see :func:`check_sys_clk_for_spi`).
+CS_SYNC_STAGES = 2
+
+
+def check_sys_clk_for_spi(sys_clk_hz: float, sclk_max_hz: float) -> None:
+    """Reject a system clock too slow to see CS before the first data byte is loaded.
+
+    A chip copies a new sample into its visible registers only while ``busy`` is low.
+    ``busy`` follows CS through :data:`CS_SYNC_STAGES` flip-flops, so it can lag CS by
+    ``CS_SYNC_STAGES + 1`` system-clock periods. The first register byte is loaded into
+    SDO 7.5 SCLK periods after the first edge, so that lag must be shorter, or a copy
+    could land while a read has already begun.
+    """
+    if not sys_clk_hz > 0:
+        raise ValueError(f"sys_clk_hz must be positive, not {sys_clk_hz!r}")
+    lag_s = (CS_SYNC_STAGES + 1) / sys_clk_hz
+    first_load_s = 7.5 / sclk_max_hz
+    if lag_s >= first_load_s:
+        min_hz = (CS_SYNC_STAGES + 1) * sclk_max_hz / 7.5
+        raise ValueError(
+            f"sys_clk_hz {sys_clk_hz:.6g} is too slow for SCLK up to {sclk_max_hz:.6g} Hz: "
+            f"CS reaches the sync domain after {lag_s * 1e9:.1f} ns but the first data byte "
+            f"is loaded after {first_load_s * 1e9:.1f} ns; use more than {min_hz:.6g} Hz"
+        )
+
+
+class SpiTarget(wiring.Component):
+    """SPI target shift engine, modes 0 and 3, MSB first.
+
+    Instantiate it inside a chip core that defines a local ``spi`` clock domain driven
+    by SCLK (rising edge, chip reset); the engine adds its own CS-reset domains.
+
+    Attributes
+    ----------
+    sclk : In(1)
+        SPI clock pin.
+    cs_n : In(1)
+        Chip select pin, active low. High resets the bit and byte counters at once.
+    mosi : In(1)
+        Controller-out target-in data pin (the datasheets' SDI).
+    miso : Out(1)
+        Target-out data pin (SDO); meaningful only while ``miso_oe`` is high.
+    miso_oe : Out(1)
+        SDO driver enable: high while selected and not muted, else SDO is high-Z.
+    fault_mute : In(1)
+        Fault injection: never drive SDO (the chip looks absent).
+    fault_flip : In(8)
+        Fault injection: XOR mask applied to every data byte sent while non-zero.
+    rx_data : Out(8)
+        The byte completing at this rising SCLK edge (combinational).
+    rx_stb : Out(1)
+        High when this rising edge completes a byte (combinational, ``spi`` domain).
+    rx_first : Out(1)
+        High while the byte being received is the transfer's first (command) byte.
+    tx_data : In(8)
+        The next byte to send; sampled on the falling edge after each completed byte.
+    busy : Out(1)
+        CS asserted, synchronised into the ``sync`` domain (lags CS by 2..3 cycles).
+    """
+
+    sclk: In(1)
+    cs_n: In(1)
+    mosi: In(1)
+    miso: Out(1)
+    miso_oe: Out(1)
+    fault_mute: In(1)
+    fault_flip: In(8)
+    rx_data: Out(8)
+    rx_stb: Out(1)
+    rx_first: Out(1)
+    tx_data: In(8)
+    busy: Out(1)
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        for name, edge in (("spi_rx", "pos"), ("spi_tx", "neg")):
+            domain = ClockDomain(name, clk_edge=edge, async_reset=True, local=True)
+            m.domains += domain
+            m.d.comb += [domain.clk.eq(self.sclk), domain.rst.eq(self.cs_n)]
+
+        bit_count = Signal(3)
+        shift_in = Signal(7)
+        first_byte = Signal(init=1)
+        m.d.spi_rx += [shift_in.eq(Cat(self.mosi, shift_in[:6])), bit_count.eq(bit_count + 1)]
+        with m.If(bit_count == 7):
+            m.d.spi_rx += first_byte.eq(0)
+        m.d.comb += [
+            self.rx_data.eq(Cat(self.mosi, shift_in)),
+            self.rx_stb.eq((bit_count == 7) & ~self.cs_n),
+            self.rx_first.eq(first_byte),
+        ]
+
+        shift_out = Signal(8)
+        with m.If(bit_count != 0):
+            m.d.spi_tx += shift_out.eq(shift_out << 1)
+        with m.Elif(~first_byte):  # a byte boundary has passed: start the next data byte
+            m.d.spi_tx += shift_out.eq(self.tx_data ^ self.fault_flip)
+        m.d.comb += [
+            self.miso.eq(shift_out[7]),
+            self.miso_oe.eq(~self.cs_n & ~self.fault_mute),
+        ]
+
+        m.submodules.cs_sync = FFSynchronizer(
+            ~self.cs_n, self.busy, o_domain="sync", stages=CS_SYNC_STAGES
+        )
+        return m
+
+
+def add_spi_domain(m: Module, sclk: Signal) -> None:
+    """Define the local ``spi`` domain (SCLK rising edge, chip reset) a chip core needs."""
+    spi = ClockDomain("spi", async_reset=True, local=True)
+    m.domains += spi
+    m.d.comb += [spi.clk.eq(sclk), spi.rst.eq(ResetSignal("sync"))]
