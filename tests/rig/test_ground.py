@@ -256,4 +256,4 @@ def test_log_chirp_frequency_runs_from_f_min_to_f_max():
     spacing = (crossings[-1] - crossings[-3]) / 2
     omega_expected = f0 * (f1 / f0) ** (crossings[-2] / duration)
     assert math.pi / spacing == pytest.approx(omega_expected, rel=1e-3)
-    assert omega_expected == pytest.approx(f1, rel=0.01)
+    assert omega_expected == pytest.approx(f1, rel=0.02)  # the last crossing, just before T
