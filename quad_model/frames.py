@@ -1,0 +1,153 @@
+"""Frame conventions and unit conversions: the one place everyone imports them from.
+
+Conventions (PX4's): world frame NED (north, east, down), body frame FRD (forward, right,
+down). Quaternions are Hamilton, scalar first ``(w, x, y, z)``, and rotate body vectors into
+NED: ``v_ned = q ⊗ v_frd ⊗ q*`` (PX4 ``matrix::Quatf`` of ``vehicle_attitude``). Euler angles
+are the aerospace Z-Y-X sequence (yaw, then pitch, then roll).
+
+The quaternion helpers are plain numpy/math code that numba also compiles: the 5 kHz kernel
+in :mod:`quad_model.dynamics` uses the same functions, so there is one definition of each
+convention.
+"""
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: Standard gravity (m/s²), CGPM 1901; PX4's ``CONSTANTS_ONE_G``.
+STANDARD_GRAVITY_MPS2 = 9.80665
+#: Earth radius used by PX4's local map projection (``CONSTANTS_RADIUS_OF_EARTH``, m).
+EARTH_RADIUS_M = 6371000.0
+GAUSS_PER_TESLA = 1.0e4
+GAUSS_PER_NANOTESLA = 1.0e-5
+#: ESC pulse range that maps to normalized throttle 0..1 (PX4 ``PWM_MAIN_MIN/MAX`` defaults).
+PWM_MIN_US = 1000.0
+PWM_MAX_US = 2000.0
+
+
+def quat_multiply(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Hamilton product ``p ⊗ q`` (compose rotations: apply ``q`` first, then ``p``)."""
+    pw, px, py, pz = p[0], p[1], p[2], p[3]
+    qw, qx, qy, qz = q[0], q[1], q[2], q[3]
+    return np.array(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ]
+    )
+
+
+def quat_to_dcm(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotation matrix ``R`` with ``v_ned = R @ v_frd`` for a unit quaternion body→NED."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def body_to_ned(q: NDArray[np.float64], v_frd: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotate a body (FRD) vector into NED."""
+    return quat_to_dcm(q) @ v_frd
+
+
+def ned_to_body(q: NDArray[np.float64], v_ned: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotate a NED vector into the body (FRD) frame."""
+    return quat_to_dcm(q).T @ v_ned
+
+
+def quat_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> NDArray[np.float64]:
+    """Body→NED quaternion from Z-Y-X Euler angles (yaw, then pitch, then roll)."""
+    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
+    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    return np.array(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
+
+
+def euler_from_quat(q: ArrayLike) -> NDArray[np.float64]:
+    """Z-Y-X Euler angles ``(roll, pitch, yaw)`` in rad of a body→NED quaternion."""
+    w, x, y, z = np.asarray(q, dtype=float)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.array([roll, pitch, yaw])
+
+
+def quat_from_axis_angle(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
+    """Quaternion of a right-handed rotation by ``angle_rad`` about ``axis``."""
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    s = math.sin(angle_rad / 2)
+    return np.array([math.cos(angle_rad / 2), a[0] * s, a[1] * s, a[2] * s])
+
+
+def ned_to_geodetic(
+    position_ned_m: ArrayLike, ref_lat_deg: float, ref_lon_deg: float, ref_alt_m: float
+) -> tuple[float, float, float]:
+    """Latitude, longitude (deg) and altitude (m) of a local NED point.
+
+    PX4's azimuthal equidistant projection (``MapProjection::reproject`` in
+    ``src/lib/geo/geo.cpp``) so the autopilot maps the position back to the same NED point.
+    """
+    n, e, d = np.asarray(position_ned_m, dtype=float)
+    lat0, lon0 = math.radians(ref_lat_deg), math.radians(ref_lon_deg)
+    x_rad, y_rad = n / EARTH_RADIUS_M, e / EARTH_RADIUS_M
+    c = math.hypot(x_rad, y_rad)
+    if c == 0.0:
+        lat, lon = lat0, lon0
+    else:
+        sin_c, cos_c = math.sin(c), math.cos(c)
+        lat = math.asin(cos_c * math.sin(lat0) + x_rad * sin_c * math.cos(lat0) / c)
+        lon = lon0 + math.atan2(
+            y_rad * sin_c, c * math.cos(lat0) * cos_c - x_rad * math.sin(lat0) * sin_c
+        )
+    return math.degrees(lat), math.degrees(lon), ref_alt_m - d
+
+
+def geodetic_to_ned(
+    lat_deg: float,
+    lon_deg: float,
+    alt_m: float,
+    ref_lat_deg: float,
+    ref_lon_deg: float,
+    ref_alt_m: float,
+) -> NDArray[np.float64]:
+    """Local NED point of a geodetic position: the inverse of :func:`ned_to_geodetic`
+    (PX4 ``MapProjection::project``)."""
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    lat0, lon0 = math.radians(ref_lat_deg), math.radians(ref_lon_deg)
+    cos_d_lon = math.cos(lon - lon0)
+    arg = max(
+        -1.0, min(1.0, math.sin(lat0) * math.sin(lat) + math.cos(lat0) * math.cos(lat) * cos_d_lon)
+    )
+    c = math.acos(arg)
+    k = 1.0 if c == 0.0 else c / math.sin(c)
+    north = k * (math.cos(lat0) * math.sin(lat) - math.sin(lat0) * math.cos(lat) * cos_d_lon)
+    east = k * math.cos(lat) * math.sin(lon - lon0)
+    return np.array([north * EARTH_RADIUS_M, east * EARTH_RADIUS_M, ref_alt_m - alt_m])
+
+
+def pwm_to_throttle(pwm_us: ArrayLike) -> NDArray[np.float64]:
+    """Normalized ESC throttle 0..1 from a pulse width in µs (clamped to the PWM range)."""
+    pwm = np.asarray(pwm_us, dtype=float)
+    return np.clip((pwm - PWM_MIN_US) / (PWM_MAX_US - PWM_MIN_US), 0.0, 1.0)
+
+
+def throttle_to_pwm(throttle: ArrayLike) -> NDArray[np.float64]:
+    """Pulse width in µs for a normalized throttle 0..1 (clamped)."""
+    return PWM_MIN_US + np.clip(np.asarray(throttle, dtype=float), 0.0, 1.0) * (
+        PWM_MAX_US - PWM_MIN_US
+    )

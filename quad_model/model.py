@@ -1,0 +1,400 @@
+"""The vehicle model users drive: one vehicle (:class:`QuadModel`) or many (:class:`QuadBatch`).
+
+Both hold ESC throttles constant over ``advance(command, duration_s)`` and run the compiled
+5 kHz RK4 loop in one call, the way the rig's lockstep holds PX4's motor outputs for one
+autopilot frame. Ground truth comes back as :class:`VehicleTruth` with named SI fields.
+"""
+
+import enum
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from quad_model import dynamics as dyn
+from quad_model.environment import Environment
+from quad_model.frames import STANDARD_GRAVITY_MPS2
+from quad_model.vehicle import ROTOR_COUNT, Vehicle
+
+DEFAULT_PHYSICS_RATE_HZ = 5000.0
+#: Above this many vehicles the batch runs on all cores (thread start-up costs ~10 µs).
+PARALLEL_MIN_VEHICLES = 32
+
+
+class ModelInputError(ValueError):
+    """A command, duration or setting handed to the model is unusable; the message says which."""
+
+
+class Mount(enum.IntEnum):
+    """How the vehicle is held: free flight or one of the paper's test benches."""
+
+    FREE = dyn.MOUNT_FREE
+    #: 1-DOF bearing through the centre of mass along body y: only pitch is free.
+    GIMBAL_PITCH = dyn.MOUNT_GIMBAL_PITCH
+    #: 1-DOF bearing along body x: only roll is free.
+    GIMBAL_ROLL = dyn.MOUNT_GIMBAL_ROLL
+    #: Rigidly clamped; ``force_frd_n``/``moment_frd_nm`` are what the load cell reads.
+    THRUST_STAND = dyn.MOUNT_THRUST_STAND
+
+
+class VehicleTruth:
+    """Ground truth of one vehicle at ``time_s`` (SI units, NED world, FRD body).
+
+    A read-only snapshot: the rig takes one per frame, so it copies two rows and names
+    their slots lazily instead of building twenty arrays.
+    """
+
+    __slots__ = ("_outputs", "_state")
+
+    def __init__(self, state: NDArray[np.float64], outputs: NDArray[np.float64]) -> None:
+        self._state = state.copy()
+        self._outputs = outputs.copy()
+        self._state.flags.writeable = False
+        self._outputs.flags.writeable = False
+
+    def __repr__(self) -> str:
+        return (
+            f"VehicleTruth(time_s={self.time_s:.6f}, position_ned_m={self.position_ned_m}, "
+            f"velocity_ned_mps={self.velocity_ned_mps}, on_ground={self.on_ground})"
+        )
+
+    @property
+    def time_s(self) -> float:
+        return float(self._state[dyn.X_TIME])
+
+    @property
+    def position_ned_m(self) -> NDArray[np.float64]:
+        return self._state[dyn.X_POS : dyn.X_POS + 3]
+
+    @property
+    def velocity_ned_mps(self) -> NDArray[np.float64]:
+        return self._state[dyn.X_VEL : dyn.X_VEL + 3]
+
+    @property
+    def acceleration_ned_mps2(self) -> NDArray[np.float64]:
+        return self._outputs[dyn.A_ACCEL_NED : dyn.A_ACCEL_NED + 3]
+
+    @property
+    def attitude_quat(self) -> NDArray[np.float64]:
+        """Body→NED, Hamilton, (w, x, y, z)."""
+        return self._state[dyn.X_QUAT : dyn.X_QUAT + 4]
+
+    @property
+    def angular_rate_frd_radps(self) -> NDArray[np.float64]:
+        return self._state[dyn.X_RATE : dyn.X_RATE + 3]
+
+    @property
+    def specific_force_frd_mps2(self) -> NDArray[np.float64]:
+        """What an ideal accelerometer reads: level at rest ≈ (0, 0, -9.81)."""
+        return self._outputs[dyn.A_SPECIFIC_FORCE : dyn.A_SPECIFIC_FORCE + 3]
+
+    @property
+    def rotor_speed_radps(self) -> NDArray[np.float64]:
+        return self._state[dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + ROTOR_COUNT]
+
+    @property
+    def rotor_angle_rad(self) -> NDArray[np.float64]:
+        """Rotor angle in each rotor's own spin direction, 0..2π (phase of the vibration)."""
+        return self._state[dyn.X_ROTOR_ANGLE : dyn.X_ROTOR_ANGLE + ROTOR_COUNT]
+
+    @property
+    def rotor_thrust_n(self) -> NDArray[np.float64]:
+        return self._outputs[dyn.A_THRUST : dyn.A_THRUST + ROTOR_COUNT]
+
+    @property
+    def rotor_torque_nm(self) -> NDArray[np.float64]:
+        return self._outputs[dyn.A_TORQUE : dyn.A_TORQUE + ROTOR_COUNT]
+
+    @property
+    def force_frd_n(self) -> NDArray[np.float64]:
+        """Propulsion + aerodynamic force on the body (what a thrust stand reads)."""
+        return self._outputs[dyn.A_FORCE_FRD : dyn.A_FORCE_FRD + 3]
+
+    @property
+    def moment_frd_nm(self) -> NDArray[np.float64]:
+        """Propulsion + aerodynamic moment about the centre of mass."""
+        return self._outputs[dyn.A_MOMENT_FRD : dyn.A_MOMENT_FRD + 3]
+
+    @property
+    def battery_voltage_v(self) -> float:
+        return float(self._outputs[dyn.A_VOLTAGE])
+
+    @property
+    def battery_current_a(self) -> float:
+        return float(self._outputs[dyn.A_CURRENT])
+
+    @property
+    def battery_charge_used_c(self) -> float:
+        return float(self._state[dyn.X_CHARGE_USED])
+
+    @property
+    def wind_ned_mps(self) -> NDArray[np.float64]:
+        return self._outputs[dyn.A_WIND_NED : dyn.A_WIND_NED + 3]
+
+    @property
+    def air_density_kgpm3(self) -> float:
+        return float(self._outputs[dyn.A_AIR_DENSITY])
+
+    @property
+    def on_ground(self) -> bool:
+        return bool(self._state[dyn.X_ON_GROUND] > 0.0)
+
+
+def pack_params(vehicle: Vehicle, environment: Environment, mount: Mount) -> NDArray[np.float64]:
+    """One row of kernel parameters (layout in :mod:`quad_model.dynamics`)."""
+    body, prop, bat = vehicle.body, vehicle.propulsion, vehicle.battery
+    p = np.zeros(dyn.P_SIZE)
+    inertia = np.array(body.inertia_kgm2)
+    p[dyn.P_MASS] = body.mass_kg
+    p[dyn.P_INERTIA : dyn.P_INERTIA + 9] = inertia.ravel()
+    p[dyn.P_INERTIA_INV : dyn.P_INERTIA_INV + 9] = np.linalg.inv(inertia).ravel()
+    p[dyn.P_DRAG_AREA : dyn.P_DRAG_AREA + 3] = body.drag_area_m2
+    p[dyn.P_ANGULAR_DRAG : dyn.P_ANGULAR_DRAG + 3] = body.angular_drag_nms2
+    p[dyn.P_ROTOR_POS : dyn.P_ROTOR_POS + 3 * ROTOR_COUNT] = np.ravel(prop.position_frd_m)
+    p[dyn.P_SPIN : dyn.P_SPIN + ROTOR_COUNT] = prop.spin_direction
+    p[dyn.P_CT] = prop.thrust_coefficient_n_per_radps2
+    p[dyn.P_CQ] = prop.torque_coefficient_nm_per_radps2
+    p[dyn.P_RHO_REF] = prop.reference_air_density_kgpm3
+    p[dyn.P_ROTOR_INERTIA] = prop.rotor_inertia_kgm2
+    p[dyn.P_MOTOR_TAU] = prop.motor_time_constant_s
+    p[dyn.P_SPEED_SLOPE] = prop.speed_slope_radps
+    p[dyn.P_SPEED_OFFSET] = prop.speed_offset_radps
+    p[dyn.P_MIN_THROTTLE] = prop.min_throttle
+    p[dyn.P_CURVE_VOLTAGE] = prop.speed_curve_voltage_v
+    p[dyn.P_ROTOR_DRAG] = prop.rotor_drag_coefficient_ns_per_m_rad
+    p[dyn.P_CELLS] = bat.cell_count
+    p[dyn.P_CAPACITY_C] = bat.capacity_ah * 3600.0
+    p[dyn.P_CELL_FULL] = bat.cell_full_v
+    p[dyn.P_CELL_EMPTY] = bat.cell_empty_v
+    p[dyn.P_R_INTERNAL] = bat.internal_resistance_ohm
+    p[dyn.P_EFFICIENCY] = bat.propulsion_efficiency
+    p[dyn.P_AVIONICS_W] = bat.avionics_power_w
+    p[dyn.P_HEALTH : dyn.P_HEALTH + ROTOR_COUNT] = 1.0
+    p[dyn.P_HOME_ALT] = environment.home.alt_amsl_m
+    p[dyn.P_WIND_STEADY : dyn.P_WIND_STEADY + 3] = environment.wind.steady_ned_mps
+    p[dyn.P_W20] = environment.wind.wind_at_6m_mps
+    p[dyn.P_TEMP_OFFSET] = environment.temperature_offset_k
+    p[dyn.P_MOUNT] = int(mount)
+    return p
+
+
+class QuadBatch:
+    """N vehicles stepped together by one compiled call (campaigns, Monte-Carlo).
+
+    ``vehicles`` is one vehicle for all N, or one per row (parameter dispersion). All
+    start at rest on the ground at home, level, facing north, battery full. Randomness
+    (turbulence) comes only from ``rng``, drawn in vehicle order, so a seed gives the same
+    numbers on any core count.
+    """
+
+    def __init__(
+        self,
+        vehicles: Vehicle | Sequence[Vehicle],
+        count: int,
+        rng: np.random.Generator,
+        environment: Environment | None = None,
+        mount: Mount = Mount.FREE,
+        physics_rate_hz: float = DEFAULT_PHYSICS_RATE_HZ,
+    ) -> None:
+        if count < 1:
+            raise ModelInputError(f"count={count} must be at least 1")
+        if isinstance(vehicles, Vehicle):
+            vehicles = [vehicles] * count
+        if len(vehicles) != count:
+            raise ModelInputError(f"got {len(vehicles)} vehicles for count={count}")
+        if not physics_rate_hz > 0:
+            raise ModelInputError(f"physics_rate_hz={physics_rate_hz} must be > 0")
+        self.vehicles = tuple(vehicles)
+        self.environment = environment or Environment()
+        self.mount = Mount(mount)
+        self.physics_dt_s = 1.0 / physics_rate_hz
+        self._rng = rng
+        rows = {id(v): pack_params(v, self.environment, self.mount) for v in self.vehicles}
+        self.params = np.array([rows[id(v)] for v in self.vehicles])
+        self.states = np.zeros((count, dyn.X_SIZE))
+        self.outputs = np.zeros((count, dyn.A_SIZE))
+        self.throttles = np.zeros((count, ROTOR_COUNT))
+        self._turbulent = bool(np.any(self.params[:, dyn.P_W20] > 0))
+        self._no_noise = np.zeros((count, 0, 3))
+        self._kernel = (
+            dyn.advance_parallel if count >= PARALLEL_MIN_VEHICLES else dyn.advance_serial
+        )
+        self._last_duration_s, self._last_n_steps = -1.0, 0
+        self.reset()
+
+    @property
+    def count(self) -> int:
+        return self.states.shape[0]
+
+    def reset(
+        self,
+        position_ned_m: ArrayLike = (0.0, 0.0, 0.0),
+        velocity_ned_mps: ArrayLike = (0.0, 0.0, 0.0),
+        attitude_quat: ArrayLike = (1.0, 0.0, 0.0, 0.0),
+        angular_rate_frd_radps: ArrayLike = (0.0, 0.0, 0.0),
+        rotor_speed_radps: ArrayLike = (0.0, 0.0, 0.0, 0.0),
+        time_s: float = 0.0,
+    ) -> None:
+        """Put every vehicle in the given state (each argument broadcasts over vehicles)."""
+        n = self.count
+        s = self.states
+        s[:] = 0.0
+        s[:, dyn.X_POS : dyn.X_POS + 3] = np.broadcast_to(position_ned_m, (n, 3))
+        s[:, dyn.X_VEL : dyn.X_VEL + 3] = np.broadcast_to(velocity_ned_mps, (n, 3))
+        quat = np.array(np.broadcast_to(attitude_quat, (n, 4)), dtype=float)
+        norms = np.linalg.norm(quat, axis=1)
+        if np.any(np.abs(norms - 1.0) > 1e-6):
+            raise ModelInputError(f"attitude_quat={attitude_quat} is not a unit quaternion")
+        s[:, dyn.X_QUAT : dyn.X_QUAT + 4] = quat / norms[:, None]
+        s[:, dyn.X_RATE : dyn.X_RATE + 3] = np.broadcast_to(angular_rate_frd_radps, (n, 3))
+        speeds = np.broadcast_to(rotor_speed_radps, (n, ROTOR_COUNT))
+        if np.any(speeds < 0):
+            raise ModelInputError(f"rotor_speed_radps={rotor_speed_radps} must be >= 0")
+        s[:, dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + ROTOR_COUNT] = speeds
+        s[:, dyn.X_TIME] = time_s
+        if not np.all(np.isfinite(s)):
+            raise ModelInputError("reset state has a non-finite value")
+        if np.any(s[:, dyn.X_POS + 2] > 0.0) and self.mount == Mount.FREE:
+            raise ModelInputError("position_ned_m is below the ground (z > 0)")
+        self.throttles[:] = 0.0
+        self.advance(self.throttles, 0.0)
+
+    def advance(self, throttles: ArrayLike, duration_s: float) -> None:
+        """Hold ESC throttles (N×4, normalized 0..1, PX4 motor order) for ``duration_s``.
+
+        Throttles outside 0..1 are clamped, as an ESC does; a non-finite value is refused.
+        ``duration_s`` must be a whole number of physics steps (1 ms = 5 steps at 5 kHz).
+        """
+        command = np.asarray(throttles, dtype=float)
+        if command.shape != self.throttles.shape:
+            raise ModelInputError(
+                f"throttles have shape {command.shape}, expected {self.throttles.shape}"
+            )
+        self.throttles[:] = command
+        self._run(duration_s)
+
+    def _run(self, duration_s: float) -> None:
+        """Run the kernel with the throttles already in ``self.throttles``."""
+        if duration_s != self._last_duration_s:
+            steps = duration_s / self.physics_dt_s
+            n_steps = round(steps)
+            if abs(steps - n_steps) > 1e-6 or n_steps < 0:
+                raise ModelInputError(
+                    f"duration_s={duration_s} is not a whole number of "
+                    f"{self.physics_dt_s * 1e3:g} ms physics steps"
+                )
+            self._last_duration_s, self._last_n_steps = duration_s, n_steps
+        n_steps = self._last_n_steps
+        noise = (
+            self._rng.standard_normal((self.count, n_steps, 3))
+            if self._turbulent
+            else self._no_noise
+        )
+        if not self._kernel(
+            self.states,
+            self.outputs,
+            self.params,
+            self.throttles,
+            noise,
+            n_steps,
+            self.physics_dt_s,
+        ):
+            raise ModelInputError(
+                f"throttles contain a non-finite value: {self.throttles.tolist()}"
+            )
+
+    def set_motor_health(self, vehicle_index: int, motor: int, thrust_fraction: float) -> None:
+        """Degrade (0 < f < 1) or kill (0) one motor-propeller unit; 1 restores it.
+
+        ``thrust_fraction`` scales the steady rotor speed by its square root, so thrust,
+        torque, current draw and vibration all follow, as with a weak motor or a chipped
+        propeller.
+        """
+        if not 0.0 <= thrust_fraction <= 1.0:
+            raise ModelInputError(f"thrust_fraction={thrust_fraction} must be within 0..1")
+        if not 0 <= motor < ROTOR_COUNT:
+            raise ModelInputError(f"motor={motor} must be within 0..{ROTOR_COUNT - 1}")
+        self.params[vehicle_index, dyn.P_HEALTH + motor] = thrust_fraction
+
+    def truth(self, index: int) -> VehicleTruth:
+        """Ground truth of one vehicle (a snapshot: safe to keep)."""
+        return VehicleTruth(self.states[index], self.outputs[index])
+
+    def hover_throttle(self, index: int = 0) -> float:
+        """Throttle at which four healthy rotors carry the weight here and now.
+
+        Solves the propulsion chain backwards at the vehicle's air density and battery
+        charge: hover speed from thrust = weight, battery voltage under the hover load,
+        then the ESC speed curve at that voltage.
+        """
+        p, s = self.params[index], self.states[index]
+        density_ratio = dyn.air_density_kgpm3(p, s[dyn.X_POS + 2]) / p[dyn.P_RHO_REF]
+        ct, cq = p[dyn.P_CT] * density_ratio, p[dyn.P_CQ] * density_ratio
+        speed = math.sqrt(p[dyn.P_MASS] * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * ct))
+        load_w = ROTOR_COUNT * cq * speed**3 / p[dyn.P_EFFICIENCY] + p[dyn.P_AVIONICS_W]
+        voltage, _ = dyn.battery_terminal(p, s[dyn.X_CHARGE_USED], load_w)
+        curve_speed = speed * p[dyn.P_CURVE_VOLTAGE] / voltage
+        return (curve_speed - p[dyn.P_SPEED_OFFSET]) / p[dyn.P_SPEED_SLOPE]
+
+
+class QuadModel:
+    """One vehicle at 5 kHz: what the rig's lockstep loop drives.
+
+    >>> from quad_model import QuadModel, load_vehicle
+    >>> model = QuadModel(load_vehicle("f450_high_precision"), np.random.default_rng(1))
+    >>> model.advance([0.7, 0.7, 0.7, 0.7], 0.001)  # one 1 ms autopilot frame
+    >>> round(model.truth.time_s, 6)
+    0.001
+    """
+
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        rng: np.random.Generator,
+        environment: Environment | None = None,
+        mount: Mount = Mount.FREE,
+        physics_rate_hz: float = DEFAULT_PHYSICS_RATE_HZ,
+    ) -> None:
+        self._batch = QuadBatch(vehicle, 1, rng, environment, mount, physics_rate_hz)
+        self.vehicle = vehicle
+
+    @property
+    def environment(self) -> Environment:
+        return self._batch.environment
+
+    @property
+    def mount(self) -> Mount:
+        return self._batch.mount
+
+    @property
+    def physics_dt_s(self) -> float:
+        return self._batch.physics_dt_s
+
+    def reset(self, **state: ArrayLike) -> None:
+        """Set the state; keywords as :meth:`QuadBatch.reset`."""
+        self._batch.reset(**state)
+
+    def advance(self, command: ArrayLike, duration_s: float) -> None:
+        """Hold the four ESC throttles (0..1, PX4 order) for ``duration_s``."""
+        try:
+            self._batch.throttles[0] = command
+        except ValueError:
+            raise ModelInputError(f"command {command!r} is not {ROTOR_COUNT} throttles") from None
+        self._batch._run(duration_s)
+
+    def set_motor_health(self, motor: int, thrust_fraction: float) -> None:
+        """Fault hook: see :meth:`QuadBatch.set_motor_health`."""
+        self._batch.set_motor_health(0, motor, thrust_fraction)
+
+    @property
+    def motor_health(self) -> NDArray[np.float64]:
+        return self._batch.params[0, dyn.P_HEALTH : dyn.P_HEALTH + ROTOR_COUNT].copy()
+
+    @property
+    def truth(self) -> VehicleTruth:
+        return self._batch.truth(0)
+
+    def hover_throttle(self) -> float:
+        """Throttle that balances the weight now: see :meth:`QuadBatch.hover_throttle`."""
+        return self._batch.hover_throttle(0)
