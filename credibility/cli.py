@@ -58,7 +58,9 @@ def _report(args: argparse.Namespace, console: Console) -> int:
     for role, path in sorted(dict(args.log).items()):
         console.print(f"log {role} = {path}")
     columns = (TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
-    with Progress(*columns, console=console, transient=True) as progress:
+    # Progress only on a terminal: a pipeline's stderr gets the result lines alone.
+    live = console.is_terminal
+    with Progress(*columns, console=console, transient=True, disable=not live) as progress:
         task = progress.add_task("scoring", total=steps(plan))
 
         def advance(label: str) -> None:

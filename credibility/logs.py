@@ -140,8 +140,9 @@ def _read_ulog(path: Path) -> tuple[dict, tuple[str, ...]]:
     # pyulog reports corruption with print(); capture it and surface it as warning lines.
     captured = io.StringIO()
     try:
-        with contextlib.redirect_stdout(captured):
-            ulog = ULog(str(path))
+        # pyulog leaves its own file handle open when parsing fails; pass it ours.
+        with path.open("rb") as stream, contextlib.redirect_stdout(captured):
+            ulog = ULog(stream)
     # A damaged file can fail anywhere in pyulog's parser; each of these means "not readable".
     except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError) as exc:
         raise CredibilityError(f"{path}: not a readable ULog file ({exc})") from None

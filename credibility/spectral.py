@@ -109,6 +109,11 @@ def estimate_response(
         sxy = np.interp(freqs_hz, f, gxy.real) + 1j * np.interp(freqs_hz, f, gxy.imag)
         sxx = np.interp(freqs_hz, f, gxx)
         syy = np.interp(freqs_hz, f, gyy)
+        if np.any(sxx <= 0.0) or np.any(syy <= 0.0):
+            raise CredibilityError(
+                "the input or output has no power in the band: a constant signal cannot be "
+                "analysed (is the excitation in this segment?)"
+            )
         gamma2 = np.clip(np.abs(sxy) ** 2 / (sxx * syy), _GAMMA2_CLIP, 1.0 - _GAMMA2_CLIP)
         eps_r = np.sqrt(1.0 - gamma2) / (np.sqrt(gamma2) * np.sqrt(2.0 * n_d))
         weight = np.where(freqs_hz * window_s >= MIN_CYCLES, 1.0 / eps_r**2, 0.0)

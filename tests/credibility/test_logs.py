@@ -1,0 +1,98 @@
+"""Reading real ULogs and tables; every bad input is one clear line."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from credibility.errors import CredibilityError
+from credibility.logs import SignalSpec, open_log
+from credibility.signals import window
+
+
+def test_x500_log_loads_with_its_corruption_warning_as_one_line(x500_log, capsys):
+    log = open_log(x500_log)
+    assert capsys.readouterr().out == ""  # pyulog's print() is captured, not leaked
+    assert len(log.warnings) == 1
+    assert "no subscription found for message id 32812" in log.warnings[0]
+    assert "\n" not in log.warnings[0]
+    pitch = log.signal(SignalSpec("vehicle_attitude.q.pitch", convert="rad->deg"))
+    # SOURCES.md: attitude range pitch −22.7 … +13.2°
+    assert pitch.values.min() == pytest.approx(-22.7, abs=1.0)
+    assert pitch.values.max() == pytest.approx(13.2, abs=1.0)
+
+
+def test_multi_instance_topics_and_hover_noise(quad4001_log):
+    log = open_log(quad4001_log)
+    accel0 = log.signal(SignalSpec("sensor_accel.0.x"))
+    accel1 = log.signal(SignalSpec("sensor_accel.1.x"))
+    assert not np.array_equal(accel0.values, accel1.values)
+    # SOURCES.md: motors stopped, gyro σ = 0.0031 / 0.0037 rad/s (x / y), 104.9–108.9 s
+    for axis, sigma in ((0, 0.0031), (1, 0.0037)):
+        gyro = log.signal(SignalSpec(f"sensor_combined.gyro_rad[{axis}]"))
+        assert window(gyro, (105.0, 108.9), 0.1).values.std() == pytest.approx(sigma, rel=0.1)
+
+
+def test_missing_topic_and_field_name_the_problem(quad4001_log):
+    log = open_log(quad4001_log)
+    with pytest.raises(CredibilityError, match=r"no topic 'sensor_accel' instance 5.*sensor_accel"):
+        log.signal(SignalSpec("sensor_accel.5.x"))
+    with pytest.raises(CredibilityError, match=r"no field 'xyz\[7\]'.*xyz\[0\]"):
+        log.signal(SignalSpec("vehicle_angular_velocity.xyz[7]"))
+
+
+def test_segment_outside_the_log_is_an_error(quad4001_log):
+    sig = open_log(quad4001_log).signal(SignalSpec("vehicle_angular_velocity.xyz[0]"))
+    with pytest.raises(CredibilityError) as info:
+        window(sig, (190.0, 200.0), 0.5)
+    assert str(info.value) == (
+        f"vehicle_angular_velocity.xyz[0] in {quad4001_log}: segment [190, 200] s is outside "
+        "the logged span [104.957, 197.419] s"
+    )
+
+
+def test_truncated_and_foreign_files(tmp_path, quad4001_log):
+    data = quad4001_log.read_bytes()
+    head_only = tmp_path / "head_only.ulg"
+    head_only.write_bytes(data[:100_000])
+    with pytest.raises(CredibilityError, match=r"ULog has no logged data \(the file is truncated"):
+        open_log(head_only)
+    # Cut mid-flight: it loads, and asking for the hover then fails on the span.
+    half = tmp_path / "half.ulg"
+    half.write_bytes(data[:2_000_000])
+    sig = open_log(half).signal(SignalSpec("vehicle_angular_velocity.xyz[0]"))
+    with pytest.raises(CredibilityError, match=r"outside the logged span \[104.957, 151.7"):
+        window(sig, (115.0, 188.0), 0.5)
+    text = tmp_path / "notes.ulg"
+    text.write_text("time,value\n0,1\n")
+    with pytest.raises(CredibilityError, match=r"notes.ulg: not a readable ULog file"):
+        open_log(text)
+    with pytest.raises(CredibilityError, match=r"log file not found"):
+        open_log(tmp_path / "absent.ulg")
+    (tmp_path / "x.bin").write_bytes(b"")
+    with pytest.raises(CredibilityError, match=r"unknown log format '.bin'"):
+        open_log(tmp_path / "x.bin")
+
+
+def test_tables_nan_and_gaps(tmp_path):
+    t = np.arange(0.0, 10.0, 0.01)
+    y = np.sin(t)
+    y[500] = np.nan
+    frame = pd.DataFrame({"time_s": t, "rig.y": y})
+    frame.to_parquet(tmp_path / "run.parquet")
+    frame.assign(timestamp=np.round(t * 1e6).astype(np.int64)).drop(columns="time_s").to_csv(
+        tmp_path / "run.csv", index=False
+    )
+    for name in ("run.parquet", "run.csv"):
+        log = open_log(tmp_path / name)
+        sig = log.signal(SignalSpec("rig.y"))
+        np.testing.assert_allclose(sig.time_s, t, atol=1e-9)
+        with pytest.raises(
+            CredibilityError, match=r"1 NaN/inf samples in \[1, 9\] s, the first at t = 5.000 s"
+        ):
+            window(sig, (1.0, 9.0), 0.5)
+        assert window(sig, (1.0, 9.0), 0.5, drop_nan=True).values.size == 800
+        with pytest.raises(CredibilityError, match=r"0.020 s without samples at t = 4.990 s"):
+            window(sig, (1.0, 9.0), 0.015, drop_nan=True)
+    pd.DataFrame({"t": t}).to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(CredibilityError, match=r"no time column"):
+        open_log(tmp_path / "bad.csv")
