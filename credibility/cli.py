@@ -68,9 +68,8 @@ def _report(args: argparse.Namespace, console: Console) -> int:
             progress.advance(task)
 
         assessment = assess(plan, advance)
-    for log in assessment.logs:
-        for warning in log.warnings:
-            console.print(f"[yellow]warning:[/] {warning}", markup=True, highlight=False)
+    for warning in dict.fromkeys(w for log in assessment.logs for w in log.warnings):
+        console.print(f"[yellow]warning:[/] {warning}")
     html_path, json_path = write_report(assessment, args.out)
     code = exit_code(assessment)
     console.print(
@@ -109,7 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     # A pipe gets 80 columns from rich; the paper table needs about 130.
     out = Console(highlight=False, width=None if sys.stdout.isatty() else 130)
-    err = Console(stderr=True, highlight=False)
+    err = Console(stderr=True, highlight=False, soft_wrap=True)  # one message, one line
     try:
         if args.command == "paper":
             return _paper(out)
