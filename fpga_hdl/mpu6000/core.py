@@ -53,6 +53,9 @@ class Mpu6000(wiring.Component):
         The chip stops driving SDO.
     fault_flip : In(8)
         XOR mask on every data byte sent while non-zero.
+    sample_pending : Out(1)
+        A sample waits for the current transfer to end; a simulation that gates the
+        system clock keeps it running until this falls.
     """
 
     sclk: In(1)
@@ -64,6 +67,7 @@ class Mpu6000(wiring.Component):
     sample_stb: In(1)
     fault_mute: In(1)
     fault_flip: In(8)
+    sample_pending: Out(1)
 
     def __init__(self, *, sys_clk_hz: float) -> None:
         check_sys_clk_for_spi(sys_clk_hz, regs.SPI_TIMING.sclk_max_sensor_registers_hz)
@@ -97,6 +101,7 @@ class Mpu6000(wiring.Component):
             latch.offered.eq(self.sample),
             latch.offered_stb.eq(self.sample_stb & ~sleeping),
             latch.busy.eq(engine.busy),
+            self.sample_pending.eq(latch.pending),
         ]
 
         address = Signal(7)

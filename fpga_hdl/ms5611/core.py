@@ -49,6 +49,9 @@ class Ms5611(wiring.Component):
         The chip stops driving SDO.
     fault_flip : In(8)
         XOR mask on every data byte sent while non-zero.
+    sample_pending : Out(1)
+        A sample waits for the current transfer to end; a simulation that gates the
+        system clock keeps it running until this falls.
     """
 
     sclk: In(1)
@@ -61,6 +64,7 @@ class Ms5611(wiring.Component):
     now_us: In(32)
     fault_mute: In(1)
     fault_flip: In(8)
+    sample_pending: Out(1)
 
     def __init__(self, *, sys_clk_hz: float, prom: tuple[int, ...] = regs.DEFAULT_PROM) -> None:
         check_sys_clk_for_spi(sys_clk_hz, regs.SCLK_MAX_HZ)
@@ -88,6 +92,7 @@ class Ms5611(wiring.Component):
             latch.offered.eq(self.sample),
             latch.offered_stb.eq(self.sample_stb),
             latch.busy.eq(engine.busy),
+            self.sample_pending.eq(latch.pending),
         ]
         time_us = Signal(32)  # ``now_us`` as the bus sees it: frozen during a transfer
         with m.If(~engine.busy):

@@ -1,0 +1,109 @@
+"""The rig's side of SensorTop's host port under cocotb, with a gated system clock.
+
+The system clock runs only while the host port is written or a chip waits to take a
+sample: :meth:`CocotbHost.cycles` toggles it from Python for a few cycles, so an idle
+bus costs no simulation time (DESIGN.md: run clocks only while a bus is active).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from cocotb.triggers import Timer
+
+from fpga_hdl.host_port import HostPortMap
+
+#: Cycles a chip may take to accept a sample after a transfer: synchroniser + copy.
+SETTLE_CYCLES_MAX = 8
+
+
+class HostPortTimeout(RuntimeError):
+    """A chip never took its offered sample: ``pending`` stayed high."""
+
+
+class CocotbHost:
+    """Writes staged words, commits, and clocks SensorTop's ``sync`` domain on demand."""
+
+    def __init__(self, dut, host_map: HostPortMap, *, sys_clk_hz: float) -> None:
+        self.dut = dut
+        self.map = host_map
+        self._half = Timer(round(0.5e12 / sys_clk_hz), unit="ps")
+        self.cycles_run = 0  # system-clock cycles so far: the host's simulation cost
+
+    async def cycles(self, count: int) -> None:
+        clk = self.dut.clk
+        for _ in range(count):
+            clk.value = 1
+            await self._half
+            clk.value = 0
+            await self._half
+        self.cycles_run += count
+
+    async def reset(self) -> None:
+        self.dut.clk.value = 0
+        self.dut.rst.value = 1
+        for name in ("write_en", "commit", "write_addr", "write_data", "read_addr"):
+            getattr(self.dut, name).value = 0
+        await self.cycles(2)
+        self.dut.rst.value = 0
+        await self.cycles(1)
+
+    async def stage(
+        self,
+        samples: Mapping[str, Mapping[str, int]],
+        *,
+        now_us: int | None = None,
+        faults: Mapping[str, tuple[bool, int]] | None = None,
+    ) -> None:
+        """Write sample fields (and time, faults) into staging: invisible until commit."""
+        words = [
+            self.map.encode(channel, field, value)
+            for channel, fields in samples.items()
+            for field, value in fields.items()
+        ]
+        if now_us is not None:
+            words.append(self.map.encode("time", "now_us", now_us % (1 << 32)))
+        for chip, (mute, flip) in (faults or {}).items():
+            words.append(self.map.encode(chip, "fault", (int(mute) << 8) | flip))
+        dut = self.dut
+        dut.write_en.value = 1
+        for address, data in words:
+            dut.write_addr.value = address
+            dut.write_data.value = data
+            await self.cycles(1)
+        dut.write_en.value = 0
+
+    async def commit(self, *, settle: bool = True) -> None:
+        """Publish everything staged in one cycle; with ``settle``, let the chips take it.
+
+        With ``settle=False`` the clock stops right after the strobe reaches the chips
+        (a test racing a transfer takes the sample in later with :meth:`settle`).
+        """
+        self.dut.commit.value = 1
+        await self.cycles(1)
+        self.dut.commit.value = 0
+        await self.cycles(1)  # the strobe reaches the chips' latches
+        if settle:
+            await self.settle()
+
+    async def load(
+        self,
+        samples: Mapping[str, Mapping[str, int]],
+        *,
+        now_us: int | None = None,
+        faults: Mapping[str, tuple[bool, int]] | None = None,
+    ) -> None:
+        """Stage, commit and settle: the usual way the rig updates the chips."""
+        await self.stage(samples, now_us=now_us, faults=faults)
+        await self.commit()
+
+    async def settle(self) -> None:
+        """Clock until no chip waits for a sample; free when none does."""
+        for _ in range(SETTLE_CYCLES_MAX):
+            if not int(self.dut.pending.value):
+                return
+            await self.cycles(1)
+        raise HostPortTimeout(
+            f"a chip still waits for its sample after {SETTLE_CYCLES_MAX} cycles; "
+            "is a chip select stuck low?"
+        )

@@ -1,0 +1,15 @@
+"""cocotb interface-timing tests of SensorTop's SPI chips, on every simulator."""
+
+from pathlib import Path
+
+import pytest
+
+from fpga_hdl.cosim.runner import SIMULATOR_PARAMS, run_cocotb
+from fpga_hdl.top import SensorTop
+
+HERE = Path(__file__).parent
+
+
+@pytest.mark.parametrize("simulator", SIMULATOR_PARAMS)
+def test_spi_chips_on_generated_verilog(simulator):
+    run_cocotb(SensorTop(), "sensor_top", "cocotb_sensor_top", module_dir=HERE, simulator=simulator)
