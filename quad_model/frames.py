@@ -114,7 +114,7 @@ def ned_to_geodetic(
         lon = lon0 + math.atan2(
             y_rad * sin_c, c * math.cos(lat0) * cos_c - x_rad * math.sin(lat0) * sin_c
         )
-    return math.degrees(lat), math.degrees(lon), ref_alt_m - d
+    return math.degrees(lat), math.degrees(lon), float(ref_alt_m - d)
 
 
 def geodetic_to_ned(

@@ -255,8 +255,10 @@ class QuadBatch:
         s[:, dyn.X_TIME] = time_s
         if not np.all(np.isfinite(s)):
             raise ModelInputError("reset state has a non-finite value")
-        if np.any(s[:, dyn.X_POS + 2] > 0.0) and self.mount == Mount.FREE:
-            raise ModelInputError("position_ned_m is below the ground (z > 0)")
+        if self.mount == Mount.FREE:
+            if np.any(s[:, dyn.X_POS + 2] > 0.0):
+                raise ModelInputError("position_ned_m is below the ground (z > 0)")
+            s[:, dyn.X_ON_GROUND] = s[:, dyn.X_POS + 2] == 0.0
         self.throttles[:] = 0.0
         self.advance(self.throttles, 0.0)
 

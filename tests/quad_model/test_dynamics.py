@@ -1,0 +1,315 @@
+"""Rigid-body, propulsion and contact physics against closed-form cases."""
+
+import math
+
+import control
+import numpy as np
+import pytest
+
+from quad_model import Environment, ModelInputError, Mount, QuadBatch, QuadModel, Wind
+from quad_model.environment import isa_density_kgpm3
+from quad_model.frames import STANDARD_GRAVITY_MPS2, euler_from_quat, quat_from_euler, quat_to_dcm
+
+G = STANDARD_GRAVITY_MPS2
+HOME_ALT_M = Environment().home.alt_amsl_m
+
+
+def density_ratio(vehicle, down_m: float = 0.0) -> float:
+    return isa_density_kgpm3(HOME_ALT_M - down_m) / vehicle.propulsion.reference_air_density_kgpm3
+
+
+def test_hover_equilibrium_at_predicted_rotor_speed(f450, rng):
+    model = QuadModel(f450, rng)
+    ct = f450.propulsion.thrust_coefficient_n_per_radps2 * density_ratio(f450, -10.0)
+    predicted = math.sqrt(f450.body.mass_kg * G / (4 * ct))
+    model.reset(position_ned_m=(0, 0, -10), rotor_speed_radps=[predicted] * 4)
+    model.advance([model.hover_throttle()] * 4, 0.5)
+    truth = model.truth
+    np.testing.assert_allclose(truth.rotor_speed_radps, predicted, rtol=2e-4)
+    assert truth.rotor_thrust_n.sum() == pytest.approx(f450.body.mass_kg * G, rel=5e-4)
+    np.testing.assert_allclose(truth.velocity_ned_mps, 0.0, atol=5e-3)
+    np.testing.assert_allclose(truth.position_ned_m, [0, 0, -10], atol=2e-3)
+    # Hovering, the accelerometer reads the weight: (0, 0, -g).
+    np.testing.assert_allclose(truth.specific_force_frd_mps2, [0, 0, -G], atol=5e-3)
+
+
+def test_free_fall_without_drag_is_half_g_t_squared(f450_no_drag, rng):
+    model = QuadModel(f450_no_drag, rng)
+    model.reset(position_ned_m=(0, 0, -100), velocity_ned_mps=(1.0, -2.0, 0.0))
+    model.advance([0.0] * 4, 2.0)
+    truth = model.truth
+    np.testing.assert_allclose(truth.position_ned_m, [2.0, -4.0, -100 + 0.5 * G * 4.0], atol=1e-9)
+    np.testing.assert_allclose(truth.velocity_ned_mps, [1.0, -2.0, 2.0 * G], atol=1e-9)
+    # Free fall: the accelerometer reads zero.
+    np.testing.assert_allclose(truth.specific_force_frd_mps2, 0.0, atol=1e-9)
+
+
+def test_falling_body_reaches_drag_terminal_velocity(f450, rng):
+    model = QuadModel(f450, rng)
+    model.reset(position_ned_m=(0, 0, -2000))
+    model.advance([0.0] * 4, 12.0)
+    truth = model.truth
+    drag_area = f450.body.drag_area_m2[2]
+    terminal = math.sqrt(2 * f450.body.mass_kg * G / (truth.air_density_kgpm3 * drag_area))
+    assert truth.velocity_ned_mps[2] == pytest.approx(terminal, rel=2e-3)
+
+
+def test_torque_free_spin_conserves_angular_momentum_and_energy(f450_no_drag, rng):
+    model = QuadModel(f450_no_drag, rng)
+    rate = np.array([0.5, 3.0, 0.8])  # mostly the intermediate axis: it tumbles
+    model.reset(position_ned_m=(0, 0, -500), angular_rate_frd_radps=rate)
+    inertia = np.array(f450_no_drag.body.inertia_kgm2)
+
+    def momentum_and_energy(truth):
+        w = truth.angular_rate_frd_radps
+        return quat_to_dcm(truth.attitude_quat) @ (inertia @ w), 0.5 * w @ inertia @ w
+
+    momentum0, energy0 = momentum_and_energy(model.truth)
+    model.advance([0.0] * 4, 3.0)
+    momentum, energy = momentum_and_energy(model.truth)
+    assert not np.allclose(model.truth.angular_rate_frd_radps, rate, atol=0.1)  # it did tumble
+    np.testing.assert_allclose(momentum, momentum0, rtol=0, atol=1e-9 * np.linalg.norm(momentum0))
+    assert energy == pytest.approx(energy0, rel=1e-9)
+
+
+def test_yaw_spin_up_from_rotor_torque_matches_izz(f450_no_drag, rng, variant):
+    # Rotor speeds held (very slow motors): CCW rotors faster, same total thrust.
+    vehicle = variant(f450_no_drag, propulsion={"motor_time_constant_s": 1e9})
+    hover = vehicle.hover_rotor_speed_radps / math.sqrt(density_ratio(vehicle, -50.0))
+    eps = 0.05
+    fast, slow = hover * math.sqrt(1 + eps), hover * math.sqrt(1 - eps)
+    model = QuadModel(vehicle, rng)
+    model.reset(position_ned_m=(0, 0, -50), rotor_speed_radps=[fast, fast, slow, slow])
+    model.advance([0.0] * 4, 0.5)
+    cq = vehicle.propulsion.torque_coefficient_nm_per_radps2 * density_ratio(vehicle, -50.0)
+    yaw_moment = cq * 2 * (fast**2 - slow**2)
+    izz = vehicle.body.inertia_kgm2[2][2]
+    rate = model.truth.angular_rate_frd_radps
+    # PX4 convention: faster CCW rotors yaw the body clockwise seen from above, +z in FRD.
+    assert rate[2] == pytest.approx(yaw_moment / izz * 0.5, rel=1e-6)
+    np.testing.assert_allclose(rate[:2], 0.0, atol=1e-9)
+    assert euler_from_quat(model.truth.attitude_quat)[2] == pytest.approx(
+        0.5 * yaw_moment / izz * 0.5**2, rel=1e-6
+    )
+    np.testing.assert_allclose(model.truth.velocity_ned_mps, 0.0, atol=1e-6)
+
+
+def test_motor_speed_is_a_first_order_lag(f450, rng, variant):
+    # A stiff battery keeps the speed target fixed while the rotors spin up.
+    vehicle = variant(f450, battery={"internal_resistance_ohm": 0.0})
+    model = QuadModel(vehicle, rng, mount=Mount.THRUST_STAND)
+    throttle = 0.6
+    tau = vehicle.propulsion.motor_time_constant_s
+    model.advance([throttle] * 4, tau)
+    prop = vehicle.propulsion
+    target = (prop.speed_slope_radps * throttle + prop.speed_offset_radps) * (
+        model.truth.battery_voltage_v / prop.speed_curve_voltage_v
+    )
+    np.testing.assert_allclose(
+        model.truth.rotor_speed_radps, target * (1 - math.exp(-1)), rtol=2e-4
+    )
+
+
+def test_thrust_stand_reads_rotor_thrust_and_torque(f450, rng):
+    model = QuadModel(f450, rng, mount=Mount.THRUST_STAND)
+    model.advance([0.2, 0.4, 0.6, 0.8], 0.5)  # 25 motor time constants: steady
+    truth = model.truth
+    w = truth.rotor_speed_radps
+    ratio = density_ratio(f450)
+    thrust = f450.propulsion.thrust_coefficient_n_per_radps2 * ratio * w**2
+    torque = f450.propulsion.torque_coefficient_nm_per_radps2 * ratio * w**2
+    np.testing.assert_allclose(truth.rotor_thrust_n, thrust, rtol=1e-12)
+    np.testing.assert_allclose(truth.rotor_torque_nm, torque, rtol=1e-12)
+    positions = np.array(f450.propulsion.position_frd_m)
+    spin = np.array(f450.propulsion.spin_direction)
+    expected_moment = np.array(
+        [
+            -(positions[:, 1] * thrust).sum(),  # y × (-T): right rotors roll left
+            (positions[:, 0] * thrust).sum(),  # front rotors pitch up
+            (spin * torque).sum(),
+        ]
+    )
+    np.testing.assert_allclose(truth.force_frd_n, [0, 0, -thrust.sum()], atol=1e-12)
+    # rtol: the draining battery still slows the rotors a little (J_r·ω̇ reaction).
+    np.testing.assert_allclose(truth.moment_frd_nm, expected_moment, rtol=5e-4)
+    # Held still: position, attitude and rates do not move.
+    np.testing.assert_allclose(truth.position_ned_m, 0.0)
+    np.testing.assert_allclose(truth.attitude_quat, [1, 0, 0, 0])
+
+
+def test_battery_sags_with_current_and_limits_speed(f450, rng):
+    model = QuadModel(f450, rng, mount=Mount.THRUST_STAND)
+    model.advance([0.0] * 4, 0.01)
+    idle = model.truth
+    battery = f450.battery
+    assert idle.battery_voltage_v == pytest.approx(
+        battery.cell_count * battery.cell_full_v, rel=2e-3
+    )  # avionics only
+    model.advance([1.0] * 4, 0.3)
+    full = model.truth
+    emf = battery.cell_count * battery.cell_full_v - 0.0  # charge used is tiny here
+    assert full.battery_voltage_v == pytest.approx(
+        emf - battery.internal_resistance_ohm * full.battery_current_a, rel=2e-3
+    )
+    shaft_w = (full.rotor_torque_nm * full.rotor_speed_radps).sum()
+    electrical_w = shaft_w / battery.propulsion_efficiency + battery.avionics_power_w
+    assert full.battery_current_a == pytest.approx(electrical_w / full.battery_voltage_v, rel=1e-9)
+    prop = f450.propulsion
+    full_speed = (prop.speed_slope_radps + prop.speed_offset_radps) * (
+        full.battery_voltage_v / prop.speed_curve_voltage_v
+    )
+    np.testing.assert_allclose(full.rotor_speed_radps, full_speed, rtol=1e-4)
+    assert full.battery_charge_used_c > 0.0
+
+
+def test_ground_contact_holds_and_landing_does_not_bounce(f450, rng):
+    model = QuadModel(f450, rng)
+    # Starts resting on the ground; 80 % of hover thrust cannot lift it.
+    model.advance([0.0] * 4, 0.2)
+    low = 0.8 * model.hover_throttle()
+    for _ in range(500):
+        model.advance([low] * 4, 0.002)
+        truth = model.truth
+        assert truth.position_ned_m[2] == 0.0
+        assert truth.on_ground
+    np.testing.assert_allclose(truth.velocity_ned_mps, 0.0)
+    np.testing.assert_allclose(truth.specific_force_frd_mps2, [0, 0, -G], atol=1e-12)
+    # Dropped from 2 m with motors off: it stops on the ground and stays there.
+    model.reset(position_ned_m=(0, 0, -2))
+    heights = []
+    for _ in range(1500):
+        model.advance([0.0] * 4, 0.001)
+        heights.append(model.truth.position_ned_m[2])
+    heights = np.array(heights)
+    touchdown = int(np.argmax(heights >= 0.0))
+    assert heights.max() == 0.0  # never below the ground
+    assert 0.55 < touchdown * 1e-3 < 0.7  # √(2h/g) = 0.64 s (less with drag)
+    np.testing.assert_array_equal(heights[touchdown:], 0.0)  # no bounce
+    # Enough thrust lifts it off.
+    model.advance([1.2 * model.hover_throttle()] * 4, 1.0)
+    assert model.truth.position_ned_m[2] < -0.1
+    assert not model.truth.on_ground
+
+
+def test_pitch_gimbal_small_signal_matches_linearized_transfer_function(f450, rng):
+    model = QuadModel(f450, rng, mount=Mount.GIMBAL_PITCH)
+    trim = model.hover_throttle()
+    model.advance([trim] * 4, 0.5)  # settle rotors and battery at the operating point
+    operating = model.truth
+    speed0 = operating.rotor_speed_radps[0]
+    prop = f450.propulsion
+    # θ/δ = K / (s²(τs + 1)): δ raises the front rotors (0, 2) and lowers the rear (1, 3).
+    motor_gain = prop.speed_slope_radps * operating.battery_voltage_v / prop.speed_curve_voltage_v
+    ct = (
+        prop.thrust_coefficient_n_per_radps2
+        * operating.air_density_kgpm3
+        / prop.reference_air_density_kgpm3
+    )
+    arm_x = prop.position_frd_m[0][0]
+    gain = 4 * arm_x * 2 * ct * speed0 * motor_gain / f450.body.inertia_kgm2[1][1]
+    plant = control.tf([gain], [prop.motor_time_constant_s, 1, 0, 0])
+
+    dt, amplitude = 0.001, 0.001
+    time = np.arange(0, 0.8, dt)
+    doublet = np.where(time < 0.2, amplitude, np.where(time < 0.4, -amplitude, 0.0))
+    pitch = []
+    for delta in doublet:
+        model.advance([trim + delta, trim - delta, trim + delta, trim - delta], dt)
+        pitch.append(euler_from_quat(model.truth.attitude_quat)[1])
+    # The model holds each command over the frame and reports the end of it: a ZOH plant.
+    response = control.forced_response(control.c2d(plant, dt, "zoh"), T=time, U=doublet)
+    # pitch[k] is at the end of frame k, the ZOH response's sample k + 1.
+    linear = response.outputs[1:]
+    assert np.max(np.abs(linear)) > 0.015  # a real motion, about 1°
+    # 1 %: the quadratic aerodynamic damping, absent from the linearization, is that small.
+    np.testing.assert_allclose(pitch[:-1], linear, atol=0.01 * np.max(np.abs(linear)))
+
+
+def test_roll_gimbal_leaves_only_roll_free(f450, rng):
+    model = QuadModel(f450, rng, mount=Mount.GIMBAL_ROLL)
+    model.advance([0.7, 0.5, 0.5, 0.7], 0.3)  # right rotors (0, 3) stronger: roll left
+    roll, pitch, yaw = euler_from_quat(model.truth.attitude_quat)
+    assert roll < -0.1
+    assert pitch == 0.0
+    assert yaw == 0.0
+    np.testing.assert_allclose(model.truth.position_ned_m, 0.0)
+
+
+def test_motor_health_hook_scales_thrust(f450, rng):
+    model = QuadModel(f450, rng, mount=Mount.THRUST_STAND)
+    model.set_motor_health(2, 0.5)
+    model.set_motor_health(3, 0.0)
+    model.advance([0.6] * 4, 0.5)
+    thrust = model.truth.rotor_thrust_n
+    assert thrust[2] / thrust[0] == pytest.approx(0.5, rel=1e-3)
+    assert thrust[3] == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(model.motor_health, [1.0, 1.0, 0.5, 0.0])
+    with pytest.raises(ModelInputError, match=r"thrust_fraction=1.5 must be within 0..1"):
+        model.set_motor_health(0, 1.5)
+
+
+def test_batch_matches_single_vehicle_serial_and_parallel(f450, x500):
+    commands = np.array([0.62, 0.60, 0.61, 0.63])
+    single = QuadModel(f450, np.random.default_rng(1))
+    single.reset(position_ned_m=(0, 0, -5), rotor_speed_radps=[560.0] * 4)
+    single.advance(commands, 0.5)
+    for count in (3, 40):  # 40 runs on all cores
+        vehicles = [f450] * (count - 1) + [x500]
+        batch = QuadBatch(vehicles, count, np.random.default_rng(1))
+        batch.reset(position_ned_m=(0, 0, -5), rotor_speed_radps=[560.0] * 4)
+        batch.advance(np.tile(commands, (count, 1)), 0.5)
+        np.testing.assert_array_equal(batch.states[0], batch.states[count - 2])
+        np.testing.assert_array_equal(batch.truth(0).position_ned_m, single.truth.position_ned_m)
+        assert not np.array_equal(batch.states[-1], batch.states[0])  # the X500 differs
+
+
+def test_dryden_turbulence_intensity_and_determinism(f450):
+    steady = 20.0
+    env = Environment(wind=Wind(steady_ned_mps=(steady, 0.0, 0.0), wind_at_6m_mps=15.0))
+    model = QuadModel(f450, np.random.default_rng(5), env, mount=Mount.THRUST_STAND)
+    wind = []
+    for _ in range(3000):
+        model.advance([0.0] * 4, 0.05)
+        wind.append(model.truth.wind_ned_mps)
+    wind = np.array(wind)
+    # MIL-F-8785C at the 10 ft floor: σ_w = 0.1·W20, σ_u = σ_w / (0.177 + 0.000823·10)^0.4.
+    sigma_w = 1.5
+    sigma_u = sigma_w / (0.177 + 0.000823 * 10) ** 0.4
+    assert wind[:, 0].mean() == pytest.approx(steady, abs=0.6)
+    assert wind[:, 0].std() == pytest.approx(sigma_u, rel=0.2)  # τ_u ≈ 1.2 s: few samples
+    assert wind[:, 1].std() == pytest.approx(sigma_u, rel=0.2)
+    assert wind[:, 2].std() == pytest.approx(sigma_w, rel=0.1)  # τ_w ≈ 0.15 s
+    again = QuadModel(f450, np.random.default_rng(5), env, mount=Mount.THRUST_STAND)
+    again.advance([0.0] * 4, 0.05)
+    first = QuadModel(f450, np.random.default_rng(5), env, mount=Mount.THRUST_STAND)
+    first.advance([0.0] * 4, 0.05)
+    np.testing.assert_array_equal(again.truth.wind_ned_mps, first.truth.wind_ned_mps)
+    other = QuadModel(f450, np.random.default_rng(6), env, mount=Mount.THRUST_STAND)
+    other.advance([0.0] * 4, 0.05)
+    assert not np.array_equal(other.truth.wind_ned_mps, first.truth.wind_ned_mps)
+
+
+def test_bad_model_inputs_are_refused(f450, rng):
+    model = QuadModel(f450, rng)
+    with pytest.raises(
+        ModelInputError, match=r"^duration_s=0.0013 is not a whole number of 0.2 ms"
+    ):
+        model.advance([0.5] * 4, 0.0013)
+    with pytest.raises(ModelInputError, match=r"^throttles contain a non-finite value"):
+        model.advance([0.5, math.nan, 0.5, 0.5], 0.001)
+    with pytest.raises(ModelInputError, match=r"^command \[0.5, 0.5\] is not 4 throttles"):
+        model.advance([0.5, 0.5], 0.001)
+    with pytest.raises(ModelInputError, match=r"below the ground"):
+        model.reset(position_ned_m=(0, 0, 1))
+    with pytest.raises(ModelInputError, match=r"not a unit quaternion"):
+        model.reset(attitude_quat=(1, 1, 0, 0))
+    assert model.truth.time_s == 0.0
+
+
+def test_initial_state_rests_level_on_the_ground(f450, rng):
+    truth = QuadModel(f450, rng).truth
+    assert truth.on_ground
+    np.testing.assert_allclose(truth.specific_force_frd_mps2, [0, 0, -G], atol=1e-12)
+    np.testing.assert_allclose(
+        quat_to_dcm(truth.attitude_quat), quat_to_dcm(quat_from_euler(0, 0, 0))
+    )
