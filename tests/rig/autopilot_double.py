@@ -113,5 +113,5 @@ def main() -> None:
 if __name__ == "__main__":
     try:
         main()
-    except (BrokenPipeError, ConnectionResetError):
-        sys.exit(0)
+    except (BrokenPipeError, ConnectionResetError, KeyboardInterrupt):
+        sys.exit(0)  # the rig ended the run (it sends SIGINT first, like Ctrl-C)

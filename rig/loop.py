@@ -1,0 +1,432 @@
+"""The closed loop: model → sensor chips → autopilot → PWM → model, in lockstep, logged.
+
+One frame is one IMU period (1 ms by default):
+
+1. the model advances one frame holding the motor throttles the PWM capture measured;
+2. sensor physics samples the truth (IMU every frame, mag/baro/GPS on their schedules) and
+   the sensor-layer faults are applied;
+3. the samples are loaded into the chips and PX4's drivers read them over SPI/I2C
+   (``sensor_layer``: Python register models, or the RTL under cocotb in its own process);
+4. due scenario commands go to the autopilot on the API link (acknowledged first with the
+   reference autopilot, so each acts at a known frame);
+5. HIL_SENSOR (+ HIL_GPS, + HIL_STATE_QUATERNION at the asked interval) goes out and, once
+   lockstep is established, the autopilot's HIL_ACTUATOR_CONTROLS for this very frame is
+   awaited under the watchdog;
+6. the controls become PWM pulses whose captured widths set the throttles of the next frame.
+
+Everything lands in ``rig.ulg``. Any failure (a stalled or dead autopilot, a refused
+command, Ctrl-C) ends the run cleanly: the reason is logged, the log is closed readable,
+and the error propagates as one line.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from fpga_hdl.ist8310.driver import sample_from_field_gauss
+from fpga_hdl.mpu6000.regs import Mpu6000Sample
+from fpga_hdl.ms5611.model import raw_from_si
+from quad_model import QuadModel, SensorSuite, load_vehicle
+from quad_model.frames import ned_to_geodetic
+from quad_model.model import Mount, VehicleTruth
+from quad_model.vehicle import VehicleFileError
+from rig.errors import RigError, ScenarioError
+from rig.faults import FaultInjector
+from rig.ground import GroundLink
+from rig.link import LinkStats, LinkTimeouts, SimulatorLink
+from rig.pwm import PwmOutput, throttle_from_capture
+from rig.px4_sim_api import Ports, mavlink
+from rig.rig_log import RigLog
+from rig.scenario import Scenario
+from rig.script import Action, CommandScript
+from rig.sensor_layer import ChipFrame, TlmSensorLayer
+from rig.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
+
+AUTOPILOTS = ("reference", "px4")
+#: Where runs land unless ``--out`` says otherwise (ignored by git).
+RUNS_DIR = Path("runs")
+#: Ground truth is logged at this rate (PX4 SITL logs its groundtruth topics at ~100 Hz).
+TRUTH_LOG_HZ = 250
+_MOUNTS = {
+    "free": Mount.FREE,
+    "gimbal_pitch": Mount.GIMBAL_PITCH,
+    "gimbal_roll": Mount.GIMBAL_ROLL,
+    "thrust_stand": Mount.THRUST_STAND,
+}
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run a scenario (everything the scenario file does not say)."""
+
+    autopilot: str = "reference"
+    instance: int = 0
+    out_dir: Path | None = None
+    sensor_layer: str | None = None  # None: the scenario's
+    duration_s: float | None = None  # None: the scenario's
+    timeouts: LinkTimeouts = field(default_factory=LinkTimeouts)
+    #: Reference-autopilot parameters ``NAME=VALUE`` (``--param``).
+    autopilot_params: tuple[str, ...] = ()
+    #: Command that starts the autopilot instead of ``python -m rig.autopilot`` (tests).
+    autopilot_argv: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.autopilot not in AUTOPILOTS:
+            raise RigError(
+                f"autopilot must be one of {', '.join(AUTOPILOTS)}, not {self.autopilot!r}"
+            )
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What a progress display shows, once per simulated tenth of a second."""
+
+    time_s: float
+    duration_s: float
+    real_time_factor: float
+    altitude_m: float
+    armed: bool
+    last_event: str
+
+
+@dataclass(frozen=True)
+class RunResult:
+    run_dir: Path
+    rig_log: Path
+    autopilot_log: Path | None
+    simulated_s: float
+    wall_s: float
+    frames: int
+    link: LinkStats
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.wall_s if self.wall_s > 0 else math.inf
+
+
+def default_run_dir(scenario: Scenario) -> Path:
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    return RUNS_DIR / f"{scenario.name}-{stamp}"
+
+
+def run_scenario(
+    scenario: Scenario,
+    options: RunOptions = RunOptions(),
+    progress: Callable[[Progress], None] | None = None,
+) -> RunResult:
+    """Fly ``scenario`` closed-loop; returns where the logs are, raises :class:`RigError`."""
+    run_dir = options.out_dir or default_run_dir(scenario)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    loop = _Loop(scenario, options, run_dir, progress)
+    try:
+        loop.run()
+    except RigError as error:
+        loop.log.event(loop.time_us, f"run ended: {error}", "err")
+        raise
+    except KeyboardInterrupt:
+        loop.log.event(loop.time_us, "run interrupted by the user (Ctrl-C)", "warn")
+        raise
+    finally:
+        loop.close()
+    return loop.result()
+
+
+class _Loop:
+    """One run's state; :func:`run_scenario` is its only user."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        options: RunOptions,
+        run_dir: Path,
+        progress: Callable[[Progress], None] | None,
+    ) -> None:
+        self.scenario = scenario
+        self.options = options
+        self.run_dir = run_dir
+        self.progress = progress
+        self.duration_s = options.duration_s or scenario.duration_s
+        self.sensor_layer_name = options.sensor_layer or scenario.sensor_layer
+        self.rates = scenario.rates
+        self.frame_us = self.rates.frame_us
+        self.time_us = 0
+        self.frames = 0
+        self.armed = False
+        self.last_event = ""
+        self._wall_start = time.monotonic()
+        self._wall_end: float | None = None
+        self._process: subprocess.Popen[bytes] | None = None
+        self._closers: list[Callable[[], None]] = []
+
+        try:
+            vehicle = load_vehicle(scenario.vehicle)
+        except VehicleFileError as error:
+            raise ScenarioError(f"{scenario.source}: key 'vehicle': {error}") from None
+        environment = scenario.environment
+        home = environment.home
+        self.log = RigLog(
+            run_dir / "rig.ulg",
+            info={
+                "sys_name": "hil-rig",
+                "ver_hw": f"RIG_{self.sensor_layer_name.upper()}",
+                "scenario": scenario.name,
+                "scenario_source": Path(scenario.source).name,
+                "vehicle": vehicle.name,
+                "autopilot": options.autopilot,
+            },
+            parameters={
+                "RIG_SEED": scenario.seed,
+                "RIG_IMU_HZ": self.rates.imu_hz,
+                "RIG_PWM_HZ": self.rates.pwm_hz,
+                "SYS_HITL": 0,
+            },
+            home_lat_deg=home.lat_deg,
+            home_lon_deg=home.lon_deg,
+            home_alt_m=home.alt_amsl_m,
+        )
+        self._closers.append(self.log.close)
+
+        model_rng, sensor_rng, fault_rng = np.random.default_rng(scenario.seed).spawn(3)
+        self.model = QuadModel(
+            vehicle, model_rng, environment, _MOUNTS[scenario.constraint], self.rates.model_hz
+        )
+        start = scenario.start
+        self.model.reset(
+            position_ned_m=start.position_ned_m,
+            attitude_quat=_yaw_quat(math.radians(start.yaw_deg)),
+        )
+        self.sensors = SensorSuite(
+            vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
+            self.rates.baro_hz,
+        )  # fmt: skip
+        self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event)
+        self.layer = _make_sensor_layer(self.sensor_layer_name)
+        self._closers.append(self.layer.close)
+        self.pwm = PwmOutput(4, self.rates.pwm_hz)
+        self.throttle = np.zeros(4)
+        self.ports = Ports(options.instance)
+
+    # -- run ---------------------------------------------------------------------------
+
+    def run(self) -> None:
+        self.layer.start()
+        link = SimulatorLink(self.ports, self.options.timeouts, peer_exit=self._autopilot_exit)
+        self._closers.append(link.close)
+        self.link = link
+        ground = GroundLink(self.ports, self.scenario.environment.home)
+        self._closers.append(ground.close)
+        self.ground = ground
+        reference = self.options.autopilot == "reference"
+        script = CommandScript(self.scenario.commands, ground, barrier=reference)
+        if reference:
+            self._start_reference_autopilot()
+            link.accept("the reference autopilot (python -m rig.autopilot)")
+        else:
+            self.log.event(0, f"waiting for PX4 SITL on {link.endpoint}")
+            link.accept(
+                f"PX4 SITL instance {self.ports.instance} (e.g. `PX4_SIM_MODEL=none_iris "
+                f"$PX4_DIR/build/px4_sitl_default/bin/px4 -i {self.ports.instance}`)"
+            )
+        self.log.event(0, f"autopilot connected on {link.endpoint}")
+        frames_total = round(self.duration_s * 1e6) // self.frame_us
+        state_next_us = 0
+        truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
+        pending: list[Action] = []
+        for frame in range(1, frames_total + 1):
+            self.time_us = frame * self.frame_us
+            time_s = self.time_us / 1e6
+            self.faults.update(self.time_us, self.model)
+            self.model.advance(self.throttle, self.frame_us / 1e6)
+            truth = self.model.truth
+            messages = self._sensor_messages(truth)
+            if link.state_interval_us and self.time_us >= state_next_us:
+                state_next_us = self.time_us + link.state_interval_us
+                messages.append(self._state_message(truth))
+            if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
+                pending.extend(script.due(time_s))
+                pending = self._run_actions(pending, time_s, reference)
+            controls = link.exchange(self.time_us, messages)
+            if controls is not None:
+                self.armed = controls.armed
+                self.pwm.command(controls.motors, controls.armed)
+                self.log.motors(self.time_us, controls.time_us, controls.motors)
+            if frame % truth_every == 0:
+                self.log.truth(self.time_us, truth)
+            self.frames = frame
+            if self.progress is not None and frame % max(1, self.rates.imu_hz // 10) == 0:
+                self._report(truth)
+        self._wall_end = time.monotonic()
+        self.log.event(self.time_us, f"run completed: {self.frames} frames")
+
+    def _sensor_messages(self, truth: VehicleTruth) -> list[mavlink.MAVLink_message]:
+        readings = self.faults.samples(self.sensors.sample(truth))
+        imu, mag, baro = readings.imu, readings.mag, readings.baro
+        pulses = self.pwm.pulses(self.time_us + 1, self.faults.pwm_dropped())
+        chip_frame = ChipFrame(
+            now_us=self.time_us,
+            imu=Mpu6000Sample.from_si(imu.accel_mps2, imu.gyro_radps, imu.temperature_degc),
+            mag=None if mag is None else sample_from_field_gauss(mag.field_gauss),
+            baro_d1_d2=None
+            if baro is None
+            else raw_from_si(baro.pressure_pa, baro.temperature_degc),
+            read_mag=mag is not None,
+            faults=self.faults.chip_faults(),
+            pulses=tuple(pulses),
+        )
+        out = self.layer.frame(chip_frame)
+        for chip, error in out.bus_errors:
+            self.log.bus_error(chip)
+            self._event(f"bus error: {chip}: {error}", "warn")
+        self.throttle = throttle_from_capture(out.pwm_widths_us, out.pwm_timed_out)
+        if pulses:
+            self.log.pwm(self.time_us, out.pwm_widths_us)
+        self.log.imu(self.time_us, self.frame_us, out.accel_mps2, out.gyro_radps)
+        if out.mag_gauss is not None:
+            self.log.mag(self.time_us, out.mag_gauss, out.imu_temperature_degc)
+        if out.baro_pa_degc is not None:
+            self.log.baro(self.time_us, out.baro_pa_degc)
+        messages = [
+            hil_sensor(
+                self.link.mav, self.time_us, accel_mps2=out.accel_mps2, gyro_radps=out.gyro_radps,
+                mag_gauss=out.mag_gauss, baro=out.baro_pa_degc,
+            )
+        ]  # fmt: skip
+        if readings.gps is not None:
+            gps = readings.gps
+            self.log.gps(self.time_us, gps)
+            messages.append(
+                hil_gps(
+                    self.link.mav, self.time_us, lat_deg=gps.lat_deg, lon_deg=gps.lon_deg,
+                    alt_amsl_m=gps.alt_amsl_m, vel_ned_mps=gps.vel_ned_mps, eph_m=gps.eph_m,
+                    epv_m=gps.epv_m, fix_type=gps.fix_type,
+                    satellites_visible=gps.satellites_visible,
+                )
+            )  # fmt: skip
+        return messages
+
+    def _state_message(self, truth: VehicleTruth) -> mavlink.MAVLink_message:
+        home = self.scenario.environment.home
+        lat, lon, alt = ned_to_geodetic(
+            truth.position_ned_m, home.lat_deg, home.lon_deg, home.alt_amsl_m
+        )
+        return hil_state_quaternion(
+            self.link.mav, self.time_us, q_body_to_ned=truth.attitude_quat,
+            rates_frd_radps=truth.angular_rate_frd_radps, lat_deg=lat, lon_deg=lon,
+            alt_amsl_m=alt, vel_ned_mps=truth.velocity_ned_mps,
+            specific_force_frd_mps2=truth.specific_force_frd_mps2,
+        )  # fmt: skip
+
+    def _run_actions(self, actions: list[Action], time_s: float, reference: bool) -> list[Action]:
+        """Run due actions; returns those still waiting (PX4: one conversation at a time)."""
+        ground = self.ground
+        if not reference:
+            result = ground.poll(time_s)
+            if result is not None:
+                self._event(result)
+        waiting = []
+        for action in actions:
+            if action.conversation is None:
+                ground.send_unacknowledged(action.unacknowledged)
+            elif reference:
+                self._event(ground.converse_now(action.name, action.conversation))
+            elif ground.busy or waiting:
+                waiting.append(action)
+            else:
+                self._event(f"{action.name}: sent")
+                ground.start(action.name, action.conversation, time_s)
+        return waiting
+
+    # -- autopilot process ---------------------------------------------------------------
+
+    def _start_reference_autopilot(self) -> None:
+        log_path = self.run_dir / "autopilot.ulg"
+        argv = self.options.autopilot_argv or (
+            sys.executable, "-m", "rig.autopilot", "--instance", str(self.ports.instance),
+            "--log", str(log_path),
+            *(arg for param in self.options.autopilot_params for arg in ("--param", param)),
+        )  # fmt: skip
+        self._process = subprocess.Popen(list(argv), start_new_session=True)
+        self._closers.append(self._stop_autopilot)
+
+    def _autopilot_exit(self) -> str | None:
+        if self._process is None or self._process.poll() is None:
+            return None
+        code = self._process.returncode
+        if code < 0:
+            return f"killed by {signal.Signals(-code).name}"
+        return f"exit code {code}"
+
+    def _stop_autopilot(self) -> None:
+        """SIGINT first, so the autopilot closes its log; then SIGKILL if it hangs."""
+        process = self._process
+        if process is None or process.poll() is not None:
+            return
+        os.killpg(process.pid, signal.SIGINT)
+        try:
+            process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+
+    # -- reporting -------------------------------------------------------------------------
+
+    def _fault_event(self, time_us: int, text: str) -> None:
+        self.log.event(time_us, text, "warn")
+        self.last_event = text
+
+    def _event(self, text: str, level: str = "info") -> None:
+        self.log.event(self.time_us, text, level)
+        self.last_event = text
+
+    def _report(self, truth: VehicleTruth) -> None:
+        wall = time.monotonic() - self._wall_start
+        self.progress(
+            Progress(
+                time_s=self.time_us / 1e6,
+                duration_s=self.duration_s,
+                real_time_factor=self.time_us / 1e6 / wall if wall > 0 else math.inf,
+                altitude_m=-float(truth.position_ned_m[2]),
+                armed=self.armed,
+                last_event=self.last_event,
+            )
+        )
+
+    def close(self) -> None:
+        for close in reversed(self._closers):
+            close()
+
+    def result(self) -> RunResult:
+        wall_end = self._wall_end or time.monotonic()
+        autopilot_log = self.run_dir / "autopilot.ulg"
+        return RunResult(
+            run_dir=self.run_dir,
+            rig_log=self.log.path,
+            autopilot_log=autopilot_log if autopilot_log.is_file() else None,
+            simulated_s=self.time_us / 1e6,
+            wall_s=wall_end - self._wall_start,
+            frames=self.frames,
+            link=self.link.stats,
+        )
+
+
+def _make_sensor_layer(name: str) -> TlmSensorLayer:
+    if name == "tlm":
+        return TlmSensorLayer()
+    from rig.cosim import RtlSensorLayer  # imported on demand: it starts a simulator
+
+    return RtlSensorLayer()
+
+
+def _yaw_quat(yaw_rad: float) -> tuple[float, float, float, float]:
+    return (math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2))
