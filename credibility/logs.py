@@ -94,10 +94,13 @@ class LogFile:
             )
         values = _field_values(fields, field, spec.path, self.path)
         time_s = fields["timestamp_s"]
-        order = np.argsort(time_s, kind="stable")
-        time_s, values = time_s[order], values[order]
-        keep = np.concatenate(([True], np.diff(time_s) > 0.0))
-        return Signal(spec.path, str(self.path), time_s[keep], values[keep] * spec.factor)
+        steps = np.diff(time_s)
+        if np.any(steps <= 0.0):  # out of order or repeated stamps: sort, keep the first
+            order = np.argsort(time_s, kind="stable")
+            time_s, values = time_s[order], values[order]
+            keep = np.concatenate(([True], np.diff(time_s) > 0.0))
+            time_s, values = time_s[keep], values[keep]
+        return Signal(spec.path, str(self.path), time_s, values * spec.factor)
 
 
 def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Path) -> np.ndarray:

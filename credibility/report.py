@@ -209,17 +209,22 @@ def _png(figure: Figure) -> str:
     return f'<img alt="plot" src="data:image/png;base64,{encoded}">'
 
 
+#: Points per plotted curve: more than a PNG can show; long logs are decimated to this.
+MAX_PLOT_POINTS = 4000
+
+
 def _time_plot(result: TimeResult) -> str:
     figure = Figure(figsize=(8.0, 3.4))
     ax = figure.add_subplot()
-    t, y_e, eps = result.grid_s, result.real_values, result.threshold
+    step = max(1, result.grid_s.size // MAX_PLOT_POINTS)
+    t, y_e, eps = result.grid_s[::step], result.real_values[::step], result.threshold
     ax.fill_between(t, y_e - eps, y_e + eps, color="0.85", label=f"real ± ε_t ({eps:.3g})")
     ax.plot(t, y_e, color="k", lw=1.2, label=f"real ({result.test.roles.real})")
     for row in result.rows:
-        ax.plot(t, row.values, lw=1.0, label=f"{row.role} (η_t {row.eta:.1%})")
-    ax.set_xlabel("time since t_a [s]")
+        ax.plot(t, row.values[::step], lw=1.0, label=f"{row.role} (η_t {row.eta:.1%})")
+    ax.set_xlabel("time since t_a [s]" + (f" (every {step}th point shown)" if step > 1 else ""))
     ax.set_ylabel(f"{result.test.signal.path} [{result.test.unit}]")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
     return _png(figure)
 

@@ -85,3 +85,16 @@ def test_bad_band_or_signal_is_a_clear_error():
         spectral.estimate_response(x, x, RATE_HZ, np.array([1.0, 60.0]), (2.0,))
     with pytest.raises(CredibilityError, match=r"no power in the band"):
         spectral.estimate_response(np.zeros(1000), x, RATE_HZ, np.array([1.0, 5.0]), (2.0,))
+
+
+@pytest.mark.parametrize(("nperseg", "noverlap"), [(64, 32), (101, 50), (256, 0)])
+def test_welch_spectra_equal_scipy(nperseg, noverlap):
+    rng = np.random.default_rng(5)
+    x, y = rng.standard_normal((2, 5000)) + 3.0
+    f, gxx, gyy, gxy, n_d = spectral.welch_spectra(x, y, RATE_HZ, nperseg, noverlap)
+    kwargs = {"fs": RATE_HZ, "nperseg": nperseg, "noverlap": noverlap}
+    np.testing.assert_allclose(gxx, sps.welch(x, **kwargs)[1], rtol=1e-9)
+    np.testing.assert_allclose(gyy, sps.welch(y, **kwargs)[1], rtol=1e-9)
+    np.testing.assert_allclose(gxy, sps.csd(x, y, **kwargs)[1], rtol=1e-9)
+    np.testing.assert_allclose(f, sps.welch(x, **kwargs)[0])
+    assert n_d == 1 + (5000 - nperseg) // (nperseg - noverlap)
