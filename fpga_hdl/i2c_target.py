@@ -1,0 +1,357 @@
+"""Generic I2C target (slave) engine, per NXP UM10204 (I2C-bus specification, rev. 7).
+
+The engine handles the bus: input synchronisers, the t_SP spike filter, START / repeated
+START / STOP detection, 7-bit address match with ACK (or NACK by silence), byte shifting
+in both directions with ACK/NACK per byte. A chip core on top of it only sees bytes: the
+bytes the controller wrote (``write_stb``) and a request for the next byte to send
+(``read_stb``). Register pointers and side effects belong to the chip.
+"""
+
+import math
+from dataclasses import dataclass
+
+from amaranth.hdl import Cat, Const, Module, Signal
+from amaranth.lib import enum, wiring
+from amaranth.lib.cdc import FFSynchronizer
+from amaranth.lib.wiring import In, Out
+
+__all__ = [
+    "FAST_MODE",
+    "STANDARD_MODE",
+    "TARGET_SDA_HOLD_NS",
+    "I2cTarget",
+    "I2cTiming",
+    "TargetSampling",
+]
+
+
+@dataclass(frozen=True)
+class I2cTiming:
+    """Bus timing of one I2C speed mode, in nanoseconds.
+
+    The module constants hold the specification limits (UM10204 rev. 7, table 10,
+    "Characteristics of the SDA and SCL bus lines"). A controller model generates these
+    durations; tests replace single fields to probe the target at or beyond the limits.
+
+    Every field except ``t_vd_dat_max_ns`` and ``t_sp_max_ns`` is a minimum.
+    """
+
+    #: SCL LOW period t_LOW.
+    t_low_ns: float
+    #: SCL HIGH period t_HIGH.
+    t_high_ns: float
+    #: Hold time of a (repeated) START: SDA falls, then SCL may fall (t_HD;STA).
+    t_hd_sta_ns: float
+    #: Set-up time of a repeated START: SCL high before SDA falls (t_SU;STA).
+    t_su_sta_ns: float
+    #: Data set-up time: SDA stable before SCL rises (t_SU;DAT).
+    t_su_dat_ns: float
+    #: Data hold time: SDA stable after SCL falls (t_HD;DAT; 0 for a controller).
+    t_hd_dat_ns: float
+    #: Set-up time of a STOP: SCL high before SDA rises (t_SU;STO).
+    t_su_sto_ns: float
+    #: Bus free time between a STOP and the next START (t_BUF).
+    t_buf_ns: float
+    #: Maximum data valid time: SCL falls until a transmitter's SDA is valid (t_VD;DAT).
+    t_vd_dat_max_ns: float
+    #: Widest spike the input filter must suppress (t_SP; 0 for Standard-mode).
+    t_sp_max_ns: float
+
+    @property
+    def scl_hz(self) -> float:
+        """SCL frequency when the controller runs at exactly t_LOW + t_HIGH per bit."""
+        return 1e9 / (self.t_low_ns + self.t_high_ns)
+
+
+#: Standard-mode (up to 100 kHz), UM10204 table 10.
+STANDARD_MODE = I2cTiming(
+    t_low_ns=4700,
+    t_high_ns=4000,
+    t_hd_sta_ns=4000,
+    t_su_sta_ns=4700,
+    t_su_dat_ns=250,
+    t_hd_dat_ns=0,
+    t_su_sto_ns=4000,
+    t_buf_ns=4700,
+    t_vd_dat_max_ns=3450,
+    t_sp_max_ns=0,
+)
+
+#: Fast-mode (up to 400 kHz), UM10204 table 10.
+FAST_MODE = I2cTiming(
+    t_low_ns=1300,
+    t_high_ns=600,
+    t_hd_sta_ns=600,
+    t_su_sta_ns=600,
+    t_su_dat_ns=100,
+    t_hd_dat_ns=0,
+    t_su_sto_ns=600,
+    t_buf_ns=1300,
+    t_vd_dat_max_ns=900,
+    t_sp_max_ns=50,
+)
+
+#: UM10204 table 10 note 2: a device must internally provide at least 300 ns of SDA hold
+#: after SCL falls, to bridge the undefined region of the falling edge.
+TARGET_SDA_HOLD_NS = 300
+
+#: Two flip-flops re-time the asynchronous bus pins into ``sync``.
+SYNC_STAGES = 2
+
+
+@dataclass(frozen=True)
+class TargetSampling:
+    """How the target samples the bus at a given ``sync`` clock, derived once.
+
+    ``filter_samples`` (N) equal samples change a filtered line: no spike shorter than
+    t_SP can fill N samples when ``N = ceil(t_SP * sys_clk_hz) + 1``. ``hold_cycles``
+    pads the SCL-to-SDA delay up to the 300 ns internal hold time.
+    """
+
+    sys_clk_hz: float
+    filter_samples: int
+    hold_cycles: int
+
+    @classmethod
+    def for_clock(cls, sys_clk_hz: float) -> "TargetSampling":
+        """Sampling for ``sys_clk_hz``; rejects a clock too slow to meet Fast-mode."""
+        if not (isinstance(sys_clk_hz, int | float) and math.isfinite(sys_clk_hz)):
+            raise ValueError(f"sys_clk_hz must be a positive frequency in Hz, not {sys_clk_hz!r}")
+        if sys_clk_hz <= 0:
+            raise ValueError(f"sys_clk_hz must be a positive frequency in Hz, not {sys_clk_hz!r}")
+        filter_samples = _cycles_covering(FAST_MODE.t_sp_max_ns, sys_clk_hz) + 1
+        hold_cycles = max(
+            0, _cycles_covering(TARGET_SDA_HOLD_NS, sys_clk_hz) - _pipeline(filter_samples)
+        )
+        sampling = cls(float(sys_clk_hz), filter_samples, hold_cycles)
+        worst_ns = sampling.scl_to_sda_ns[1]
+        if worst_ns > FAST_MODE.t_vd_dat_max_ns:
+            raise ValueError(
+                f"sys_clk_hz {sys_clk_hz:g} is too slow for Fast-mode: SDA would be valid "
+                f"{worst_ns:.0f} ns after SCL falls, t_VD;DAT allows "
+                f"{FAST_MODE.t_vd_dat_max_ns:.0f} ns"
+            )
+        return sampling
+
+    @property
+    def scl_to_sda_ns(self) -> tuple[float, float]:
+        """Shortest and longest delay from SCL falling on the wire to the target's SDA.
+
+        The edge lands anywhere within the cycle before it is first sampled, hence a
+        one-cycle spread.
+        """
+        period_ns = 1e9 / self.sys_clk_hz
+        cycles = _pipeline(self.filter_samples) + self.hold_cycles
+        return cycles * period_ns, (cycles + 1) * period_ns
+
+
+def _cycles_covering(duration_ns: float, clk_hz: float) -> int:
+    """Whole clock cycles that cover ``duration_ns`` (float noise below 1 ppb ignored)."""
+    return math.ceil(duration_ns * clk_hz / 1e9 - 1e-9)
+
+
+def _pipeline(filter_samples: int) -> int:
+    """Cycles from the first clock edge that samples an SCL edge to SDA changing.
+
+    Synchroniser, N-sample window, filtered register, edge detector feeding the FSM
+    register, then the SDA register.
+    """
+    return SYNC_STAGES + filter_samples + 1
+
+
+class _State(enum.Enum, shape=3):
+    IDLE = 0  # not addressed: wait for START
+    ADDRESS = 1  # shifting in the address byte
+    ADDRESS_ACK = 2  # driving the ACK of our address
+    WRITE = 3  # shifting in a data byte from the controller
+    WRITE_ACK = 4  # driving the ACK of a received data byte
+    READ = 5  # shifting out a data byte
+    READ_ACK = 6  # listening for the controller's ACK/NACK
+
+
+class I2cTarget(wiring.Component):
+    """I2C target engine with a fixed 7-bit address (UM10204 sections 3.1 and 3.2).
+
+    Why this sampling scheme: the engine oversamples SCL and SDA with the ``sync`` clock
+    and filters both with the same N-sample filter. Equal delay on both lines keeps their
+    order, so START/STOP and data are told apart exactly as on the wire. N is the
+    smallest count that no spike shorter than t_SP (50 ns) can fill:
+    ``N = ceil(t_SP * sys_clk_hz) + 1``. The lowest clock that still meets Fast-mode
+    (SDA valid within t_VD;DAT = 900 ns of SCL falling, with the 300 ns internal hold)
+    is about 7 MHz. 10 MHz is the recommended rate: N = 2, 25 cycles per Fast-mode bit,
+    about 2,400 cycles for a PX4 magnetometer read. Every cycle is simulated, and faster
+    clocks only add cycles.
+
+    Parameters
+    ----------
+    address : int
+        7-bit target address, 0x08..0x77 (UM10204 table 4 reserves the rest).
+    sys_clk_hz : float
+        Frequency of the ``sync`` domain.
+
+    Attributes
+    ----------
+    scl : In(1)
+        SCL as seen on the bus.
+    sda_i : In(1)
+        SDA as seen on the bus (the wired-AND of every driver, this one included).
+    sda_oe : Out(1)
+        1 pulls SDA low (open drain); 0 releases it.
+    fault_mute : In(1)
+        While 1 the target never drives SDA: no ACK, no data; it looks absent.
+    fault_flip : In(8)
+        XOR mask applied to every data byte the target sends while it is non-zero.
+    start : Out(1)
+        One-cycle strobe: a START or repeated START was seen (any address).
+    stop : Out(1)
+        One-cycle strobe: a STOP was seen.
+    busy : Out(1)
+        1 from the ACK of this target's address until the next STOP. A chip holds its
+        data registers steady while it is 1, so one transaction reads one sample.
+    write_stb : Out(1)
+        One-cycle strobe: ``write_data`` holds a byte the controller wrote (and we ACKed).
+    write_data : Out(8)
+        The byte received with ``write_stb``.
+    read_stb : Out(1)
+        One-cycle strobe: the engine took ``read_data`` to send it. The chip advances its
+        register pointer and applies read side effects on this strobe.
+    read_data : In(8)
+        Next byte to send, presented by the chip before the engine asks for it.
+    """
+
+    scl: In(1)
+    sda_i: In(1)
+    sda_oe: Out(1)
+    fault_mute: In(1)
+    fault_flip: In(8)
+    start: Out(1)
+    stop: Out(1)
+    busy: Out(1)
+    write_stb: Out(1)
+    write_data: Out(8)
+    read_stb: Out(1)
+    read_data: In(8)
+
+    def __init__(self, *, address: int, sys_clk_hz: float) -> None:
+        if not isinstance(address, int) or not 0x08 <= address <= 0x77:
+            raise ValueError(f"I2C address must be a 7-bit address in 0x08..0x77, not {address!r}")
+        self.address = address
+        self.sampling = TargetSampling.for_clock(sys_clk_hz)
+        super().__init__()
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+
+        scl, sda = self._filtered(m, self.scl, "scl"), self._filtered(m, self.sda_i, "sda")
+        scl_prev = Signal(init=1)
+        sda_prev = Signal(init=1)
+        m.d.sync += [scl_prev.eq(scl), sda_prev.eq(sda)]
+        scl_rise = scl & ~scl_prev
+        scl_fall = ~scl & scl_prev
+        start_cond = scl & scl_prev & sda_prev & ~sda
+        stop_cond = scl & scl_prev & ~sda_prev & sda
+
+        state = Signal(_State)
+        shift = Signal(8)
+        bit_count = Signal(range(9))
+        reading = Signal()  # R/W bit of the addressing byte
+        acked = Signal()  # the controller ACKed the byte just sent
+        sda_drive = Signal()  # 1 = pull SDA low
+        drive_next = Signal()  # level for sda_drive once the hold time has passed
+        hold = Signal(range(self.sampling.hold_cycles + 1))
+        hold_pending = Signal()
+
+        m.d.comb += [
+            self.sda_oe.eq(sda_drive & ~self.fault_mute),
+            self.start.eq(start_cond),
+            self.stop.eq(stop_cond),
+            self.write_data.eq(shift),
+        ]
+
+        # SDA changes only after SCL has fallen and the internal hold time has passed.
+        with m.If(hold_pending):
+            with m.If(hold == 0):
+                m.d.sync += [sda_drive.eq(drive_next), hold_pending.eq(0)]
+            with m.Else():
+                m.d.sync += hold.eq(hold - 1)
+
+        def drive_after_fall(pull_low) -> None:
+            m.d.sync += [
+                drive_next.eq(pull_low),
+                hold.eq(self.sampling.hold_cycles),
+                hold_pending.eq(1),
+            ]
+
+        def send_next_byte() -> None:
+            m.d.comb += self.read_stb.eq(1)
+            byte = self.read_data ^ self.fault_flip
+            m.d.sync += [
+                state.eq(_State.READ),
+                shift.eq(Cat(Const(0, 1), byte[:7])),
+                bit_count.eq(1),
+            ]
+            drive_after_fall(~byte[7])
+
+        with m.If(start_cond | stop_cond):
+            m.d.sync += [sda_drive.eq(0), hold_pending.eq(0), bit_count.eq(0)]
+            with m.If(start_cond):
+                m.d.sync += state.eq(_State.ADDRESS)
+            with m.Else():
+                m.d.sync += [state.eq(_State.IDLE), self.busy.eq(0)]
+        with m.Else(), m.Switch(state):
+            with m.Case(_State.ADDRESS, _State.WRITE):
+                with m.If(scl_rise):
+                    m.d.sync += [shift.eq(Cat(sda, shift[:7])), bit_count.eq(bit_count + 1)]
+                with m.If(scl_fall & (bit_count == 8)):
+                    with m.If(state == _State.WRITE):
+                        m.d.comb += self.write_stb.eq(1)
+                        m.d.sync += state.eq(_State.WRITE_ACK)
+                        drive_after_fall(1)
+                    with m.Elif((shift[1:] == self.address) & ~self.fault_mute):
+                        m.d.sync += [
+                            state.eq(_State.ADDRESS_ACK),
+                            reading.eq(shift[0]),
+                            self.busy.eq(1),
+                        ]
+                        drive_after_fall(1)
+                    with m.Else():
+                        # Not our address: stay silent (NACK) until the next START.
+                        m.d.sync += state.eq(_State.IDLE)
+            with m.Case(_State.ADDRESS_ACK, _State.WRITE_ACK), m.If(scl_fall):
+                with m.If(reading):
+                    send_next_byte()
+                with m.Else():
+                    m.d.sync += [state.eq(_State.WRITE), bit_count.eq(0)]
+                    drive_after_fall(0)
+            with m.Case(_State.READ), m.If(scl_fall):
+                with m.If(bit_count == 8):
+                    m.d.sync += state.eq(_State.READ_ACK)
+                    drive_after_fall(0)
+                with m.Else():
+                    m.d.sync += [shift.eq(shift << 1), bit_count.eq(bit_count + 1)]
+                    drive_after_fall(~shift[7])
+            with m.Case(_State.READ_ACK):
+                with m.If(scl_rise):
+                    m.d.sync += acked.eq(~sda)
+                with m.If(scl_fall):
+                    with m.If(acked):
+                        send_next_byte()
+                    with m.Else():
+                        # UM10204 3.1.6: a NACK ends the read; SDA stays released so
+                        # the controller can send STOP or a repeated START.
+                        m.d.sync += state.eq(_State.IDLE)
+        return m
+
+    def _filtered(self, m: Module, pin: Signal, name: str) -> Signal:
+        """Re-time ``pin`` and suppress pulses shorter than t_SP (N equal samples rule)."""
+        synced = Signal(init=1, name=f"{name}_sync")
+        m.submodules[f"{name}_ff"] = FFSynchronizer(pin, synced, init=1, stages=SYNC_STAGES)
+        history = Signal(self.sampling.filter_samples - 1, init=-1, name=f"{name}_history")
+        filtered = Signal(init=1, name=f"{name}_filtered")
+        window = Cat(synced, history)
+        m.d.sync += history.eq(window[: self.sampling.filter_samples - 1])
+        with m.If(window.all()):
+            m.d.sync += filtered.eq(1)
+        with m.Elif(~window.any()):
+            m.d.sync += filtered.eq(0)
+        return filtered

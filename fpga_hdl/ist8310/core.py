@@ -1,0 +1,159 @@
+"""IST8310 magnetometer emulated on I2C (iSentek IST8310 datasheet; register map in regs.py)."""
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from fpga_hdl.i2c_target import I2cTarget, TargetSampling
+from fpga_hdl.ist8310 import regs
+from fpga_hdl.ist8310.regs import Register
+
+__all__ = ["Ist8310Core"]
+
+
+class Ist8310Core(wiring.Component):
+    """IST8310 register file behind an :class:`~fpga_hdl.i2c_target.I2cTarget`.
+
+    Behaviour emulated: WAI reads 0x10; writing CNTL1 = single measurement starts a
+    measurement that completes ``regs.MEASUREMENT_TIME_US`` later in simulated time
+    (``now_us``), so no clock has to run while the bus is idle; STAT1.DRDY is then 1 and
+    CNTL1 reads back standby; reading any data register clears DRDY; data registers
+    are little-endian int16 at 1320 LSB/G (CNTL3 16-bit bits set) or 330 LSB/G (14-bit,
+    the power-on default); CNTL2.SRST resets every register; reads and writes
+    auto-increment the register pointer (0xFF wraps to 0x00); a wrong address is NACKed.
+
+    Parameters
+    ----------
+    sys_clk_hz : float
+        Frequency of the ``sync`` domain (see :class:`I2cTarget` for the choice).
+    address : int
+        7-bit address, one of ``regs.ADDRESSES`` (the CAD pins' choices).
+
+    Attributes
+    ----------
+    scl : In(1)
+        I2C clock from the bus.
+    sda_i : In(1)
+        I2C data as seen on the bus (wired-AND, resolved by the top or testbench).
+    sda_oe : Out(1)
+        1 pulls SDA low.
+    sample : In(regs.SAMPLE_LAYOUT)
+        Field in 16-bit-mode counts, chip axes. Must hold from ``sample_stb`` until the
+        next one (the host port's staging register).
+    sample_stb : In(1)
+        One-cycle strobe: a new ``sample`` is offered. It becomes visible at once when no
+        transaction with this chip is running, else at the transaction's STOP, so one
+        read never mixes two samples.
+    now_us : In(32)
+        Simulated time in microseconds, written by the host; wraps modulo 2**32.
+    fault_mute : In(1)
+        While 1 the chip does not answer (no ACK).
+    fault_flip : In(8)
+        XOR mask applied to every byte the chip sends while it is non-zero.
+    """
+
+    scl: In(1)
+    sda_i: In(1)
+    sda_oe: Out(1)
+    sample: In(regs.SAMPLE_LAYOUT)
+    sample_stb: In(1)
+    now_us: In(32)
+    fault_mute: In(1)
+    fault_flip: In(8)
+
+    def __init__(self, *, sys_clk_hz: float, address: int = regs.DEFAULT_ADDRESS) -> None:
+        if address not in regs.ADDRESSES:
+            choices = ", ".join(f"0x{a:02X}" for a in regs.ADDRESSES)
+            raise ValueError(f"IST8310 address must be one of {choices}, not {address!r}")
+        self.address = address
+        self.sampling = TargetSampling.for_clock(sys_clk_hz)
+        super().__init__()
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        m.submodules.target = target = I2cTarget(
+            address=self.address, sys_clk_hz=self.sampling.sys_clk_hz
+        )
+        m.d.comb += [
+            target.scl.eq(self.scl),
+            target.sda_i.eq(self.sda_i),
+            self.sda_oe.eq(target.sda_oe),
+            target.fault_mute.eq(self.fault_mute),
+            target.fault_flip.eq(self.fault_flip),
+        ]
+
+        # Double buffer: the visible sample changes only between transactions.
+        visible = Signal(regs.SAMPLE_LAYOUT)
+        pending = Signal()
+        with m.If(~target.busy & (pending | self.sample_stb)):
+            m.d.sync += [visible.eq(self.sample), pending.eq(0)]
+        with m.Elif(self.sample_stb):
+            m.d.sync += pending.eq(1)
+
+        stored = {reg: Signal(8, name=reg.name.lower()) for reg in regs.STORED_REGISTERS}
+        cntl3 = stored[Register.CNTL3]
+        measuring = Signal()
+        started_us = Signal(32)
+        finished = measuring & ((self.now_us - started_us)[:32] >= regs.MEASUREMENT_TIME_US)
+
+        # Output resolution per axis: 16-bit counts, or 14-bit (shifted right) by default.
+        out = {}
+        for name, bit in (
+            ("x", regs.CNTL3_X_16BIT),
+            ("y", regs.CNTL3_Y_16BIT),
+            ("z", regs.CNTL3_Z_16BIT),
+        ):
+            counts = visible[name]
+            out[name] = Signal.like(counts, name=f"data_{name}")
+            m.d.comb += out[name].eq(Mux(cntl3 & bit, counts, counts >> regs.SHIFT_14BIT))
+
+        pointer = Signal(8)
+        with m.Switch(pointer):
+            with m.Case(Register.WAI):
+                m.d.comb += target.read_data.eq(regs.DEVICE_ID)
+            with m.Case(Register.STAT1):
+                m.d.comb += target.read_data.eq(Mux(finished, regs.STAT1_DRDY, 0))
+            for index, reg in enumerate(regs.DATA_REGISTERS):
+                with m.Case(reg):
+                    value = out["xyz"[index // 2]]
+                    m.d.comb += target.read_data.eq(value.as_unsigned().word_select(index % 2, 8))
+            with m.Case(Register.CNTL1):
+                mode = Mux(measuring & ~finished, regs.CNTL1_MODE_SINGLE, 0)
+                m.d.comb += target.read_data.eq(mode)
+            for reg, register in stored.items():
+                with m.Case(reg):
+                    m.d.comb += target.read_data.eq(register)
+            with m.Default():
+                m.d.comb += target.read_data.eq(0)
+
+        # The first byte written after a START is the register pointer (datasheet I2C
+        # write sequence); later bytes write registers with auto-increment.
+        pointer_next = Signal()
+        with m.If(target.start):
+            m.d.sync += pointer_next.eq(1)
+        with m.Elif(target.write_stb & pointer_next):
+            m.d.sync += [pointer.eq(target.write_data), pointer_next.eq(0)]
+        with m.Elif(target.write_stb):
+            m.d.sync += pointer.eq(pointer + 1)
+            byte = target.write_data
+            with m.Switch(pointer):
+                with m.Case(Register.CNTL1):
+                    is_single = (byte & regs.CNTL1_MODE_MASK) == regs.CNTL1_MODE_SINGLE
+                    m.d.sync += [measuring.eq(is_single), started_us.eq(self.now_us)]
+                with m.Case(Register.CNTL2):
+                    with m.If(byte & regs.CNTL2_SRST):
+                        m.d.sync += [measuring.eq(0), *(r.eq(0) for r in stored.values())]
+                    with m.Else():
+                        m.d.sync += stored[Register.CNTL2].eq(
+                            byte & regs.STORED_REGISTERS[Register.CNTL2]
+                        )
+                for reg, mask in regs.STORED_REGISTERS.items():
+                    if reg != Register.CNTL2:
+                        with m.Case(reg):
+                            m.d.sync += stored[reg].eq(byte & mask)
+        with m.Elif(target.read_stb):
+            m.d.sync += pointer.eq(pointer + 1)
+            reads_data = (pointer >= Register.DATAXL) & (pointer <= Register.DATAZH)
+            with m.If(reads_data & finished):
+                m.d.sync += measuring.eq(0)
+        return m
