@@ -10,7 +10,9 @@ Behaviours:
   SET_MESSAGE_INTERVAL for HIL_STATE_QUATERNION (5000 µs), stay silent for the first
   ``--after`` frames (PX4 boots for 52–112 ms of simulated time), then answer every
   HIL_SENSOR with ``id = 0`` with one disarmed HIL_ACTUATOR_CONTROLS echoing ``time_usec``.
-  With ``--throttle X`` it answers armed, every motor at X.
+  With ``--throttle X`` it answers armed, every motor at X, from frame ``--arm-after``
+  on (a real autopilot is disarmed while the rig freewheels, so the answered frames
+  before lockstep do not change the flight).
 - ``hang``: answers ``--after`` frames, then stops answering but keeps the link open.
 - ``close``: answers ``--after`` frames, then closes the link.
 - ``garbage``: answers ``--after`` frames, then sends random bytes instead of answers.
@@ -58,6 +60,7 @@ def main() -> None:
     parser.add_argument("--behaviour", default="px4")
     parser.add_argument("--after", type=int, default=0)
     parser.add_argument("--throttle", type=float, default=None)
+    parser.add_argument("--arm-after", type=int, default=0)
     parser.add_argument("--record", default=None)
     args = parser.parse_args()
 
@@ -101,7 +104,7 @@ def main() -> None:
             if misbehaving and args.behaviour == "nan":
                 controls = [math.nan] * 4 + [0.0] * 12
                 mode = ARMED_MODE
-            elif args.throttle is not None:
+            elif args.throttle is not None and frames > args.arm_after:
                 controls, mode = [args.throttle] * 4 + [0.0] * 12, ARMED_MODE
             else:
                 controls, mode = [0.0] * 16, 1

@@ -1,0 +1,212 @@
+"""The closed loop with the TLM chips against the test-double autopilot process.
+
+The double speaks PX4's side of the link for real (see autopilot_double.py), so these
+runs exercise everything but the flight controller: model, sensor physics, chips and
+drivers, HIL encoding, lockstep, PWM capture, faults and rig.ulg. Flights with the
+reference autopilot are in test_closed_loop.py.
+"""
+
+import json
+import math
+import socket
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import pyulog
+
+from rig.errors import AutopilotStalled
+from rig.link import LinkTimeouts
+from rig.loop import RunOptions, run_scenario
+from rig.px4_sim_api import HilSensorFields, Ports
+from rig.scenario import scenario_from_dict
+
+DOUBLE = Path(__file__).with_name("autopilot_double.py")
+F450_HOVER_THROTTLE = 0.55  # quad_model's hover_throttle() for the F450 at 488 m, rounded
+
+
+def free_instance() -> int:
+    """An instance whose simulator TCP and API UDP ports are free right now."""
+    for instance in range(60, 100):
+        ports = Ports(instance)
+        tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            tcp.bind(("127.0.0.1", ports.simulator_tcp))
+            udp.bind(("127.0.0.1", ports.api_remote_udp))
+        except OSError:
+            continue
+        finally:
+            tcp.close()
+            udp.close()
+        return instance
+    raise RuntimeError("no free rig instance")
+
+
+def fly(tmp_path, *double_args, duration_s=1.0, faults=(), seed=1, name="run", **scenario):
+    instance = free_instance()
+    record = tmp_path / f"{name}-received.jsonl"
+    argv = (
+        sys.executable, str(DOUBLE), "--port", str(Ports(instance).simulator_tcp),
+        "--record", str(record), *double_args,
+    )  # fmt: skip
+    document = {"name": "t", "vehicle": "f450_high_precision", "duration_s": duration_s,
+                "seed": seed, "faults": list(faults), **scenario}  # fmt: skip
+    options = RunOptions(
+        instance=instance,
+        out_dir=tmp_path / name,
+        timeouts=LinkTimeouts(connect_s=20, answer_s=5),
+        autopilot_argv=argv,
+    )
+    result = run_scenario(scenario_from_dict(document), options)
+    received = [json.loads(line) for line in record.read_text().splitlines()]
+    return result, pyulog.ULog(str(result.rig_log)), received
+
+
+def data(log, topic):
+    return log.get_dataset(topic).data
+
+
+def test_vehicle_at_rest_sensors_reach_the_autopilot_at_their_rates(tmp_path):
+    result, log, received = fly(tmp_path, "--behaviour", "px4", duration_s=1.0)
+    assert result.frames == 1000
+    sensors = [m for m in received if m["mavpackettype"] == "HIL_SENSOR"]
+    assert [m["time_usec"] for m in sensors] == list(range(1000, 1_000_001, 1000))
+    masks = np.array([m["fields_updated"] for m in sensors])
+    imu = HilSensorFields.ACCEL | HilSensorFields.GYRO
+    assert np.all(masks & imu == imu)  # every frame: accel and gyro (lockstep needs gyro)
+    assert np.sum(masks & HilSensorFields.MAG == HilSensorFields.MAG) == 100  # 100 Hz
+    # MS5611 at 50 Hz: D2 then D1, 10 ms each (PX4's cycle), the first pressure at 21 ms.
+    baro_times = [m["time_usec"] for m in sensors if m["fields_updated"] & HilSensorFields.BARO]
+    assert baro_times == list(range(21_000, 1_000_001, 20_000))
+    gps = [m for m in received if m["mavpackettype"] == "HIL_GPS"]
+    assert 9 <= len(gps) <= 10  # 10 Hz minus the receiver's latency at the start
+    states = [m for m in received if m["mavpackettype"] == "HIL_STATE_QUATERNION"]
+    assert len(states) == pytest.approx(200, abs=2)  # the 5000 µs the double asked for
+
+    # At rest, level, on the ground: what PX4 would read, through the chips' quantization.
+    accel = np.array([[m["xacc"], m["yacc"], m["zacc"]] for m in sensors])
+    # The F450 file's residual IMU errors after calibration: bias σ 0.05 m/s², scale σ 0.5 %,
+    # misalignment σ 0.01 rad (≈ 0.1 m/s² on x/y at 1 g): bounds at about 3σ.
+    mean = accel.mean(axis=0)
+    assert np.linalg.norm(mean) == pytest.approx(9.80665, abs=0.2)
+    assert np.abs(mean[:2]).max() < 0.35
+    assert mean[2] < -9.5
+    baro = [m for m in sensors if m["fields_updated"] & HilSensorFields.BARO]
+    # ISA troposphere p = p0·(1 − L·h/T0)^(g/(R·L)) at 488 m AMSL: 955.98 hPa (ICAO tables
+    # give 954.61 hPa at 500 m); the bound covers the F450's baro offset and noise.
+    isa_hpa = 1013.25 * (1 - 0.0065 * 488 / 288.15) ** 5.25588
+    assert isa_hpa == pytest.approx(955.98, abs=0.01)
+    assert np.mean([m["abs_pressure"] for m in baro]) == pytest.approx(isa_hpa, abs=0.5)
+    mag = [m for m in sensors if m["fields_updated"] & HilSensorFields.MAG]
+    field = np.mean([[m["xmag"], m["ymag"], m["zmag"]] for m in mag], axis=0)
+    assert field == pytest.approx([0.215, 0.013, 0.433], abs=0.02)  # WMM at PX4's home
+    assert gps[0]["lat"] == pytest.approx(473977420, abs=50)
+    assert gps[0]["fix_type"] >= 3
+    assert gps[0]["satellites_visible"] >= 6
+
+    # rig.ulg holds the same data under PX4's names, plus the truth.
+    logged = data(log, "sensor_combined")
+    assert len(logged["timestamp"]) == 1000
+    assert logged["accelerometer_m_s2[2]"] == pytest.approx(accel[:, 2], abs=1e-5)
+    truth = data(log, "vehicle_local_position_groundtruth")
+    assert np.max(np.abs(truth["z"])) < 1e-3  # resting on the ground
+    outputs = data(log, "actuator_outputs")
+    assert np.all(outputs["output[0]"] == 1000.0)  # disarmed: PWM_MAIN_DIS
+    messages = [m.message for m in log.logged_messages]
+    assert messages[-1] == "run completed: 1000 frames"
+    assert log.initial_parameters["RIG_SEED"] == 1
+    assert log.msg_info_dict["scenario"] == "t"
+
+
+def test_pwm_carries_the_commanded_throttle_and_the_vehicle_climbs(tmp_path):
+    _, log, _ = fly(tmp_path, "--behaviour", "px4", "--throttle", "0.7", duration_s=1.5)
+    outputs = data(log, "actuator_outputs")
+    assert outputs["output[0]"][-1] == pytest.approx(1700.0)  # 1000 + 0.7 × 1000 µs
+    assert np.diff(outputs["timestamp"]).min() >= 2000  # 400 Hz pulses: a new width ≤ every 2.5 ms
+    motors = data(log, "actuator_motors")
+    assert motors["control[0]"][-1] == pytest.approx(0.7)
+    truth = data(log, "vehicle_local_position_groundtruth")
+    assert truth["z"][-1] < -1.0  # 0.7 > hover throttle (≈ 0.55): it climbs (NED z < 0)
+    assert truth["vz"][-1] < -1.0
+
+
+def test_same_seed_gives_identical_rig_log(tmp_path):
+    spin = ("--behaviour", "px4", "--throttle", "0.6", "--arm-after", "100")
+    _, first, _ = fly(tmp_path, *spin, name="a", seed=7)
+    _, second, _ = fly(tmp_path, *spin, name="b", seed=7)
+    _, other, _ = fly(tmp_path, *spin, name="c", seed=8)
+    for topic in ("sensor_combined", "vehicle_local_position_groundtruth", "sensor_baro"):
+        a, b = data(first, topic), data(second, topic)
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=f"{topic}.{key}")
+    assert not np.array_equal(
+        data(first, "sensor_combined")["gyro_rad[0]"], data(other, "sensor_combined")["gyro_rad[0]"]
+    )
+
+
+def test_killed_autopilot_ends_the_run_with_a_clear_message_and_a_readable_log(tmp_path):
+    with pytest.raises(AutopilotStalled) as error:
+        fly(tmp_path, "--behaviour", "close", "--after", "300", duration_s=2.0)
+    assert "the autopilot closed the simulator link" in str(error.value)
+    assert "PX4 never reconnects" in str(error.value)
+    log = pyulog.ULog(str(tmp_path / "run" / "rig.ulg"))
+    assert len(data(log, "sensor_combined")["timestamp"]) >= 299
+    assert log.logged_messages[-1].message.startswith("run ended: the autopilot closed")
+
+
+def test_pwm_dropout_times_out_the_capture_and_the_motors_stop(tmp_path):
+    dropout = {"kind": "pwm_dropout", "start_s": 1.0}
+    _, log, _ = fly(tmp_path, "--behaviour", "px4", "--throttle", "0.7", duration_s=1.6,
+                    faults=[dropout])  # fmt: skip
+    truth = data(log, "rig_propulsion_groundtruth")
+    t = truth["timestamp"] / 1e6
+    speed_before = truth["rotor_speed_radps[0]"][np.searchsorted(t, 0.99)]
+    speed_after = truth["rotor_speed_radps[0]"][-1]
+    assert speed_before > 500  # spinning at 0.7 throttle
+    assert speed_after < 0.2 * speed_before  # capture timed out (10 ms) → ESC stops
+    events = [m.message for m in log.logged_messages]
+    assert "fault pwm_dropout started" in events
+
+
+def test_bus_faults_reach_the_autopilot_through_the_chips(tmp_path):
+    faults = [
+        {"kind": "bus_bit_flip", "chip": "mpu6000", "mask": 0x80, "start_s": 0.5, "end_s": 0.6},
+        {"kind": "chip_mute", "chip": "ist8310", "start_s": 0.5},
+    ]
+    _, log, received = fly(tmp_path, "--behaviour", "px4", duration_s=0.8, faults=faults)
+    sensors = [m for m in received if m["mavpackettype"] == "HIL_SENSOR"]
+    zacc = {m["time_usec"]: m["zacc"] for m in sensors}
+    assert zacc[400_000] == pytest.approx(-9.81, abs=0.1)
+    # Flipping bit 7 of every byte turns −9.81 m/s² (0xF8xx at ±16 g) into a positive value.
+    assert zacc[550_000] > 0
+    assert zacc[700_000] == pytest.approx(-9.81, abs=0.1)  # the flip ended
+    mag_times = [m["time_usec"] for m in sensors if m["fields_updated"] & HilSensorFields.MAG]
+    assert max(mag_times) < 500_000  # a muted IST8310 NACKs: no mag reaches the autopilot
+    events = [m.message for m in log.logged_messages]
+    assert "fault chip_mute (chip=ist8310) started" in events
+    assert any(
+        e.startswith("bus error: ist8310: I2C target 0x0E did not acknowledge") for e in events
+    )
+
+
+def test_sensor_faults_and_gps_loss(tmp_path):
+    faults = [
+        {"kind": "sensor_stuck", "sensor": "gyro", "start_s": 0.3, "end_s": 0.5},
+        {"kind": "sensor_bias", "sensor": "baro", "bias": 500.0, "start_s": 0.3},
+        {"kind": "gps_loss", "start_s": 0.45},
+    ]
+    _, log, received = fly(tmp_path, "--behaviour", "px4", duration_s=0.7, faults=faults)
+    sensors = [m for m in received if m["mavpackettype"] == "HIL_SENSOR"]
+    gyro = {m["time_usec"]: (m["xgyro"], m["ygyro"], m["zgyro"]) for m in sensors}
+    stuck = {gyro[t] for t in range(300_000, 500_000, 1000)}
+    assert len(stuck) == 1  # frozen: the same sample for 200 frames
+    assert len({gyro[t] for t in range(100_000, 300_000, 1000)}) > 50  # noisy before
+    baro = [(m["time_usec"], m["abs_pressure"]) for m in sensors if m["fields_updated"] & 0x200]
+    before = np.mean([p for t, p in baro if t < 290_000])
+    after = np.mean([p for t, p in baro if t > 340_000])  # after the MS5611 cycle latency
+    assert after - before == pytest.approx(5.0, abs=0.3)  # +500 Pa = +5 hPa
+    gps_times = [m["time_usec"] for m in received if m["mavpackettype"] == "HIL_GPS"]
+    assert max(gps_times) < 450_000
+    assert math.isclose(len(data(log, "sensor_gps")["timestamp"]), len(gps_times))
