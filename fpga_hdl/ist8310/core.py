@@ -44,6 +44,9 @@ class Ist8310Core(wiring.Component):
         One-cycle strobe: a new ``sample`` is offered. It becomes visible at once when no
         transaction with this chip is running, else at the transaction's STOP, so one
         read never mixes two samples.
+    sample_pending : Out(1)
+        An offered sample waits for the running transaction's STOP (a simulation that
+        gates the system clock keeps it running while this is 1).
     now_us : In(32)
         Simulated time in microseconds, written by the host; wraps modulo 2**32.
     fault_mute : In(1)
@@ -57,6 +60,7 @@ class Ist8310Core(wiring.Component):
     sda_oe: Out(1)
     sample: In(regs.SAMPLE_LAYOUT)
     sample_stb: In(1)
+    sample_pending: Out(1)
     now_us: In(32)
     fault_mute: In(1)
     fault_flip: In(8)
@@ -84,7 +88,7 @@ class Ist8310Core(wiring.Component):
 
         # Double buffer: the visible sample changes only between transactions.
         visible = Signal(regs.SAMPLE_LAYOUT)
-        pending = Signal()
+        pending = self.sample_pending
         with m.If(~target.busy & (pending | self.sample_stb)):
             m.d.sync += [visible.eq(self.sample), pending.eq(0)]
         with m.Elif(self.sample_stb):

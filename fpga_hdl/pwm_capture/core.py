@@ -1,0 +1,107 @@
+"""Eight-channel PWM capture: pulse width, period and a timeout flag per channel, in ticks."""
+
+import math
+
+from amaranth.hdl import Module, Signal
+from amaranth.lib import data, wiring
+from amaranth.lib.cdc import FFSynchronizer
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["CHANNELS", "LATENCY_TICKS", "PwmCapture", "timeout_ticks"]
+
+CHANNELS = 8
+#: Two flip-flops re-time the asynchronous PWM inputs.
+SYNC_STAGES = 2
+#: Clock edges from the one that first samples a PWM edge to the one that updates the
+#: results: the synchroniser's second stage, then the result registers (the edge detector
+#: between them is combinational).
+LATENCY_TICKS = SYNC_STAGES
+
+
+def timeout_ticks(tick_hz: float, timeout_s: float) -> int:
+    """The timeout in whole ticks (at least 2); rejects nonsense with an exact message."""
+    if not (isinstance(tick_hz, int | float) and math.isfinite(tick_hz) and tick_hz > 0):
+        raise ValueError(f"tick_hz must be a positive frequency in Hz, not {tick_hz!r}")
+    if not (isinstance(timeout_s, int | float) and math.isfinite(timeout_s) and timeout_s > 0):
+        raise ValueError(f"timeout_s must be a positive duration in s, not {timeout_s!r}")
+    return max(2, round(timeout_s * tick_hz))
+
+
+class PwmCapture(wiring.Component):
+    """Measure the servo/ESC PWM the autopilot drives, one counter per channel.
+
+    Why its own clock: the core counts in ticks, and the cheapest clock that resolves one
+    tick is the tick itself. Its ``sync`` domain is meant to run at ``tick_hz`` (the top
+    renames it to a slow ``pwm`` domain), so a 400 Hz motor PWM costs ``tick_hz`` cycles
+    per simulated second, not the system clock's. At the default 1 MHz a tick is 1 µs,
+    the unit PX4 uses for PWM. The results change once per pulse, so a reader in another
+    domain samples them with the usual two-flop synchroniser, at worst one pulse late.
+
+    Definitions, per channel, counted on the re-timed input: ``width_ticks`` is the
+    high time of the last complete pulse (rising to falling edge), ``period_ticks`` the
+    time between its last two rising edges. ``timeout`` is 1 from reset, and again once
+    ``timeout_s`` passes without a rising edge (pulses stopped, or the line stuck high
+    or low): width and period then read 0, so a reader that ignores the flag still sees
+    a zero command. It clears at the falling edge of the next complete pulse.
+
+    Parameters
+    ----------
+    tick_hz : float
+        Frequency of the ``sync`` domain; one tick per cycle.
+    timeout_s : float
+        Time without a rising edge after which a channel is flagged (and zeroed).
+
+    Attributes
+    ----------
+    pwm : In(8)
+        PWM inputs, one bit per channel (asynchronous).
+    width_ticks : Out(ArrayLayout(unsigned(counter_bits), 8))
+        Pulse width per channel, in ticks.
+    period_ticks : Out(ArrayLayout(unsigned(counter_bits), 8))
+        Pulse period per channel, in ticks; 0 until two rising edges are seen.
+    timeout : Out(8)
+        Per channel: no pulse for ``timeout_s`` (or none yet since reset).
+    """
+
+    def __init__(self, *, tick_hz: float = 1e6, timeout_s: float = 0.1) -> None:
+        self.timeout_ticks = timeout_ticks(tick_hz, timeout_s)
+        self.tick_hz = float(tick_hz)
+        self.timeout_s = float(timeout_s)
+        self.counter_bits = self.timeout_ticks.bit_length()
+        counts = data.ArrayLayout(self.counter_bits, CHANNELS)
+        super().__init__(
+            {
+                "pwm": In(CHANNELS),
+                "width_ticks": Out(counts),
+                "period_ticks": Out(counts),
+                "timeout": Out(CHANNELS, init=(1 << CHANNELS) - 1),
+            }
+        )
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        level = Signal(CHANNELS)
+        m.submodules.sync_pwm = FFSynchronizer(self.pwm, level, stages=SYNC_STAGES)
+        previous = Signal(CHANNELS)
+        m.d.sync += previous.eq(level)
+
+        for ch in range(CHANNELS):
+            rise = level[ch] & ~previous[ch]
+            fall = ~level[ch] & previous[ch]
+            # Ticks since the last rising edge; saturates at the timeout.
+            since_rise = Signal(self.counter_bits, name=f"since_rise_{ch}")
+            armed = Signal(name=f"armed_{ch}")  # a rising edge seen since the timeout
+            width, period = self.width_ticks[ch], self.period_ticks[ch]
+            timeout = self.timeout[ch]
+
+            with m.If(since_rise < self.timeout_ticks):
+                m.d.sync += since_rise.eq(since_rise + 1)
+            with m.If(rise):
+                m.d.sync += [since_rise.eq(1), armed.eq(1)]
+                with m.If(armed):
+                    m.d.sync += period.eq(since_rise)
+            with m.Elif(armed & (since_rise == self.timeout_ticks)):
+                m.d.sync += [armed.eq(0), timeout.eq(1), width.eq(0), period.eq(0)]
+            with m.Elif(fall & armed):
+                m.d.sync += [width.eq(since_rise), timeout.eq(0)]
+        return m

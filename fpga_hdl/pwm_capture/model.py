@@ -1,0 +1,77 @@
+"""Transaction-level PWM capture: what ``core.py`` reports for given pulse trains.
+
+Exact to the tick, including sampling and latency, so the tests can demand equality with
+the RTL: clock edge ``k`` (at ``first_edge_s + k / tick_hz``) samples the input; an edge
+landing exactly on a clock edge counts as already there. The core acts on a sample
+``LATENCY_TICKS`` edges later.
+"""
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from fpga_hdl.pwm_capture.core import LATENCY_TICKS, timeout_ticks
+
+__all__ = ["ChannelCapture", "PwmCaptureModel"]
+
+
+@dataclass(frozen=True)
+class ChannelCapture:
+    """One channel's results, as the core's output registers hold them."""
+
+    width_ticks: int
+    period_ticks: int
+    timeout: bool
+
+
+class PwmCaptureModel:
+    """The core's arithmetic for one channel at a time, event by event (no per-tick loop)."""
+
+    def __init__(self, *, tick_hz: float = 1e6, timeout_s: float = 0.1) -> None:
+        self.timeout_ticks = timeout_ticks(tick_hz, timeout_s)
+        self.tick_hz = float(tick_hz)
+
+    def capture(
+        self, pulses_s: Sequence[tuple[float, float]], *, at_s: float, first_edge_s: float = 0.0
+    ) -> ChannelCapture:
+        """Results visible just after the last clock edge at or before ``at_s``.
+
+        ``pulses_s`` are (rise, fall) times in seconds, increasing; the line is low
+        before the first rise and between pulses.
+        """
+        events = []
+        previous_fall = -math.inf
+        for rise_s, fall_s in pulses_s:
+            if not previous_fall <= rise_s < fall_s:
+                raise ValueError(
+                    f"pulses must be increasing (rise < fall), got ({rise_s!r}, {fall_s!r}) "
+                    f"after a fall at {previous_fall!r}"
+                )
+            previous_fall = fall_s
+            rise_edge = self._edge(rise_s, first_edge_s)
+            fall_edge = self._edge(fall_s, first_edge_s)
+            if rise_edge != fall_edge:  # a pulse between two samples is never seen
+                events += [(rise_edge + LATENCY_TICKS, True), (fall_edge + LATENCY_TICKS, False)]
+        now = math.floor((at_s - first_edge_s) * self.tick_hz + 1e-9)
+
+        width = period = 0
+        timeout, armed, last_rise = True, False, 0
+        for edge, is_rise in events:
+            if edge > now:
+                break
+            deadline = last_rise + self.timeout_ticks
+            if armed and (deadline < edge or (deadline == edge and not is_rise)):
+                armed, timeout, width, period = False, True, 0, 0
+            if is_rise:
+                if armed:
+                    period = edge - last_rise
+                armed, last_rise = True, edge
+            elif armed:
+                width, timeout = edge - last_rise, False
+        if armed and last_rise + self.timeout_ticks <= now:
+            timeout, width, period = True, 0, 0
+        return ChannelCapture(width, period, timeout)
+
+    def _edge(self, time_s: float, first_edge_s: float) -> int:
+        """Index of the first clock edge at or after ``time_s``."""
+        return max(0, math.ceil((time_s - first_edge_s) * self.tick_hz - 1e-9))
