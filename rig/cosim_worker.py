@@ -37,7 +37,7 @@ from rig.cosim_channel import (
     receive_message,
     send_message,
 )
-from rig.pwm import MOTOR_CHANNELS, Pulse, PwmCaptureTimeline
+from rig.pwm import MOTOR_CHANNELS, Pulse, PwmCapture
 from rig.sensor_layer import CHIPS, NO_FAULT, ChipFrame, SensorEngine
 
 #: SensorTop's host-port channel and fault names for the rig's chip names.
@@ -50,7 +50,7 @@ class RtlChips:
     def __init__(self, host: CocotbHost) -> None:
         self.host = host
         self.ist8310 = Ist8310Model()
-        self.pwm = PwmCaptureTimeline(MOTOR_CHANNELS)
+        self.pwm = PwmCapture(MOTOR_CHANNELS)
 
     async def load(self, frame: ChipFrame) -> None:
         samples: dict[str, dict[str, int]] = {}

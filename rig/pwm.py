@@ -8,24 +8,31 @@ next PWM period (up to 2.5 ms later at 400 Hz), as on the real rig. A dropped-ou
 emits no pulse at all. The pulses go to the PWM capture core (RTL) or its model (TLM), and
 the captured widths, not the commands, drive the motors; a channel whose capture timed out
 means zero thrust (the ESC's failsafe).
+
+Known gap: SensorTop has no PWM capture core yet, so the RTL layer also measures the
+pulses with fpga_hdl's tick-exact model of that core.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from fpga_hdl.pwm_capture.model import PwmCaptureModel
 from quad_model.frames import PWM_MIN_US, pwm_to_throttle, throttle_to_pwm
 
 #: PX4 PWM_MAIN_DISn default: the pulse an ESC sees while the vehicle is disarmed.
 PWM_DISARMED_US = PWM_MIN_US
 #: Quad-X: the first four outputs drive the motors (PX4 MOTOR_ORDER).
 MOTOR_CHANNELS = 4
-#: No rising edge for this long and a channel counts as lost (4 periods at 400 Hz); the
-#: ESC then stops the motor, as common ESC firmware does on a lost signal.
-PWM_TIMEOUT_US = 10_000
+#: The capture core's tick: 1 µs, the unit PX4 uses for PWM (fpga_hdl.pwm_capture).
+PWM_TICK_HZ = 1e6
+#: No rising edge for this long and a channel counts as lost: the capture core's default,
+#: and a usual ESC signal-loss time; the ESC then stops the motor.
+PWM_TIMEOUT_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -73,33 +80,31 @@ def throttle_from_capture(widths_us: Sequence[float], timed_out: Sequence[bool])
     return throttle
 
 
-class PwmCaptureTimeline:
-    """Transaction-level PWM capture: per channel the last complete pulse and a timeout.
+class PwmCapture:
+    """The PWM capture core's results for the pulses so far (fpga_hdl's tick-exact model).
 
-    A pulse counts once its falling edge (``start + width``) is in the past, as the
-    capture core latches the width at the falling edge; a channel with no rising edge for
-    :data:`PWM_TIMEOUT_US` is timed out and reads zero thrust.
+    :class:`fpga_hdl.pwm_capture.model.PwmCaptureModel` recomputes a channel from its
+    pulse history. Its results depend only on the last two rising edges, the last
+    complete pulse and the time since the last rise, so the last three pulses of a
+    channel (the newest may still be high) give the same answer as the whole history;
+    a test checks that against random pulse trains with dropouts.
     """
 
-    def __init__(self, channels: int, timeout_us: int = PWM_TIMEOUT_US) -> None:
-        self.timeout_us = timeout_us
-        self._widths_us = [0.0] * channels
-        self._last_rise_us = [None] * channels
-        self._in_flight: list[Pulse] = []
+    def __init__(self, channels: int, tick_hz: float = PWM_TICK_HZ,
+                 timeout_s: float = PWM_TIMEOUT_S) -> None:  # fmt: skip
+        self.model = PwmCaptureModel(tick_hz=tick_hz, timeout_s=timeout_s)
+        self._recent: list[deque[tuple[float, float]]] = [deque(maxlen=3) for _ in range(channels)]
 
     def capture(
         self, pulses: Sequence[Pulse], now_us: int
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
-        self._in_flight.extend(pulses)
-        still_high = []
-        for pulse in self._in_flight:
-            if pulse.start_us + pulse.width_us <= now_us:
-                self._widths_us[pulse.channel] = float(pulse.width_us)
-                self._last_rise_us[pulse.channel] = pulse.start_us
-            else:
-                still_high.append(pulse)
-        self._in_flight = still_high
-        timed_out = tuple(
-            rise is None or now_us - rise > self.timeout_us for rise in self._last_rise_us
+        """Add the new pulses; return each channel's width (µs) and timeout flag at ``now_us``."""
+        for pulse in pulses:
+            start_s = pulse.start_us / 1e6
+            self._recent[pulse.channel].append((start_s, start_s + pulse.width_us / 1e6))
+        results = [self.model.capture(list(recent), at_s=now_us / 1e6) for recent in self._recent]
+        tick_us = 1e6 / self.model.tick_hz
+        return (
+            tuple(r.width_ticks * tick_us for r in results),
+            tuple(r.timeout for r in results),
         )
-        return tuple(self._widths_us), timed_out

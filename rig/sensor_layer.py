@@ -34,7 +34,7 @@ from fpga_hdl.mpu6000.model import Mpu6000Model
 from fpga_hdl.ms5611 import regs as ms_regs
 from fpga_hdl.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
 from fpga_hdl.ms5611.model import Ms5611Model
-from rig.pwm import MOTOR_CHANNELS, Pulse, PwmCaptureTimeline
+from rig.pwm import MOTOR_CHANNELS, Pulse, PwmCapture
 
 CHIPS = ("mpu6000", "ms5611", "ist8310")
 
@@ -201,7 +201,7 @@ class TlmChips:
         self.ist8310 = Ist8310Model()
         self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
         self.i2c = TlmI2cBus({self.ist8310.address: self.ist8310})
-        self.pwm = PwmCaptureTimeline(MOTOR_CHANNELS)
+        self.pwm = PwmCapture(MOTOR_CHANNELS)
 
     async def load(self, frame: ChipFrame) -> None:
         self.ms5611.now_us = self.ist8310.now_us = frame.now_us

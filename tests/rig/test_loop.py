@@ -112,7 +112,8 @@ def test_vehicle_at_rest_sensors_reach_the_autopilot_at_their_rates(tmp_path):
     truth = data(log, "vehicle_local_position_groundtruth")
     assert np.max(np.abs(truth["z"])) < 1e-3  # resting on the ground
     outputs = data(log, "actuator_outputs")
-    assert np.all(outputs["output[0]"] == 1000.0)  # disarmed: PWM_MAIN_DIS
+    assert outputs["output[0]"][0] == 0.0  # the first pulse is still high at 1 ms
+    assert np.all(outputs["output[0]"][1:] == 1000.0)  # disarmed: PWM_MAIN_DIS
     messages = [m.message for m in log.logged_messages]
     assert messages[-1] == "run completed: 1000 frames"
     assert log.initial_parameters["RIG_SEED"] == 1
