@@ -150,6 +150,8 @@ class FlightController:
         self._gps_velocity: tuple[NDArray[np.float64], int] | None = None
         self._gps_accel_ned = np.zeros(3)
         self._last_mag_gauss: NDArray[np.float64] | None = None
+        self._offboard_attitude: tuple[NDArray[np.float64], float] | None = None
+        self._motor_test: tuple[int, float, int] | None = None  # motor, throttle, end time
 
     # ------------------------------------------------------------------ frame
     def update(self, sensors: SensorFrame, time_us: int) -> Controls:
@@ -169,6 +171,15 @@ class FlightController:
             self.rate_control.reset_integral()
             self.position_control.reset_integral()
         self._write_log(time_us)
+        if self._motor_test is not None and not self.armed:
+            motor, throttle, end_us = self._motor_test
+            if time_us < end_us:
+                # PX4's actuator test drives the output while disarmed; the armed bit tells the
+                # rig that this output is live.
+                motors = [0.0] * 4
+                motors[motor] = throttle
+                return Controls(tuple(motors), True)
+            self._motor_test = None
         if not self.armed:
             return _IDLE
         m = self.motors
@@ -183,13 +194,13 @@ class FlightController:
         if self.armed:
             return _ACCEPTED
         if self.nav_state in (NavState.AUTO_LAND, NavState.DESCEND, NavState.TERMINATION):
-            return self._refuse(f"Arming denied: not possible in {self.nav_state.name} mode")
+            return self.refuse(f"Arming denied: not possible in {self.nav_state.name} mode")
         if not force:
             reason = self.preflight_failure()
             if reason:
-                return self._refuse(reason)
+                return self.refuse(reason)
         if self.nav_state == NavState.OFFBOARD and not self._offboard_fresh():
-            return self._refuse("Arming denied: no offboard setpoint")
+            return self.refuse("Arming denied: no offboard setpoint")
         self.armed = True
         self.gyro_calibration.reset()
         self.armed_time_us = self.time_us
@@ -210,18 +221,18 @@ class FlightController:
         if not self.armed:
             return _ACCEPTED
         if not self.landed and not force:
-            return self._refuse("Disarming denied: not landed")
+            return self.refuse("Disarming denied: not landed")
         self._disarm("Disarmed by external command")
         return _ACCEPTED
 
     def set_mode(self, nav_state: NavState) -> CommandResult:
         """Switch modes as PX4's commander does: refused when the mode cannot run."""
         if nav_state in _POSITION_MODES and not self.position_valid():
-            return self._refuse(f"Switching to {nav_state.name} denied: no position estimate")
+            return self.refuse(f"Switching to {nav_state.name} denied: no position estimate")
         if nav_state == NavState.AUTO_MISSION and not self.navigator.mission:
-            return self._refuse("Switching to mission denied: no valid mission")
+            return self.refuse("Switching to mission denied: no valid mission")
         if nav_state == NavState.OFFBOARD and not self._offboard_fresh():
-            return self._refuse("Switching to offboard denied: no offboard setpoint")
+            return self.refuse("Switching to offboard denied: no offboard setpoint")
         self.user_nav_state = nav_state
         self.failsafe = False
         self._enter(nav_state)
@@ -268,7 +279,23 @@ class FlightController:
         nav.offboard_position = np.asarray(position_ned_m, dtype=float)
         nav.offboard_velocity = np.asarray(velocity_ned_mps, dtype=float)
         nav.offboard_yaw_rad, nav.offboard_yawspeed_radps = yaw_rad, yawspeed_radps
+        self._offboard_attitude = None
         self._offboard_sp_time_us = self.time_us
+
+    def set_offboard_attitude(self, q: NDArray[np.float64], thrust: float) -> None:
+        """SET_ATTITUDE_TARGET: attitude and collective thrust 0..1, position control off."""
+        self._offboard_attitude = (np.asarray(q, dtype=float), min(max(thrust, 0.0), 1.0))
+        self._offboard_sp_time_us = self.time_us
+
+    def motor_test(self, motor: int, throttle: float, duration_s: float) -> CommandResult:
+        """DO_MOTOR_TEST: spin one motor while disarmed on the ground (PX4 actuator test)."""
+        if self.armed or not self.landed:
+            return self.refuse("Motor test denied: vehicle armed")
+        if not 0 <= motor < 4 or not 0.0 <= throttle <= 1.0 or not 0.0 < duration_s <= 60.0:
+            return self.refuse(f"Motor test denied: motor {motor + 1} at {throttle:.0%} "
+                                f"for {duration_s:g} s is out of range")  # fmt: skip
+        self._motor_test = (motor, throttle, self.time_us + int(duration_s * 1e6))
+        return _ACCEPTED
 
     def set_parameter(self, name: str, value: float) -> float | int:
         """Set a parameter (raises :class:`ParameterError`); logged as PX4 logs ``param set``."""
@@ -491,6 +518,8 @@ class FlightController:
         if self.nav_state == NavState.AUTO_MISSION:
             return self.navigator.mission_finished
         if self.nav_state == NavState.OFFBOARD:
+            if self._offboard_attitude is not None:
+                return self._offboard_attitude[1] <= self.params["MPC_THR_MIN"]
             nav = self.navigator
             z = self.position.position_ned_m[2]
             return not (nav.offboard_position[2] < z - 0.3 or nav.offboard_velocity[2] < -0.1)
@@ -540,6 +569,11 @@ class FlightController:
             setpoint = nav.land(position, dt_s)
         elif self.nav_state == NavState.DESCEND:
             setpoint = nav.descend()
+        elif self.nav_state == NavState.OFFBOARD and self._offboard_attitude is not None:
+            self.setpoint = None
+            self.position_control.reset_integral()
+            self.q_sp, self.collective_thrust = self._offboard_attitude
+            return
         elif self.nav_state == NavState.OFFBOARD:
             setpoint = nav.offboard()
         else:
@@ -583,7 +617,8 @@ class FlightController:
         severity = mavlink.MAV_SEVERITY_CRITICAL if self.failsafe else mavlink.MAV_SEVERITY_INFO
         self._status(severity, reason)
 
-    def _refuse(self, reason: str) -> CommandResult:
+    def refuse(self, reason: str) -> CommandResult:
+        """Refuse a request: the reason goes out as a critical STATUSTEXT and into the log."""
         self._status(mavlink.MAV_SEVERITY_CRITICAL, reason)
         return CommandResult(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, reason)
 
