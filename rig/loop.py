@@ -240,6 +240,7 @@ class _Loop:
             )
         self.log.event(0, f"autopilot connected on {link.endpoint}")
         frames_total = round(self.duration_s * 1e6) // self.frame_us
+        self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
         state_next_us = 0
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
         pending: list[Action] = []

@@ -15,12 +15,14 @@ pulses with fpga_hdl's tick-exact model of that core.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from fpga_hdl.pwm_capture.core import LATENCY_TICKS
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
 from quad_model.frames import PWM_MIN_US, pwm_to_throttle, throttle_to_pwm
 
@@ -93,18 +95,37 @@ class PwmCapture:
     def __init__(self, channels: int, tick_hz: float = PWM_TICK_HZ,
                  timeout_s: float = PWM_TIMEOUT_S) -> None:  # fmt: skip
         self.model = PwmCaptureModel(tick_hz=tick_hz, timeout_s=timeout_s)
+        self._tick_us = 1e6 / tick_hz
+        self._timeout_us = timeout_s * 1e6
+        self._latency_us = LATENCY_TICKS * self._tick_us
         self._recent: list[deque[tuple[float, float]]] = [deque(maxlen=3) for _ in range(channels)]
+        self._widths_us = [0.0] * channels
+        self._timed_out = [True] * channels
+        #: Per channel, the earliest time its results can change: a fall or a timeout.
+        self._next_change_us = [math.inf] * channels
 
     def capture(
         self, pulses: Sequence[Pulse], now_us: int
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
-        """Add the new pulses; return each channel's width (µs) and timeout flag at ``now_us``."""
+        """Add the new pulses; return each channel's width (µs) and timeout flag at ``now_us``.
+
+        A channel is recomputed only once a pulse may have ended or its timeout may have
+        run out since the last result: between those events the core's registers hold.
+        """
         for pulse in pulses:
             start_s = pulse.start_us / 1e6
             self._recent[pulse.channel].append((start_s, start_s + pulse.width_us / 1e6))
-        results = [self.model.capture(list(recent), at_s=now_us / 1e6) for recent in self._recent]
-        tick_us = 1e6 / self.model.tick_hz
-        return (
-            tuple(r.width_ticks * tick_us for r in results),
-            tuple(r.timeout for r in results),
-        )
+            fall_us = pulse.start_us + pulse.width_us
+            self._next_change_us[pulse.channel] = min(self._next_change_us[pulse.channel], fall_us)
+        for channel, recent in enumerate(self._recent):
+            if now_us < self._next_change_us[channel]:
+                continue
+            result = self.model.capture(list(recent), at_s=now_us / 1e6)
+            self._widths_us[channel] = result.width_ticks * self._tick_us
+            self._timed_out[channel] = result.timeout
+            last_rise_us, last_fall_us = (t * 1e6 for t in recent[-1])
+            seen_fall_us = last_fall_us + self._latency_us  # the core re-times its inputs
+            pending_fall = seen_fall_us if seen_fall_us > now_us else math.inf
+            timeout_at = math.inf if result.timeout else last_rise_us + self._timeout_us
+            self._next_change_us[channel] = min(pending_fall, timeout_at)
+        return tuple(self._widths_us), tuple(self._timed_out)

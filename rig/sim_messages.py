@@ -14,8 +14,6 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from rig.errors import AutopilotProtocolError
 from rig.px4_sim_api import LOCKSTEP_FLAG, ActuatorMode, HilSensorFields, mavlink
 
@@ -184,17 +182,17 @@ def decode_actuator_controls(
     disarmed (``actuator_controls_from_outputs``), so the clamp is part of the protocol.
     A NaN command is rejected: silently treating it as zero thrust would hide a bug.
     """
-    controls = np.asarray(message.controls[:motor_count], dtype=float)
-    if not np.all(np.isfinite(controls)):
+    controls = message.controls[:motor_count]  # plain floats: numpy costs more for four
+    if not all(math.isfinite(c) for c in controls):
         raise AutopilotProtocolError(
             f"HIL_ACTUATOR_CONTROLS at time_usec={message.time_usec} has non-finite motor "
-            f"commands {controls.tolist()}"
+            f"commands {list(controls)}"
         )
     armed = bool(message.mode & ActuatorMode.SAFETY_ARMED)
-    motors = np.clip(controls, 0.0, 1.0) if armed else np.zeros(motor_count)
+    motors = tuple(min(max(c, 0.0), 1.0) for c in controls) if armed else (0.0,) * motor_count
     return ActuatorControls(
         time_us=int(message.time_usec),
-        motors=tuple(motors.tolist()),
+        motors=motors,
         armed=armed,
         lockstep=bool(message.flags & LOCKSTEP_FLAG),
     )

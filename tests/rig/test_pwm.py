@@ -45,6 +45,21 @@ def test_capture_of_the_last_pulses_equals_the_model_over_the_whole_history():
         assert timed_out[0] == full.timeout
 
 
+def test_capture_on_the_frame_grid_equals_the_whole_history():
+    """Frames every 1 ms, pulses every 2.5 ms whose falls land on frame times, dropouts."""
+    model = PwmCaptureModel(tick_hz=1e6, timeout_s=PWM_TIMEOUT_S)
+    out, capture, history = PwmOutput(1, 400), PwmCapture(1), []
+    for frame in range(1, 1500):
+        now_us = frame * 1000
+        out.command([(frame // 7 % 5) / 4], armed=True)  # widths 1000, 1250, ... 2000 µs
+        dropped = {0} if 600 <= frame < 800 else set()
+        pulses = out.pulses(now_us + 1, dropped)
+        history += [(p.start_us / 1e6, (p.start_us + p.width_us) / 1e6) for p in pulses]
+        widths, timed_out = capture.capture(pulses, now_us)
+        full = model.capture(history, at_s=now_us / 1e6)
+        assert (widths[0], timed_out[0]) == (full.width_ticks, full.timeout), f"frame {frame}"
+
+
 def test_width_measured_within_one_tick_and_timeout_after_100_ms():
     capture = PwmCapture(2)
     pulses = [Pulse(0, k * 2500, 1500) for k in range(8)]
