@@ -4,6 +4,7 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.host_port import CoherentLatch
 from fpga_hdl.i2c_target import I2cTarget, TargetSampling
 from fpga_hdl.ist8310 import regs
 from fpga_hdl.ist8310.regs import Register
@@ -87,12 +88,14 @@ class Ist8310Core(wiring.Component):
         ]
 
         # Double buffer: the visible sample changes only between transactions.
-        visible = Signal(regs.SAMPLE_LAYOUT)
-        pending = self.sample_pending
-        with m.If(~target.busy & (pending | self.sample_stb)):
-            m.d.sync += [visible.eq(self.sample), pending.eq(0)]
-        with m.Elif(self.sample_stb):
-            m.d.sync += pending.eq(1)
+        m.submodules.latch = latch = CoherentLatch(regs.SAMPLE_LAYOUT)
+        m.d.comb += [
+            latch.offered.eq(self.sample),
+            latch.offered_stb.eq(self.sample_stb),
+            latch.busy.eq(target.busy),
+            self.sample_pending.eq(latch.pending),
+        ]
+        visible = latch.visible
 
         stored = {reg: Signal(8, name=reg.name.lower()) for reg in regs.STORED_REGISTERS}
         cntl3 = stored[Register.CNTL3]
