@@ -19,7 +19,7 @@ socket is read in order).
 
 PX4 facts used here (PX4-Autopilot ``src/modules/commander/px4_custom_mode.h``,
 ``src/modules/mavlink/mavlink_receiver.cpp``, MAVLink ``common.xml``): custom main mode
-AUTO = 4 with sub modes, OFFBOARD = 6; NAV_TAKEOFF's param7 is the altitude AMSL;
+OFFBOARD = 6; NAV_TAKEOFF with a NaN altitude climbs MIS_TAKEOFF_ALT above home;
 DO_MOTOR_TEST takes a 1-based motor instance and a percentage.
 """
 
@@ -196,10 +196,18 @@ class GroundLink:
         )
 
     def takeoff(self, altitude_m: float) -> Conversation:
-        altitude_amsl_m = self.home.alt_amsl_m + altitude_m  # PX4: param7 is AMSL
-        return self.command(
-            mavlink.MAV_CMD_NAV_TAKEOFF, -1.0, 0.0, 0.0, math.nan, math.nan, math.nan,
-            altitude_amsl_m, what=f"takeoff to {altitude_m:g} m",
+        """MAVSDK's way: MIS_TAKEOFF_ALT, then NAV_TAKEOFF with a NaN altitude.
+
+        NaN tells PX4 to climb MIS_TAKEOFF_ALT above the home *it* set at arming (from its
+        own GPS/baro), so the height is right even when its home altitude is off by the
+        GPS's vertical error; an AMSL altitude computed here would not be.
+        """
+        yield from self.set_param("MIS_TAKEOFF_ALT", altitude_m)
+        return (
+            yield from self.command(
+                mavlink.MAV_CMD_NAV_TAKEOFF, -1.0, 0.0, 0.0, math.nan, math.nan, math.nan,
+                math.nan, what=f"takeoff to {altitude_m:g} m",
+            )
         )  # fmt: skip
 
     def land(self) -> Conversation:
