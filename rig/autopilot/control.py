@@ -292,9 +292,12 @@ class PositionController:
             max(vel_from_pos[2] + feed_forward[2], -velocity_limits_mps[1]),
             velocity_limits_mps[2],
         )
-        vel_error = vel_sp - velocity_ned_mps
-        acc_sp = vel_error * self.gain_vel_p + self.velocity_integral
-        acc_sp -= accel_ned_mps2 * self.gain_vel_d
+        # an axis with neither a position nor a velocity set-point is not controlled: zero
+        # acceleration (level flight for x/y), as PX4 does for NaN set-points
+        free = np.isnan(position_sp) & np.isnan(velocity_sp)
+        vel_error = np.where(free, 0.0, vel_sp - velocity_ned_mps)
+        acc_sp = vel_error * self.gain_vel_p + np.where(free, 0.0, self.velocity_integral)
+        acc_sp -= np.where(free, 0.0, accel_ned_mps2 * self.gain_vel_d)
         thrust = self._acceleration_to_thrust(acc_sp)
 
         if (thrust[2] >= -self.thrust_min and vel_error[2] >= 0.0) or (

@@ -141,6 +141,7 @@ class FlightController:
         self._last_fast_log_us = -FAST_LOG_PERIOD_US
         self._last_slow_log_us = -POSITION_LOOP_PERIOD_US
         self._low_thrust_since_us: int | None = None
+        self._took_off = False
         self._landed_since_us = 0
         self._height_at_arming = 0.0
         self._offboard_sp_time_us: int | None = None
@@ -202,6 +203,7 @@ class FlightController:
         if self.nav_state == NavState.OFFBOARD and not self._offboard_fresh():
             return self.refuse("Arming denied: no offboard setpoint")
         self.armed = True
+        self._took_off = False
         self.gyro_calibration.reset()
         self.armed_time_us = self.time_us
         self.landed = True
@@ -386,7 +388,9 @@ class FlightController:
             self._last_mag_gauss = sensors.mag_gauss
         # the latest field is used every frame, as PX4's filter keeps it between samples
         mag = self._last_mag_gauss if self.monitors["mag"].healthy(time_us) else None
-        compensation = self._gps_accel_ned if self.params["ATT_ACC_COMP"] else None
+        compensation = None
+        if self.params["ATT_ACC_COMP"] and self.monitors["gps"].healthy(time_us):
+            compensation = self._gps_accel_ned
         if not self.armed:
             offsets = self.gyro_calibration.update(sensors.gyro_radps, sensors.accel_mps2, dt_s)
             if offsets is not None:
@@ -471,23 +475,19 @@ class FlightController:
         vz = float(self.position.velocity_ned_mps[2])
         if self.landed:
             climbed = self._height_at_arming - float(self.position.position_ned_m[2])
-            if not self._idle() and (climbed > 0.5 or vz < -0.5):
+            idle = self._idle()
+            if not idle and (climbed > 0.5 or vz < -0.5):
                 self.landed = False
+                self._took_off = True
                 self._status(mavlink.MAV_SEVERITY_INFO, "Takeoff detected")
-            elif (
-                p["COM_DISARM_PRFLT"] > 0
-                and time_us - self.armed_time_us > p["COM_DISARM_PRFLT"] * 1e6
-                and self._idle()
-            ):
-                self._disarm("Disarmed: no takeoff (COM_DISARM_PRFLT)")
-            elif (
-                self._idle()
-                and p["COM_DISARM_LAND"] >= 0
-                and time_us - self._landed_since_us > p["COM_DISARM_LAND"] * 1e6
-                and time_us - self.armed_time_us > p["COM_DISARM_LAND"] * 1e6
-                and self.nav_state in (NavState.AUTO_LAND, NavState.DESCEND)
-            ):
-                self._disarm("Disarmed: landed (COM_DISARM_LAND)")
+            elif idle and not self._took_off:
+                limit_s = p["COM_DISARM_PRFLT"]
+                if limit_s > 0 and time_us - self.armed_time_us > limit_s * 1e6:
+                    self._disarm("Disarmed: no takeoff (COM_DISARM_PRFLT)")
+            elif idle:
+                limit_s = p["COM_DISARM_LAND"]
+                if limit_s >= 0 and time_us - self._landed_since_us > limit_s * 1e6:
+                    self._disarm("Disarmed: landed (COM_DISARM_LAND)")
             return
         hover, thr_min = p["MPC_THR_HOVER"], p["MPC_THR_MIN"]
         low_thrust = self.collective_thrust < thr_min + 0.3 * (hover - thr_min)

@@ -166,6 +166,16 @@ class GroundStation:
         self._command(link, msg, msg.command, params)
 
     def _command(self, link: MavlinkLink, msg, command: int, p: tuple[float, ...]) -> None:
+        try:
+            result = self._run_command(link, command, p)
+        except (ValueError, OverflowError):  # NaN or ∞ where a mode or index was needed
+            self.malformed += 1
+            result = CommandResult(mavlink.MAV_RESULT_DENIED)
+        self.flush_events()  # a refusal's reason goes out before its ACK
+        link.send(mavlink.MAVLink_command_ack_message(
+            command, result.result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))  # fmt: skip
+
+    def _run_command(self, link: MavlinkLink, command: int, p: tuple[float, ...]):
         fc = self.fc
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             force = round(p[1]) == 21196 if math.isfinite(p[1]) else False
@@ -193,9 +203,7 @@ class GroundStation:
             result = fc.motor_test(int(p[0]) - 1, p[2] / 100.0, p[3])
         else:
             result = CommandResult(mavlink.MAV_RESULT_UNSUPPORTED)
-        self.flush_events()  # a refusal's reason goes out before its ACK
-        link.send(mavlink.MAVLink_command_ack_message(
-            command, result.result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))  # fmt: skip
+        return result
 
     def _set_mode(self, p: tuple[float, ...]) -> CommandResult:
         if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:

@@ -70,9 +70,9 @@ class QuadPlant:
         )
         r = quat_to_dcm(self.q)
         force_body = np.array([0.0, 0.0, -thrust.sum()])
-        accel = (r @ force_body - self.drag_nspm * self.velocity) / self.mass_kg
-        self._specific_force = r.T @ accel
-        accel = accel + np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])
+        gravity = np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])
+        accel = (r @ force_body - self.drag_nspm * self.velocity) / self.mass_kg + gravity
+        velocity_before = self.velocity
         inertia = self.inertia_kgm2
         rate_dot = np.linalg.solve(inertia, torque - np.cross(self.rates, inertia @ self.rates))
         self.velocity = self.velocity + accel * dt_s
@@ -82,7 +82,8 @@ class QuadPlant:
             self.position[2] = 0.0
             self.velocity[:] = 0.0
             self.rates[:] = 0.0
-            self._specific_force = r.T @ np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2])
+        # what an accelerometer feels, the touchdown's impulse included
+        self._specific_force = r.T @ ((self.velocity - velocity_before) / dt_s - gravity)
         half = self.rates * (0.5 * dt_s)
         q = quat_multiply(self.q, np.array([1.0, *half]))
         self.q = q / np.linalg.norm(q)
