@@ -109,6 +109,7 @@ class GroundLink:
 
     def converse_now(self, name: str, conversation: Conversation) -> str:
         """Run a conversation to its end, waiting in wall time (reference autopilot)."""
+        self._drain()  # telemetry queued since the last frame; a STATUSTEXT may explain
         step = next(conversation)
         while True:
             self._send(step.send)

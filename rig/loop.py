@@ -254,6 +254,11 @@ class _Loop:
             if link.state_interval_us and self.time_us >= state_next_us:
                 state_next_us = self.time_us + link.state_interval_us
                 messages.append(self._state_message(truth))
+            # Read the API link every frame: its telemetry would otherwise fill the socket
+            # buffer and the kernel would drop the next COMMAND_ACK.
+            result = ground.poll(time_s)
+            if result is not None:
+                self._event(result)
             if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
                 pending.extend(script.due(time_s))
                 pending = self._run_actions(pending, time_s, reference)
@@ -331,16 +336,14 @@ class _Loop:
     def _run_actions(self, actions: list[Action], time_s: float, reference: bool) -> list[Action]:
         """Run due actions; returns those still waiting (PX4: one conversation at a time)."""
         ground = self.ground
-        if not reference:
-            result = ground.poll(time_s)
-            if result is not None:
-                self._event(result)
         waiting = []
         for action in actions:
             if action.conversation is None:
                 ground.send_unacknowledged(action.unacknowledged)
             elif reference:
-                self._event(ground.converse_now(action.name, action.conversation))
+                result = ground.converse_now(action.name, action.conversation)
+                if action.logged:
+                    self._event(result)
             elif ground.busy or waiting:
                 waiting.append(action)
             else:

@@ -29,6 +29,8 @@ class Action:
     name: str
     conversation: Conversation | None = None
     unacknowledged: tuple[mavlink.MAVLink_message, ...] = ()
+    #: False for a stream's keep-alive repeats: only its first setpoint is a log event.
+    logged: bool = True
 
 
 @dataclass
@@ -96,7 +98,8 @@ class CommandScript:
             )  # fmt: skip
             setpoint = self.ground.attitude_setpoint(0.0, pitch, 0.0, p["thrust"], time_s)
         name = f"{command.action} at t={command.at_s:g} s"
-        if self.barrier or not stream.announced:
-            stream.announced = True
-            return Action(name, self.ground.offboard([setpoint], name))
-        return Action(name, unacknowledged=(setpoint,))
+        first = not stream.announced
+        stream.announced = True
+        if self.barrier or first:
+            return Action(name, self.ground.offboard([setpoint], name), logged=first)
+        return Action(name, unacknowledged=(setpoint,), logged=False)
