@@ -8,7 +8,6 @@ reference autopilot are in test_closed_loop.py.
 
 import json
 import math
-import socket
 import sys
 from pathlib import Path
 
@@ -26,24 +25,9 @@ DOUBLE = Path(__file__).with_name("autopilot_double.py")
 F450_HOVER_THROTTLE = 0.55  # quad_model's hover_throttle() for the F450 at 488 m, rounded
 
 
-def free_instance() -> int:
-    """An instance whose simulator TCP and API UDP ports are free right now."""
-    for instance in range(60, 100):
-        ports = Ports(instance)
-        tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            tcp.bind(("127.0.0.1", ports.simulator_tcp))
-            udp.bind(("127.0.0.1", ports.api_remote_udp))
-        except OSError:
-            continue
-        finally:
-            tcp.close()
-            udp.close()
-        return instance
-    raise RuntimeError("no free rig instance")
-
-
-def fly(tmp_path, *double_args, duration_s=1.0, faults=(), seed=1, name="run", **scenario):
+def fly(
+    tmp_path, free_instance, *double_args, duration_s=1.0, faults=(), seed=1, name="run", **scenario
+):
     instance = free_instance()
     record = tmp_path / f"{name}-received.jsonl"
     argv = (
@@ -67,8 +51,8 @@ def data(log, topic):
     return log.get_dataset(topic).data
 
 
-def test_vehicle_at_rest_sensors_reach_the_autopilot_at_their_rates(tmp_path):
-    result, log, received = fly(tmp_path, "--behaviour", "px4", duration_s=1.0)
+def test_vehicle_at_rest_sensors_reach_the_autopilot_at_their_rates(tmp_path, free_instance):
+    result, log, received = fly(tmp_path, free_instance, "--behaviour", "px4", duration_s=1.0)
     assert result.frames == 1000
     sensors = [m for m in received if m["mavpackettype"] == "HIL_SENSOR"]
     assert [m["time_usec"] for m in sensors] == list(range(1000, 1_000_001, 1000))
@@ -120,8 +104,10 @@ def test_vehicle_at_rest_sensors_reach_the_autopilot_at_their_rates(tmp_path):
     assert log.msg_info_dict["scenario"] == "t"
 
 
-def test_pwm_carries_the_commanded_throttle_and_the_vehicle_climbs(tmp_path):
-    _, log, _ = fly(tmp_path, "--behaviour", "px4", "--throttle", "0.7", duration_s=1.5)
+def test_pwm_carries_the_commanded_throttle_and_the_vehicle_climbs(tmp_path, free_instance):
+    _, log, _ = fly(
+        tmp_path, free_instance, "--behaviour", "px4", "--throttle", "0.7", duration_s=1.5
+    )
     outputs = data(log, "actuator_outputs")
     assert outputs["output[0]"][-1] == pytest.approx(1700.0)  # 1000 + 0.7 × 1000 µs
     assert np.diff(outputs["timestamp"]).min() >= 2000  # 400 Hz pulses: a new width ≤ every 2.5 ms
@@ -132,11 +118,11 @@ def test_pwm_carries_the_commanded_throttle_and_the_vehicle_climbs(tmp_path):
     assert truth["vz"][-1] < -1.0
 
 
-def test_same_seed_gives_identical_rig_log(tmp_path):
+def test_same_seed_gives_identical_rig_log(tmp_path, free_instance):
     spin = ("--behaviour", "px4", "--throttle", "0.6", "--arm-after", "100")
-    _, first, _ = fly(tmp_path, *spin, name="a", seed=7)
-    _, second, _ = fly(tmp_path, *spin, name="b", seed=7)
-    _, other, _ = fly(tmp_path, *spin, name="c", seed=8)
+    _, first, _ = fly(tmp_path, free_instance, *spin, name="a", seed=7)
+    _, second, _ = fly(tmp_path, free_instance, *spin, name="b", seed=7)
+    _, other, _ = fly(tmp_path, free_instance, *spin, name="c", seed=8)
     for topic in ("sensor_combined", "vehicle_local_position_groundtruth", "sensor_baro"):
         a, b = data(first, topic), data(second, topic)
         assert a.keys() == b.keys()
@@ -147,9 +133,11 @@ def test_same_seed_gives_identical_rig_log(tmp_path):
     )
 
 
-def test_killed_autopilot_ends_the_run_with_a_clear_message_and_a_readable_log(tmp_path):
+def test_killed_autopilot_ends_the_run_with_a_clear_message_and_a_readable_log(
+    tmp_path, free_instance
+):
     with pytest.raises(AutopilotStalled) as error:
-        fly(tmp_path, "--behaviour", "close", "--after", "300", duration_s=2.0)
+        fly(tmp_path, free_instance, "--behaviour", "close", "--after", "300", duration_s=2.0)
     assert "the autopilot closed the simulator link" in str(error.value)
     assert "PX4 never reconnects" in str(error.value)
     log = pyulog.ULog(str(tmp_path / "run" / "rig.ulg"))
@@ -157,10 +145,10 @@ def test_killed_autopilot_ends_the_run_with_a_clear_message_and_a_readable_log(t
     assert log.logged_messages[-1].message.startswith("run ended: the autopilot closed")
 
 
-def test_pwm_dropout_times_out_the_capture_and_the_motors_stop(tmp_path):
+def test_pwm_dropout_times_out_the_capture_and_the_motors_stop(tmp_path, free_instance):
     dropout = {"kind": "pwm_dropout", "start_s": 1.0}
-    _, log, _ = fly(tmp_path, "--behaviour", "px4", "--throttle", "0.7", duration_s=1.6,
-                    faults=[dropout])  # fmt: skip
+    spin = ("--behaviour", "px4", "--throttle", "0.7")
+    _, log, _ = fly(tmp_path, free_instance, *spin, duration_s=1.6, faults=[dropout])
     truth = data(log, "rig_propulsion_groundtruth")
     t = truth["timestamp"] / 1e6
     speed_before = truth["rotor_speed_radps[0]"][np.searchsorted(t, 0.99)]
@@ -171,12 +159,14 @@ def test_pwm_dropout_times_out_the_capture_and_the_motors_stop(tmp_path):
     assert "fault pwm_dropout started" in events
 
 
-def test_bus_faults_reach_the_autopilot_through_the_chips(tmp_path):
+def test_bus_faults_reach_the_autopilot_through_the_chips(tmp_path, free_instance):
     faults = [
         {"kind": "bus_bit_flip", "chip": "mpu6000", "mask": 0x80, "start_s": 0.5, "end_s": 0.6},
         {"kind": "chip_mute", "chip": "ist8310", "start_s": 0.5},
     ]
-    _, log, received = fly(tmp_path, "--behaviour", "px4", duration_s=0.8, faults=faults)
+    _, log, received = fly(
+        tmp_path, free_instance, "--behaviour", "px4", duration_s=0.8, faults=faults
+    )
     sensors = [m for m in received if m["mavpackettype"] == "HIL_SENSOR"]
     zacc = {m["time_usec"]: m["zacc"] for m in sensors}
     assert zacc[400_000] == pytest.approx(-9.81, abs=0.1)
@@ -192,13 +182,15 @@ def test_bus_faults_reach_the_autopilot_through_the_chips(tmp_path):
     )
 
 
-def test_sensor_faults_and_gps_loss(tmp_path):
+def test_sensor_faults_and_gps_loss(tmp_path, free_instance):
     faults = [
         {"kind": "sensor_stuck", "sensor": "gyro", "start_s": 0.3, "end_s": 0.5},
         {"kind": "sensor_bias", "sensor": "baro", "bias": 500.0, "start_s": 0.3},
         {"kind": "gps_loss", "start_s": 0.45},
     ]
-    _, log, received = fly(tmp_path, "--behaviour", "px4", duration_s=0.7, faults=faults)
+    _, log, received = fly(
+        tmp_path, free_instance, "--behaviour", "px4", duration_s=0.7, faults=faults
+    )
     sensors = [m for m in received if m["mavpackettype"] == "HIL_SENSOR"]
     gyro = {m["time_usec"]: (m["xgyro"], m["ygyro"], m["zgyro"]) for m in sensors}
     stuck = {gyro[t] for t in range(300_000, 500_000, 1000)}
