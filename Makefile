@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 hil-sim: $(STAMP)
-	$(BIN)/python -m rig.open_loop_demo
+	$(BIN)/rig hil-sim
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
