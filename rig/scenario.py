@@ -69,27 +69,22 @@ FAULT_KINDS: dict[str, dict[str, tuple[str, bool]]] = {
 
 @dataclass(frozen=True)
 class Rates:
-    """Simulation and sensor rates (Hz); one lockstep frame is one IMU period."""
+    """Simulation and sensor rates (Hz); one lockstep frame is one IMU period.
+
+    The GPS rate is the receiver's (``fix_rate_hz`` in the vehicle file, 10 Hz for the
+    bundled ones), with its latency.
+    """
 
     model_hz: int = 5000
     imu_hz: int = 1000
     mag_hz: int = 100
     baro_hz: int = 50
-    gps_hz: int = 10
     pwm_hz: int = 400
 
     @property
     def frame_us(self) -> int:
         """One lockstep frame: one IMU period."""
         return 1_000_000 // self.imu_hz
-
-    def due(self, rate_hz: int, frame: int) -> bool:
-        """Whether a sensor at ``rate_hz`` has a new sample in IMU frame ``frame`` (0-based).
-
-        A rate that does not divide the IMU rate (mag 100 Hz on a 250 Hz IMU) gets the
-        nearest frames, 2 or 3 apart, with the exact average rate, as on a real board.
-        """
-        return frame * rate_hz // self.imu_hz != (frame - 1) * rate_hz // self.imu_hz
 
 
 @dataclass(frozen=True)
@@ -305,7 +300,7 @@ def _vector3(value: Any) -> Any:
 
 
 def _rates(table: Mapping[str, Any], where: _Where) -> Rates:
-    names = ("model_hz", "imu_hz", "mag_hz", "baro_hz", "gps_hz", "pwm_hz")
+    names = ("model_hz", "imu_hz", "mag_hz", "baro_hz", "pwm_hz")
     where.no_unknown_keys(table, set(names), "rates.")
     defaults = Rates()
     values = {
@@ -317,7 +312,7 @@ def _rates(table: Mapping[str, Any], where: _Where) -> Rates:
             "rates.imu_hz", rates.imu_hz,
             f"must divide rates.model_hz ({rates.model_hz}) and give a whole number of µs",
         )  # fmt: skip
-    for name in ("mag_hz", "baro_hz", "gps_hz"):
+    for name in ("mag_hz", "baro_hz"):
         if getattr(rates, name) > rates.imu_hz:
             where.fail(
                 f"rates.{name}", getattr(rates, name), f"exceeds rates.imu_hz ({rates.imu_hz})"
