@@ -55,10 +55,10 @@ def main(argv: list[str] | None = None) -> int:
         )
         result = _run_with_progress(scenario, options, console)
     except RigError as error:
-        console.print(f"rig: error: {error}", markup=False, highlight=False)
+        print(f"rig: error: {error}", file=sys.stderr)  # one line, never wrapped
         return 1
     except KeyboardInterrupt:
-        console.print("rig: interrupted; the logs written so far are readable")
+        print("rig: interrupted; the logs written so far are readable", file=sys.stderr)
         return 130
     console.print(
         f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "

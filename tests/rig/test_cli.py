@@ -1,0 +1,60 @@
+"""The ``rig`` command: one-line errors, and Ctrl-C leaving readable logs."""
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import pyulog
+
+from rig.cli import main
+
+
+def test_missing_scenario_is_one_line_on_stderr(capsys, tmp_path):
+    assert main(["run", str(tmp_path / "nope.toml")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"rig: error: {tmp_path / 'nope.toml'}: no such scenario file")
+    assert "Traceback" not in err
+
+
+def test_bad_scenario_value_names_file_key_and_value(capsys, tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text('name = "bad"\nvehicle = "f450_high_precision"\nduration_s = 5\nseed = -1\n')
+    assert main(["run", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err == f"rig: error: {path}: key 'seed' = -1: expected an integer >= 0\n"
+
+
+def test_unknown_vehicle_is_a_scenario_error(capsys, tmp_path):
+    path = tmp_path / "v.toml"
+    path.write_text('name = "v"\nvehicle = "zeppelin"\nduration_s = 5\nseed = 1\n')
+    assert main(["run", str(path), "--out", str(tmp_path / "run")]) == 1
+    last = capsys.readouterr().err.splitlines()[-1]  # after the run's banner
+    assert last.startswith(f"rig: error: {path}: key 'vehicle':")
+    assert "zeppelin.toml: no such vehicle file" in last
+
+
+@pytest.mark.closed_loop
+def test_ctrl_c_stops_cleanly_with_readable_logs(tmp_path, free_instance):
+    out = tmp_path / "run"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "rig.cli", "run", "takeoff_hover_land", "--instance",
+         str(free_instance()), "--out", str(out)],
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:  # wait until the flight is under way
+        if (out / "rig.ulg").is_file() and (out / "rig.ulg").stat().st_size > 200_000:
+            break
+        time.sleep(0.2)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert "rig: interrupted; the logs written so far are readable" in err
+    assert "Traceback" not in err
+    rig_log = pyulog.ULog(str(out / "rig.ulg"))
+    assert rig_log.logged_messages[-1].message == "run interrupted by the user (Ctrl-C)"
+    assert len(rig_log.get_dataset("sensor_combined").data["timestamp"]) > 1000
+    autopilot_log = pyulog.ULog(str(out / "autopilot.ulg"))  # closed on SIGINT, readable
+    assert len(autopilot_log.get_dataset("vehicle_attitude").data["timestamp"]) > 10
