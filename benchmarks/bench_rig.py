@@ -17,6 +17,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from rig.errors import RigError
 from rig.link import LinkTimeouts
 from rig.loop import RunOptions, run_scenario
 from rig.px4_sim_api import Ports
@@ -60,7 +61,11 @@ def _case(sensor_layer: str, imu_hz: int, autopilot: str) -> None:
             timeouts=LinkTimeouts(connect_s=600, answer_s=30),
             autopilot_argv=argv,
         )
-        result = run_scenario(scenario, options)
+        try:
+            result = run_scenario(scenario, options)
+        except RigError as error:
+            print(f"{sensor_layer:>3}  IMU {imu_hz:>4} Hz  {autopilot:<9}  failed: {error}")
+            return
     waiting = result.link.lockstep_wait_s / result.wall_s
     print(
         f"{sensor_layer:>3}  IMU {imu_hz:>4} Hz  {autopilot:<9}"

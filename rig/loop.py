@@ -243,6 +243,7 @@ class _Loop:
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
         state_next_us = 0
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
+        poll_every = max(1, self.rates.imu_hz // 100)
         pending: list[Action] = []
         for frame in range(1, frames_total + 1):
             self.time_us = frame * self.frame_us
@@ -254,11 +255,13 @@ class _Loop:
             if link.state_interval_us and self.time_us >= state_next_us:
                 state_next_us = self.time_us + link.state_interval_us
                 messages.append(self._state_message(truth))
-            # Read the API link every frame: its telemetry would otherwise fill the socket
-            # buffer and the kernel would drop the next COMMAND_ACK.
-            result = ground.poll(time_s)
-            if result is not None:
-                self._event(result)
+            # Read the API link every 10 ms (every frame while PX4 owes an answer): its
+            # telemetry would otherwise fill the socket buffer and the kernel would drop
+            # the next COMMAND_ACK.
+            if ground.busy or frame % poll_every == 0:
+                result = ground.poll(time_s)
+                if result is not None:
+                    self._event(result)
             if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
                 pending.extend(script.due(time_s))
                 pending = self._run_actions(pending, time_s, reference)
