@@ -8,7 +8,11 @@ reference autopilot are in test_closed_loop.py.
 
 import json
 import math
+import socket
+import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +22,7 @@ import pyulog
 from rig.errors import AutopilotStalled
 from rig.link import LinkTimeouts
 from rig.loop import RunOptions, run_scenario
-from rig.px4_sim_api import HilSensorFields, Ports
+from rig.px4_sim_api import HilSensorFields, Ports, mavlink
 from rig.scenario import scenario_from_dict
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
@@ -203,3 +207,49 @@ def test_sensor_faults_and_gps_loss(tmp_path, free_instance):
     gps_times = [m["time_usec"] for m in received if m["mavpackettype"] == "HIL_GPS"]
     assert max(gps_times) < 450_000
     assert math.isclose(len(data(log, "sensor_gps")["timestamp"]), len(gps_times))
+
+
+def test_px4_mode_waits_for_the_connection_and_steps_until_the_ack(tmp_path, free_instance):
+    """``--autopilot px4``: the rig starts nothing and waits for PX4's connection; a
+    command is sent and the rig keeps stepping (PX4 acts only as its clock advances)
+    until the COMMAND_ACK arrives. PX4 itself cannot be installed here: the peer is the
+    PX4-side test double (boot delay, one answer per frame) plus a UDP thread that ACKs
+    commands on the API link the way PX4's mavlink module does, 50 ms late."""
+    instance = free_instance()
+    ports = Ports(instance)
+    api = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    api.bind(("127.0.0.1", ports.api_local_udp))
+    api.settimeout(10)
+    acked = []
+
+    def px4_api():
+        mav = mavlink.MAVLink(None, ports.system_id, 1)
+        data, sender = api.recvfrom(65536)
+        (command,) = mavlink.MAVLink(None, 0, 0).parse_buffer(data)
+        time.sleep(0.05)
+        api.sendto(mav.command_ack_encode(command.command, 0).pack(mav), sender)
+        acked.append(command.command)
+
+    thread = threading.Thread(target=px4_api, daemon=True)
+    thread.start()
+    double = subprocess.Popen([sys.executable, str(DOUBLE), "--port", str(ports.simulator_tcp),
+                               "--behaviour", "px4", "--after", "60"])  # fmt: skip
+    try:
+        document = {"name": "px4", "vehicle": "f450_high_precision", "duration_s": 1.0,
+                    "seed": 1, "commands": [{"at_s": 0.2, "action": "arm"}]}  # fmt: skip
+        options = RunOptions(autopilot="px4", instance=instance, out_dir=tmp_path / "px4",
+                             timeouts=LinkTimeouts(connect_s=20, answer_s=5))  # fmt: skip
+        result = run_scenario(scenario_from_dict(document), options)
+    finally:
+        double.kill()
+        double.wait()
+        thread.join()
+        api.close()
+    assert acked == [mavlink.MAV_CMD_COMPONENT_ARM_DISARM]
+    assert result.link.freewheel_frames >= 60  # PX4 "booted" for 60 frames
+    events = [(m.timestamp, m.message) for m in pyulog.ULog(str(result.rig_log)).logged_messages]
+    texts = [text for _, text in events]
+    assert texts[0].startswith("waiting for PX4 SITL on TCP 127.0.0.1:")
+    (sent_at,) = [t for t, text in events if text == "arm at t=0.2 s: sent"]
+    (acked_at,) = [t for t, text in events if text == "arm: accepted"]
+    assert acked_at > sent_at  # the rig kept stepping while PX4 had not answered
