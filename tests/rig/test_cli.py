@@ -55,6 +55,6 @@ def test_ctrl_c_stops_cleanly_with_readable_logs(tmp_path, free_instance):
     assert "Traceback" not in err
     rig_log = pyulog.ULog(str(out / "rig.ulg"))
     assert rig_log.logged_messages[-1].message == "run interrupted by the user (Ctrl-C)"
-    assert len(rig_log.get_dataset("sensor_combined").data["timestamp"]) > 1000
+    assert len(rig_log.get_dataset("sensor_combined").data["timestamp"]) > 500  # ≥ 0.5 s flown
     autopilot_log = pyulog.ULog(str(out / "autopilot.ulg"))  # closed on SIGINT, readable
     assert len(autopilot_log.get_dataset("vehicle_attitude").data["timestamp"]) > 10
