@@ -50,7 +50,7 @@ from rig.px4_sim_api import Ports, mavlink
 from rig.rig_log import RigLog
 from rig.scenario import Scenario
 from rig.script import Action, CommandScript
-from rig.sensor_layer import ChipFrame, TlmSensorLayer
+from rig.sensor_layer import ChipFrame, SensorLayer, TlmSensorLayer
 from rig.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
 
 AUTOPILOTS = ("reference", "px4")
@@ -427,7 +427,7 @@ class _Loop:
         )
 
 
-def _make_sensor_layer(name: str) -> TlmSensorLayer:
+def _make_sensor_layer(name: str) -> SensorLayer:
     if name == "tlm":
         return TlmSensorLayer()
     from rig.cosim import RtlSensorLayer  # imported on demand: it starts a simulator

@@ -98,6 +98,16 @@ class ChipHost(Protocol):
         ...
 
 
+class SensorLayer(Protocol):
+    """What the loop needs of a sensor layer (:class:`TlmSensorLayer`, ``RtlSensorLayer``)."""
+
+    def start(self) -> None: ...
+
+    def frame(self, frame: ChipFrame) -> ChipReadout: ...
+
+    def close(self) -> None: ...
+
+
 def run_now(coroutine: Coroutine[Any, Any, _T]) -> _T:
     """Run a coroutine that never suspends (TLM buses) to its result, without an event loop.
 
