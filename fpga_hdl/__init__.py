@@ -1,1 +1,1 @@
-"""Amaranth cores that impersonate sensor chips on SPI/I2C and capture PWM, with cocotb co-simulation."""
+"""Amaranth cores that impersonate sensor chips (SPI, I2C, PWM capture), co-simulated in cocotb."""

@@ -9,13 +9,19 @@ Buses, as on a Pixhawk FMU (e.g. FMUv2/v3, where the MPU-6000 and MS5611 share S
 - one I2C bus for the IST8310 (open drain: ``i2c_sda_oe`` = 1 pulls SDA low; the
   testbench resolves the wired-AND with its own driver).
 
+- eight PWM inputs (``pwm``) into the PWM capture core, which runs in its own slow
+  ``pwm`` domain at ``pwm_tick_hz`` (one tick per cycle, so a simulation pays the tick
+  rate, not the system clock, to watch the motors). Its width, period and timeout
+  results cross into ``sync`` through a :class:`~fpga_hdl.snapshot_cdc.SnapshotSynchronizer`
+  and are read as host-port result words (:data:`HOST_MAP`).
+
 The host port (``fpga_hdl.host_port``) loads samples, time and faults; ``now_us`` goes
 to every chip with a conversion time. ``pending`` tells a simulation that gates the
 system clock that a chip still waits to take a sample at a transfer's end.
 """
 
-from amaranth.hdl import Module
-from amaranth.lib import wiring
+from amaranth.hdl import ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal
+from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from fpga_hdl.host_port import HostPort, host_port_map
@@ -25,6 +31,8 @@ from fpga_hdl.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.mpu6000.core import Mpu6000
 from fpga_hdl.ms5611 import regs as ms5611_regs
 from fpga_hdl.ms5611.core import Ms5611
+from fpga_hdl.pwm_capture.core import CHANNELS, PwmCapture, timeout_ticks
+from fpga_hdl.snapshot_cdc import SnapshotSynchronizer
 
 #: Default system clock: above the SPI chips' 8 MHz floor (see ``spi_target``) and fast
 #: enough for the I2C target's Fast-mode timing, as slow as possible because the system
@@ -37,8 +45,23 @@ SAMPLE_CHANNELS = {
     "mag": ist8310_regs.SAMPLE_LAYOUT,
 }
 FAULT_CHIPS = ("imu", "baro", "mag")
+#: PWM capture tick: 1 µs, the unit PX4 uses for PWM (``fpga_hdl.pwm_capture``).
+PWM_TICK_HZ = 1e6
+#: No rising edge for this long and a channel is flagged (and reads zero): a usual ESC
+#: signal-loss time.
+PWM_TIMEOUT_S = 0.1
+
+
+def pwm_result_words(tick_hz: float, timeout_s: float) -> dict[str, dict[str, int]]:
+    """The capture results as host-port read words: width and period per channel, timeouts."""
+    bits = timeout_ticks(tick_hz, timeout_s).bit_length()
+    fields = {f"width_ticks_{ch}": bits for ch in range(CHANNELS)}
+    fields |= {f"period_ticks_{ch}": bits for ch in range(CHANNELS)}
+    return {"pwm": fields | {"timeout": CHANNELS}}
+
+
 #: The host port's word map, for the rig side (no need to build the gateware for it).
-HOST_MAP = host_port_map(SAMPLE_CHANNELS, FAULT_CHIPS, {})
+HOST_MAP = host_port_map(SAMPLE_CHANNELS, FAULT_CHIPS, pwm_result_words(PWM_TICK_HZ, PWM_TIMEOUT_S))
 
 
 class SensorTop(wiring.Component):
@@ -48,6 +71,9 @@ class SensorTop(wiring.Component):
     ----------
     sys_clk_hz : float
         Frequency of the ``sync`` domain, passed to every chip (which checks it).
+    pwm_tick_hz, pwm_timeout_s : float
+        Frequency of the ``pwm`` domain (one capture tick per cycle) and the capture's
+        signal-loss timeout.
 
     Attributes
     ----------
@@ -67,6 +93,10 @@ class SensorTop(wiring.Component):
         Chip selects of the MPU-6000 and the MS5611.
     i2c_scl, i2c_sda_i : In(1), i2c_sda_oe : Out(1)
         I2C bus of the IST8310 (``i2c_sda_oe`` = 1 pulls SDA low).
+    pwm : In(8)
+        PWM inputs from the autopilot, one per channel (asynchronous).
+    pwm_clk, pwm_rst : In(1)
+        Clock and reset of the ``pwm`` domain (the system clock is ``clk``/``rst``).
     """
 
     write_addr: In(8)
@@ -86,13 +116,32 @@ class SensorTop(wiring.Component):
     i2c_scl: In(1, init=1)
     i2c_sda_i: In(1, init=1)
     i2c_sda_oe: Out(1)
+    pwm: In(CHANNELS)
+    pwm_clk: In(1)
+    pwm_rst: In(1)
 
-    def __init__(self, *, sys_clk_hz: float = SYS_CLK_HZ) -> None:
+    def __init__(
+        self,
+        *,
+        sys_clk_hz: float = SYS_CLK_HZ,
+        pwm_tick_hz: float = PWM_TICK_HZ,
+        pwm_timeout_s: float = PWM_TIMEOUT_S,
+    ) -> None:
         self.sys_clk_hz = sys_clk_hz
+        self.pwm_tick_hz = pwm_tick_hz
         self.imu = Mpu6000(sys_clk_hz=sys_clk_hz)
         self.baro = Ms5611(sys_clk_hz=sys_clk_hz)
         self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
-        self.host = HostPort(SAMPLE_CHANNELS, FAULT_CHIPS, {})
+        self.capture = PwmCapture(tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s)
+        # The synchroniser copies a result stable for its stages + 2 system cycles; the
+        # capture changes a result at most once per tick.
+        if not sys_clk_hz >= 4 * pwm_tick_hz:
+            raise ValueError(
+                f"sys_clk_hz {sys_clk_hz:g} must be at least 4 × pwm_tick_hz "
+                f"({pwm_tick_hz:g}) for the capture results to cross into sync whole"
+            )
+        results = pwm_result_words(pwm_tick_hz, pwm_timeout_s)
+        self.host = HostPort(SAMPLE_CHANNELS, FAULT_CHIPS, results)
         super().__init__()
 
     def elaborate(self, platform) -> Module:
@@ -102,6 +151,9 @@ class SensorTop(wiring.Component):
         m.submodules.imu = imu
         m.submodules.baro = baro
         m.submodules.mag = mag
+        m.domains.pwm = ClockDomain(local=True)
+        m.d.comb += [ClockSignal("pwm").eq(self.pwm_clk), ResetSignal("pwm").eq(self.pwm_rst)]
+        m.submodules.capture = capture = DomainRenamer("pwm")(self.capture)
         m.d.comb += [
             host.write_addr.eq(self.write_addr),
             host.write_data.eq(self.write_data),
@@ -118,7 +170,7 @@ class SensorTop(wiring.Component):
                 chip.fault_flip.eq(getattr(host, f"{name}_fault_flip")),
             ]
         m.d.comb += [baro.now_us.eq(host.now_us), mag.now_us.eq(host.now_us)]
-        m.d.comb += self.pending.eq(imu.sample_pending | baro.sample_pending)
+        m.d.comb += self.pending.eq(imu.sample_pending | baro.sample_pending | mag.sample_pending)
 
         for chip, cs_n in ((imu, self.imu_cs_n), (baro, self.baro_cs_n)):
             m.d.comb += [chip.sclk.eq(self.spi_sclk), chip.mosi.eq(self.spi_mosi)]
@@ -133,4 +185,30 @@ class SensorTop(wiring.Component):
             mag.sda_i.eq(self.i2c_sda_i),
             self.i2c_sda_oe.eq(mag.sda_oe),
         ]
+        self._capture_results(m, capture)
         return m
+
+    def _capture_results(self, m: Module, capture: PwmCapture) -> None:
+        """PWM pins → capture (``pwm``) → snapshot synchroniser (``sync``) → host words."""
+        layout = data.StructLayout(
+            {
+                "width": capture.width_ticks.shape(),
+                "period": capture.period_ticks.shape(),
+                "timeout": CHANNELS,
+            }
+        )
+        m.submodules.capture_cdc = cdc = SnapshotSynchronizer(
+            layout, i_domain="pwm", o_domain="sync"
+        )
+        m.d.comb += [
+            capture.pwm.eq(self.pwm),
+            cdc.data_i.width.eq(capture.width_ticks),
+            cdc.data_i.period.eq(capture.period_ticks),
+            cdc.data_i.timeout.eq(capture.timeout),
+            self.host.pwm_timeout.eq(cdc.data_o.timeout),
+        ]
+        for ch in range(CHANNELS):
+            m.d.comb += [
+                getattr(self.host, f"pwm_width_ticks_{ch}").eq(cdc.data_o.width[ch]),
+                getattr(self.host, f"pwm_period_ticks_{ch}").eq(cdc.data_o.period[ch]),
+            ]
