@@ -16,36 +16,20 @@ every change of ``sda_oe`` (a few per byte).
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
-from fpga_hdl.buses import I2cNack, check_clock_hz
-from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
+from fpga_hdl.buses import I2cNack
+from fpga_hdl.i2c_controller import timing_for  # one place for the stretched timing
+from fpga_hdl.i2c_target import FAST_MODE, I2cTiming
 
 __all__ = ["CocotbI2cMaster", "I2cTimingViolation", "timing_for"]
 
 
 class I2cTimingViolation(AssertionError):
     """The target's SDA was not valid, or not stable, when UM10204 requires it."""
-
-
-def timing_for(scl_hz: float) -> I2cTiming:
-    """Spec-minimum timing of the mode that covers ``scl_hz``, stretched to that rate.
-
-    The slack beyond t_LOW + t_HIGH is split evenly between the two phases.
-    """
-    check_clock_hz("scl_hz", scl_hz)
-    for mode, top_hz in ((STANDARD_MODE, 100e3), (FAST_MODE, 400e3)):
-        if scl_hz <= top_hz:
-            slack_ns = max(0.0, 1e9 / scl_hz - mode.t_low_ns - mode.t_high_ns)
-            return replace(
-                mode, t_low_ns=mode.t_low_ns + slack_ns / 2, t_high_ns=mode.t_high_ns + slack_ns / 2
-            )
-    raise ValueError(f"scl_hz {scl_hz:g} is above Fast-mode (400 kHz), which the IST8310 tops at")
 
 
 def _ps(ns: float) -> int:

@@ -1,0 +1,270 @@
+"""The fast path: ``SpiBus``, ``I2cBus``, host port and PWM over the harness's peripherals.
+
+Each class drives one peripheral of :class:`fpga_hdl.cosim.harness.CosimHarness` under
+cocotb: it sets the peripheral's inputs, flips its request toggle and awaits the
+acknowledge, so a transaction costs two Python wake-ups whatever its length, and the
+gated system clock runs only while something is in flight. The same PX4-like drivers
+run over these buses unchanged; the pin-level masters (``spi_master``, ``i2c_master``,
+``pwm_source``) stay for the interface-timing tests that probe the specification limits.
+
+:class:`Harness` bundles them for a testbench or the rig's co-simulation process::
+
+    harness = Harness(dut)
+    await harness.reset()
+    await harness.host.load({"imu": sample.fields()}, now_us=1000)
+    rx = await harness.spi.transfer("imu", bytes([0x3B | 0x80]) + bytes(14), sclk_hz=20e6)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+from cocotb.triggers import Timer
+from cocotb.utils import get_sim_time
+
+from fpga_hdl.buses import I2cNack, UnknownDevice, check_clock_hz
+from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, SPI_DEVICES
+from fpga_hdl.host_port import WORD_BITS, HostPortMap
+from fpga_hdl.i2c_controller import RATES_HZ, controller_rate_hz
+from fpga_hdl.pwm_capture.core import CHANNELS
+from fpga_hdl.pwm_capture.model import ChannelCapture
+from fpga_hdl.spi_controller import divider_for
+from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ
+
+__all__ = [
+    "Harness",
+    "HarnessHost",
+    "HarnessI2cBus",
+    "HarnessPwm",
+    "HarnessSpiBus",
+]
+
+#: Where the PWM clock's edges sit relative to the system clock's 31.25 ns grid: a
+#: quarter system period off it, so no PWM edge ever shares a time step with a system
+#: clock edge or a testbench write (whose order would then be up to the simulator).
+PWM_PHASE_PS = round(0.25e12 / HARNESS_SYS_CLK_HZ)
+
+
+class _Requester:
+    """One peripheral's request toggle and acknowledge."""
+
+    def __init__(self, dut, prefix: str) -> None:
+        self._request = getattr(dut, f"{prefix}_request")
+        self._acknowledge = getattr(dut, f"{prefix}_acknowledge")
+        self._level = 0
+        self.count = 0  # transactions so far
+
+    def reset(self) -> None:
+        self._request.value = self._level = 0
+
+    async def __call__(self) -> None:
+        self._level ^= 1
+        self._request.value = self._level
+        await self._acknowledge.value_change
+        self.count += 1
+
+
+def _pack(values: Sequence[int], bits: int) -> int:
+    """Values into one wide port, element ``i`` at bit ``i * bits``."""
+    return sum((value & ((1 << bits) - 1)) << (i * bits) for i, value in enumerate(values))
+
+
+class HarnessSpiBus:
+    """:class:`fpga_hdl.buses.SpiBus` over the harness's SPI controller (mode 0 or 3)."""
+
+    def __init__(self, dut, *, mode: int = 0, sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:
+        if mode not in (0, 3):
+            raise ValueError(f"SPI mode must be 0 or 3 (the chips' modes), not {mode!r}")
+        self.dut = dut
+        self.sys_clk_hz = sys_clk_hz
+        self.depth = len(dut.spi_tx) // 8
+        self._request = _Requester(dut, "spi")
+        dut.spi_mode3.value = int(mode == 3)
+
+    @property
+    def transfers(self) -> int:
+        return self._request.count
+
+    def reset(self) -> None:
+        self._request.reset()
+
+    async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
+        check_clock_hz("sclk_hz", sclk_hz)
+        if device not in SPI_DEVICES:
+            raise UnknownDevice(f"no SPI device {device!r} on this bus; wired: {SPI_DEVICES}")
+        if len(tx) > self.depth:
+            raise ValueError(
+                f"SPI transfer of {len(tx)} bytes exceeds the {self.depth}-byte buffer"
+            )
+        dut = self.dut
+        dut.spi_device.value = SPI_DEVICES.index(device)
+        dut.spi_length.value = len(tx)
+        dut.spi_divider.value = divider_for(self.sys_clk_hz, sclk_hz)
+        dut.spi_tx.value = int.from_bytes(tx, "little")
+        await self._request()
+        return int(dut.spi_rx.value).to_bytes(self.depth, "little")[: len(tx)]
+
+
+class HarnessI2cBus:
+    """:class:`fpga_hdl.buses.I2cBus` over the harness's I2C controller (100/400 kHz).
+
+    A requested rate is rounded down to the controller's rates (:data:`RATES_HZ`).
+    """
+
+    def __init__(self, dut) -> None:
+        self.dut = dut
+        self.write_depth = len(dut.i2c_tx) // 8
+        self.read_depth = len(dut.i2c_rx) // 8
+        self._request = _Requester(dut, "i2c")
+
+    @property
+    def transfers(self) -> int:
+        return self._request.count
+
+    def reset(self) -> None:
+        self._request.reset()
+
+    async def write_read(
+        self, address: int, write: bytes, read_len: int, *, scl_hz: float
+    ) -> bytes:
+        rate_hz = controller_rate_hz(scl_hz)
+        if not 0 <= address <= 0x7F:
+            raise ValueError(f"I2C address must be 7-bit (0x00..0x7F), not 0x{address:X}")
+        if not 0 <= read_len <= self.read_depth:
+            raise ValueError(f"read_len must be in 0..{self.read_depth}, not {read_len}")
+        if len(write) > self.write_depth:
+            raise ValueError(f"I2C write of {len(write)} bytes exceeds {self.write_depth}")
+        dut = self.dut
+        dut.i2c_address.value = address
+        dut.i2c_write_len.value = len(write)
+        dut.i2c_read_len.value = read_len
+        dut.i2c_tx.value = int.from_bytes(write, "little")
+        dut.i2c_fast.value = int(rate_hz == RATES_HZ[1])
+        await self._request()
+        if int(dut.i2c_nack.value):
+            raise I2cNack(address, int(dut.i2c_nack_index.value))
+        return int(dut.i2c_rx.value).to_bytes(self.read_depth, "little")[:read_len]
+
+
+class HarnessHost:
+    """The rig's side of SensorTop's host port: one burst write per load, one burst read."""
+
+    def __init__(self, dut, host_map: HostPortMap = HOST_MAP) -> None:
+        self.dut = dut
+        self.map = host_map
+        self._write = _Requester(dut, "host")
+        self._read = _Requester(dut, "read")
+
+    def reset(self) -> None:
+        self._write.reset()
+        self._read.reset()
+
+    async def load(
+        self,
+        samples: Mapping[str, Mapping[str, int]],
+        *,
+        now_us: int | None = None,
+        faults: Mapping[str, tuple[bool, int]] | None = None,
+    ) -> None:
+        """Stage the fields (and time, faults), commit, and return once the chips took them."""
+        words = [
+            self.map.encode(channel, field, value)
+            for channel, fields in samples.items()
+            for field, value in fields.items()
+        ]
+        if now_us is not None:
+            words.append(self.map.encode("time", "now_us", now_us % (1 << 32)))
+        for chip, (mute, flip) in (faults or {}).items():
+            words.append(self.map.encode(chip, "fault", (int(mute) << 8) | flip))
+        self.dut.host_words.value = _pack(
+            [address | data << 8 for address, data in words], 8 + WORD_BITS
+        )
+        self.dut.host_count.value = len(words)
+        await self._write()
+
+    async def results(self) -> dict[tuple[str, str], int]:
+        """Every result word, keyed by (channel, field), sign-extended where signed."""
+        await self._read()
+        packed = int(self.dut.read_words.value)
+        values = {}
+        for word in self.map.reads:
+            raw = packed >> (word.address * WORD_BITS) & ((1 << word.width) - 1)
+            if word.signed and raw >> (word.width - 1):
+                raw -= 1 << word.width
+            values[(word.channel, word.field)] = raw
+        return values
+
+    async def pwm_capture(self) -> list[ChannelCapture]:
+        """The PWM capture's results per channel, as the host port shows them."""
+        values = await self.results()
+        timeout = values[("pwm", "timeout")]
+        return [
+            ChannelCapture(
+                values[("pwm", f"width_ticks_{ch}")],
+                values[("pwm", f"period_ticks_{ch}")],
+                bool(timeout >> ch & 1),
+            )
+            for ch in range(CHANNELS)
+        ]
+
+
+class HarnessPwm:
+    """The autopilot's PWM outputs: period and widths in ticks, written once per frame."""
+
+    def __init__(self, dut, *, tick_hz: float = PWM_TICK_HZ) -> None:
+        self.dut = dut
+        self.tick_hz = tick_hz
+        self.counter_bits = len(dut.pwm_period_ticks)
+
+    def write(self, widths_ticks: Sequence[int], *, period_ticks: int) -> None:
+        """New widths (0 = no pulse) from the next period start; period 0 stops all."""
+        if len(widths_ticks) > CHANNELS:
+            raise ValueError(f"at most {CHANNELS} PWM channels, got {len(widths_ticks)}")
+        limit = (1 << self.counter_bits) - 1
+        for value in (*widths_ticks, period_ticks):
+            if not 0 <= value <= limit:
+                raise ValueError(f"PWM ticks must be in 0..{limit}, not {value}")
+        self.dut.pwm_width_ticks.value = _pack(widths_ticks, self.counter_bits)
+        self.dut.pwm_period_ticks.value = period_ticks
+
+    async def run(self) -> None:
+        """Start the PWM tick clock off the system clock's grid (:data:`PWM_PHASE_PS`),
+        then return on the grid, as the caller was."""
+        grid_ps = round(0.5e12 / HARNESS_SYS_CLK_HZ)
+        offset_ps = (PWM_PHASE_PS - get_sim_time("ps")) % grid_ps
+        await Timer(offset_ps, unit="ps")
+        self.dut.pwm_run.value = 1
+        await Timer(grid_ps - offset_ps, unit="ps")
+
+
+class Harness:
+    """Host port, SPI, I2C and PWM of a :class:`~fpga_hdl.cosim.harness.CosimHarness`."""
+
+    def __init__(self, dut, *, spi_mode: int = 0) -> None:
+        self.dut = dut
+        self.host = HarnessHost(dut)
+        self.spi = HarnessSpiBus(dut, mode=spi_mode)
+        self.i2c = HarnessI2cBus(dut)
+        self.pwm = HarnessPwm(dut)
+
+    async def reset(self) -> None:
+        """Reset both clock domains (both clocks run for it), then leave them stopped."""
+        dut = self.dut
+        for part in (self.host, self.spi, self.i2c):
+            part.reset()
+        dut.pwm_run.value = 0
+        self.pwm.write([0] * CHANNELS, period_ticks=0)
+        dut.rst.value = 1
+        await Timer(round(3e12 / PWM_TICK_HZ), unit="ps")  # three ticks: both domains reset
+        dut.rst.value = 0
+        await Timer(round(1e12 / PWM_TICK_HZ), unit="ps")  # let both clocks stop
+
+    def cycles(self) -> tuple[int, int]:
+        """(system, PWM) clock cycles so far: what the simulation has cost."""
+        return int(self.dut.sync_cycles.value), int(self.dut.pwm_cycles.value)
+
+    async def wait_until_s(self, time_s: float) -> None:
+        """Let simulated time reach ``time_s`` (only the clocks that are enabled run)."""
+        delta_ps = round(time_s * 1e12) - get_sim_time("ps")
+        if delta_ps > 0:
+            await Timer(delta_ps, unit="ps")
