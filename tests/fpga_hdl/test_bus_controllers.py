@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """amaranth.sim tests of the autopilot-side peripherals: SPI and I2C controllers, PWM
 generator, and the snapshot synchroniser that carries the PWM results into ``sync``."""
 
