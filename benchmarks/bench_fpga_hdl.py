@@ -1,79 +1,91 @@
-"""fpga_hdl co-simulation cost: the whole sensor frame through SensorTop, per simulator.
+"""fpga_hdl co-simulation cost: the rig's full sensor frame, fast path and pin-level path.
 
-Prints, for Verilator and Icarus: wall time per frame (IMU burst at 1 kHz, baro at
-50 Hz, host-port loads), SPI transactions per wall second, and simulated clock edges
-(SCLK edges + system-clock cycles) per wall second. Also the TLM frame for comparison.
-A closed loop at 1 kHz runs faster than real time when a frame costs under 1 ms.
+Fast path (``fpga_hdl.cosim.harness``): per 1 kHz frame a host-port burst, the MPU-6000
+burst at 5 MHz, at 100 Hz the IST8310 read + trigger (400 kHz) and the MS5611 ADC read +
+convert, the four motor widths to the PWM generator and the capture read back, with the
+400 Hz PWM and its 1 µs capture clock running all the time; simulated time advances
+1 ms per frame, so the real-time factor (RTF = simulated s / wall s) is the closed
+loop's. Also without the PWM clock, to show its share, and the cycle budget per bus.
+
+Pin-level path (the masters the interface-timing tests use), as before: host load +
+IMU burst, baro every 20th frame; no I2C, no PWM, simulated time not advanced.
+Numbers only; nothing passes or fails on time.
 """
 
-import asyncio
 import json
 import tempfile
-import time
 from pathlib import Path
 
-from fpga_hdl.buses import TlmSpiBus
-from fpga_hdl.cosim.runner import SIMULATORS, build_simulation, missing_simulator_reason, run_cocotb
-from fpga_hdl.mpu6000 import regs as mpu
-from fpga_hdl.mpu6000.driver import Mpu6000Driver
-from fpga_hdl.mpu6000.model import Mpu6000Model
+from fpga_hdl.cosim.harness import GATED_CLOCK_VERILOG, HARNESS_TOPLEVEL, CosimHarness
+from fpga_hdl.cosim.runner import SIMULATORS, missing_simulator_reason, run_cocotb
 from fpga_hdl.top import SensorTop
 
 HERE = Path(__file__).parent
 FRAMES = 200
 
 
-def cosim_frame(simulator: str) -> dict:
-    build_simulation(SensorTop(), "sensor_top", simulator=simulator)  # build outside the timing
+def run_frames(simulator: str, module: str, **env: str) -> dict:
+    fast = module == "cocotb_fast_frame"
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "figures.json"
         run_cocotb(
-            SensorTop(),
-            "sensor_top",
-            "cocotb_fpga_frame",
+            CosimHarness() if fast else SensorTop(),
+            HARNESS_TOPLEVEL if fast else "sensor_top",
+            module,
             module_dir=HERE,
             simulator=simulator,
-            extra_env={"BENCH_OUT": str(out), "BENCH_FRAMES": str(FRAMES)},
+            extra_env={"BENCH_OUT": str(out), "BENCH_FRAMES": str(FRAMES), **env},
+            extra_verilog={"cosim_gated_clock": GATED_CLOCK_VERILOG} if fast else None,
         )
         return json.loads(out.read_text())
 
 
-def tlm_frame_s() -> float:
-    model = Mpu6000Model()
-    driver = Mpu6000Driver(TlmSpiBus({"imu": model}))
-    sample = mpu.Mpu6000Sample(1, 2, 3, 4, 5, 6, 7)
+def print_fast(simulator: str, f: dict) -> None:
+    frames, wall_s = f["frames"], f["wall_s"]
+    transfers = f["spi_transfers"] + f["i2c_transfers"]
+    label = f"{simulator} fast{'' if f['pwm'] else ' (no PWM)'}"
+    print(
+        f"{label:<24} {1e6 * wall_s / frames:>9.0f} {f['sim_s'] / wall_s:>6.2f} "
+        f"{transfers / wall_s:>12.0f} {f['sync_cycles'] / frames:>11.0f} "
+        f"{f['pwm_cycles'] / frames:>10.0f} "
+        f"{(f['sync_cycles'] + f['pwm_cycles']) / wall_s / 1e6:>8.2f}"
+    )
 
-    async def frames():
-        await driver.start()
-        start = time.perf_counter()
-        for _ in range(FRAMES):
-            model.load_sample(sample)
-            await driver.read_raw()
-        return (time.perf_counter() - start) / FRAMES
 
-    return asyncio.run(frames())
+def print_budget(f: dict) -> None:
+    """Cycles per simulated second and wall time per simulated second, per part."""
+    sim_s = f["sim_s"]
+    print(f"  budget per simulated second ({f['frames']} frames):")
+    for name, (wall_s, sync, pwm) in f["parts"].items():
+        sync_k, pwm_k = sync / sim_s / 1e3, pwm / sim_s / 1e3
+        print(
+            f"    {name:<5} sync {sync_k:>7.0f} k cycles  pwm {pwm_k:>6.0f} k cycles  "
+            f"wall {wall_s / sim_s:>6.3f} s"
+        )
 
 
 def main() -> None:
-    print("frame = host load + IMU 15-byte burst at 5 MHz; baro ADC READ + CONVERT every 20th")
     print(
-        f"{'simulator':<10} {'frame µs':>9} {'transfers/s':>12} {'edges/s':>10} "
-        f"{'SCLK edges/frame':>17} {'sys cycles/frame':>17}"
+        f"{'path':<24} {'frame µs':>9} {'RTF':>6} {'transfers/s':>12} "
+        f"{'sys cyc/fr':>11} {'pwm cyc/fr':>10} {'Mcyc/s':>8}"
     )
     for simulator in SIMULATORS:
         reason = missing_simulator_reason(simulator)
         if reason is not None:
-            print(f"{simulator:<10} skipped: {reason}")
+            print(f"{simulator:<24} skipped: {reason}")
             continue
-        f = cosim_frame(simulator)
-        edges = f["sclk_edges"] + 2 * f["sys_cycles"]
+        with_pwm = run_frames(simulator, "cocotb_fast_frame")
+        print_fast(simulator, with_pwm)
+        print_fast(simulator, run_frames(simulator, "cocotb_fast_frame", BENCH_PWM="0"))
+        old = run_frames(simulator, "cocotb_fpga_frame")
+        label = f"{simulator} pin-level"
         print(
-            f"{simulator:<10} {1e6 * f['wall_s'] / f['frames']:>9.0f} "
-            f"{f['transfers'] / f['wall_s']:>12.0f} {edges / f['wall_s']:>10.3g} "
-            f"{f['sclk_edges'] / f['frames']:>17.0f} {f['sys_cycles'] / f['frames']:>17.1f}"
+            f"{label:<24} {1e6 * old['wall_s'] / old['frames']:>9.0f} {'-':>6} "
+            f"{old['transfers'] / old['wall_s']:>12.0f} "
+            f"{old['sys_cycles'] / old['frames']:>11.0f} {'-':>10} "
+            f"  (+{old['sclk_edges'] / old['frames']:.0f} SCLK edges/frame from Python)"
         )
-    print(f"{'tlm':<10} {1e6 * tlm_frame_s():>9.1f}  (pure-Python model, IMU burst only)")
-    print("not in the frame yet: IST8310 over I2C and PWM capture (no cocotb masters for them)")
+        print_budget(with_pwm)
 
 
 if __name__ == "__main__":
