@@ -1,4 +1,4 @@
-"""Closed-loop speed: real-time factor and frames per second of the rig, TLM and RTL sensors.
+"""Closed-loop speed: real-time factor, per-frame budget and memory of the rig.
 
 Targets from the issue (figures only, no pass/fail): ``rtl`` ≥ 1.0× real time and
 ``tlm`` ≥ 20× on 2 cores. Each case flies a short scenario end to end: model, sensor
@@ -6,54 +6,66 @@ physics, chips and PX4's drivers, HIL encoding, lockstep over TCP, PWM capture, 
 
 Two autopilots: the reference autopilot (the product's loop), and the PX4-side test double
 of ``tests/rig`` (answers each frame at a fixed throttle, doing almost no work), which
-shows the rig's own cost. "waiting" is the share of wall time the rig spent blocked on
-the autopilot's answers.
+shows the rig's own cost. The budget splits each frame's wall time (µs) into the parts of
+:class:`rig.loop.FrameBudget`; ``wait`` is the time blocked on the autopilot's answer, so
+the lockstep frame costs rig + autopilot, one after the other.
+
+``python -m benchmarks.bench_rig --peak-rss`` flies one 60 s TLM run with the reference
+autopilot and prints the peak resident memory of the rig and of the autopilot process.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import resource
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 from rig.errors import RigError
 from rig.link import LinkTimeouts
-from rig.loop import RunOptions, run_scenario
+from rig.loop import FrameBudget, RunOptions, RunResult, run_scenario
 from rig.px4_sim_api import Ports
-from rig.scenario import scenario_from_dict
+from rig.scenario import Scenario, scenario_from_dict
 
 REPO = Path(__file__).resolve().parent.parent
 DOUBLE = REPO / "tests" / "rig" / "autopilot_double.py"
 INSTANCE = 90  # away from the instances tests and users pick first
 SIMULATED_S = {"tlm": 6.0, "rtl": 3.0}
+PEAK_RSS_SIMULATED_S = 60.0
+#: Columns of the budget table: (heading, FrameBudget field).
+BUDGET_COLUMNS = (
+    ("model", "model_us"), ("sensors", "sensor_physics_us"), ("chips", "chips_us"),
+    ("mavlink", "mavlink_us"), ("send", "socket_send_us"), ("wait", "autopilot_wait_us"),
+    ("log", "logging_us"), ("other", "other_us"),
+)  # fmt: skip
 
 
-def _scenario(sensor_layer: str, imu_hz: int) -> object:
+def _scenario(sensor_layer: str, imu_hz: int, autopilot: str, duration_s: float) -> Scenario:
+    commands = [
+        {"at_s": 0.5, "action": "arm"},
+        {"at_s": 0.6, "action": "takeoff", "altitude_m": 2.0},
+    ]
     return scenario_from_dict(
         {
             "name": "bench_hover",
             "vehicle": "f450_high_precision",
-            "duration_s": SIMULATED_S[sensor_layer],
+            "duration_s": duration_s,
             "seed": 1,
             "sensor_layer": sensor_layer,
             "rates": {"imu_hz": imu_hz},
-            "commands": [
-                {"at_s": 0.5, "action": "arm"},
-                {"at_s": 0.6, "action": "takeoff", "altitude_m": 2.0},
-            ],
+            "commands": commands if autopilot == "reference" else [],
         }
     )
 
 
-def _case(sensor_layer: str, imu_hz: int, autopilot: str) -> None:
-    scenario = _scenario(sensor_layer, imu_hz)
+def _fly(sensor_layer: str, imu_hz: int, autopilot: str, duration_s: float) -> RunResult:
     argv = None
     if autopilot == "double":
         port = Ports(INSTANCE).simulator_tcp
         argv = (sys.executable, str(DOUBLE), "--port", str(port), "--behaviour", "px4",
                 "--throttle", "0.55", "--arm-after", "500")  # fmt: skip
-        scenario = scenario_from_dict({**_as_document(scenario), "commands": []})
     with tempfile.TemporaryDirectory() as folder:
         options = RunOptions(
             instance=INSTANCE,
@@ -61,30 +73,45 @@ def _case(sensor_layer: str, imu_hz: int, autopilot: str) -> None:
             timeouts=LinkTimeouts(connect_s=600, answer_s=30),
             autopilot_argv=argv,
         )
-        try:
-            result = run_scenario(scenario, options)
-        except RigError as error:
-            print(f"{sensor_layer:>3}  IMU {imu_hz:>4} Hz  {autopilot:<9}  failed: {error}")
-            return
-    waiting = result.link.lockstep_wait_s / result.wall_s
+        return run_scenario(_scenario(sensor_layer, imu_hz, autopilot, duration_s), options)
+
+
+def _budget_heading() -> str:
+    parts = "".join(f"{heading:>8}" for heading, _ in BUDGET_COLUMNS)
+    return f"{'case':<27}{'RTF':>8}{'frames/s':>10}  µs/frame:{parts}{'total':>8}"
+
+
+def _budget_row(budget: FrameBudget) -> str:
+    parts = "".join(f"{getattr(budget, name):8.1f}" for _, name in BUDGET_COLUMNS)
+    return f"{parts}{budget.total_us:8.1f}"
+
+
+def _case(sensor_layer: str, imu_hz: int, autopilot: str) -> None:
+    label = f"{sensor_layer} IMU {imu_hz:>4} Hz {autopilot}"
+    try:
+        result = _fly(sensor_layer, imu_hz, autopilot, SIMULATED_S[sensor_layer])
+    except RigError as error:
+        print(f"{label:<27}  failed: {error}", flush=True)
+        return
     print(
-        f"{sensor_layer:>3}  IMU {imu_hz:>4} Hz  {autopilot:<9}"
-        f"  RTF {result.real_time_factor:6.2f}x"
-        f"  {result.frames / result.wall_s:8.0f} frames/s  waiting {waiting:4.0%}"
-        f"  ({result.simulated_s:.0f} s simulated in {result.wall_s:.1f} s)",
+        f"{label:<27}{result.real_time_factor:7.2f}x{result.frames / result.wall_s:10.0f}"
+        f"  {' ' * 9}{_budget_row(result.budget)}",
         flush=True,
     )
 
 
-def _as_document(scenario: object) -> dict:
-    return {
-        "name": scenario.name,
-        "vehicle": scenario.vehicle,
-        "duration_s": scenario.duration_s,
-        "seed": scenario.seed,
-        "sensor_layer": scenario.sensor_layer,
-        "rates": {"imu_hz": scenario.rates.imu_hz},
-    }
+def peak_rss() -> None:
+    """One 60 s TLM run at 1 kHz with the reference autopilot; peak RSS of both processes."""
+    result = _fly("tlm", 1000, "reference", PEAK_RSS_SIMULATED_S)
+    # ru_maxrss is in KiB on Linux; the autopilot is the rig's only (waited-for) child.
+    rig_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    autopilot_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    print(
+        f"peak RSS of a {result.simulated_s:.0f} s TLM run (1 kHz IMU, reference autopilot, "
+        f"RTF {result.real_time_factor:.2f}x): rig {rig_mib:.0f} MiB, "
+        f"autopilot {autopilot_mib:.0f} MiB",
+        flush=True,
+    )
 
 
 def main() -> None:
@@ -93,12 +120,20 @@ def main() -> None:
         autopilots.insert(0, "reference")
     else:
         print("(reference autopilot not installed: `python -m rig.autopilot` is missing)")
+    print(_budget_heading())
     for sensor_layer in ("tlm", "rtl"):
         for imu_hz in (1000, 250):
             for autopilot in autopilots:
                 _case(sensor_layer, imu_hz, autopilot)
     print("targets: rtl >= 1.0x, tlm >= 20x real time (2 cores)")
+    # A fresh process, so the peak is this run's and not the cases' above.
+    subprocess.run(
+        [sys.executable, "-m", "benchmarks.bench_rig", "--peak-rss"], check=True, cwd=REPO
+    )
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:] == ["--peak-rss"]:
+        peak_rss()
+    else:
+        main()

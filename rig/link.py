@@ -56,14 +56,22 @@ class LinkTimeouts:
 
 @dataclass
 class LinkStats:
-    """Counters a run reports: how the lockstep went, and what the peer sent."""
+    """Counters a run reports: how the lockstep went, what the peer sent, where time went.
+
+    The wall times are disjoint: ``encode_s`` packing MAVLink frames, ``send_s`` in the
+    socket's send, ``wait_s`` blocked until the autopilot's bytes arrive (its compute time
+    in lockstep), ``decode_s`` parsing and handling what it sent.
+    """
 
     frames_sent: int = 0
     answers: int = 0
     stale_answers: int = 0
     freewheel_frames: int = 0
     malformed: int = 0
-    lockstep_wait_s: float = 0.0
+    encode_s: float = 0.0
+    send_s: float = 0.0
+    wait_s: float = 0.0
+    decode_s: float = 0.0
 
 
 class SimulatorLink:
@@ -143,7 +151,10 @@ class SimulatorLink:
 
     def send(self, *messages: mavlink.MAVLink_message) -> None:
         """Write messages to the autopilot (MAVLink 2 frames)."""
+        started = time.perf_counter()
         payload = b"".join(message.pack(self.mav) for message in messages)
+        packed = time.perf_counter()
+        self.stats.encode_s += packed - started
         try:
             self._connection().sendall(payload)
         except OSError as error:
@@ -151,6 +162,7 @@ class SimulatorLink:
                 f"the autopilot closed the simulator link ({self.endpoint}: {error.strerror}) "
                 f"{self._exit_note()}; {PX4_NEVER_RECONNECTS}"
             ) from None
+        self.stats.send_s += time.perf_counter() - packed
 
     def exchange(
         self, time_us: int, messages: list[mavlink.MAVLink_message]
@@ -197,8 +209,7 @@ class SimulatorLink:
         return self._conn
 
     def _wait_for_answer(self, time_us: int) -> None:
-        started = time.monotonic()
-        deadline = started + self.timeouts.answer_s
+        deadline = time.monotonic() + self.timeouts.answer_s
         self._awaited_us = time_us
         while self._latest is None or self._latest.time_us < time_us:
             remaining = deadline - time.monotonic()
@@ -213,13 +224,14 @@ class SimulatorLink:
             self._receive(min(remaining, 0.25))
         self._awaited_us = None
         self.stats.answers += 1
-        self.stats.lockstep_wait_s += time.monotonic() - started
 
     def _receive(self, timeout_s: float) -> None:
         """Read what is there (waiting at most ``timeout_s``) and handle each message."""
         conn = self._connection()
+        started = time.perf_counter()
         ready, _, _ = select.select([conn], [], [], timeout_s)
         if not ready:
+            self.stats.wait_s += time.perf_counter() - started
             exit_reason = self.peer_exit()
             if exit_reason is not None:
                 raise AutopilotStalled(
@@ -233,6 +245,8 @@ class SimulatorLink:
             data, reason = b"", error.strerror
         else:
             reason = "end of stream"
+        received = time.perf_counter()
+        self.stats.wait_s += received - started
         if not data:
             raise AutopilotStalled(
                 f"the autopilot closed the simulator link ({self.endpoint}: {reason}) "
@@ -240,6 +254,7 @@ class SimulatorLink:
             )
         for message in self.mav.parse_buffer(data) or ():
             self._handle(message)
+        self.stats.decode_s += time.perf_counter() - received
 
     def _handle(self, message: mavlink.MAVLink_message) -> None:
         kind = message.get_type()

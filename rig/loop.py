@@ -28,7 +28,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -40,6 +40,7 @@ from fpga_hdl.ms5611.model import raw_from_si
 from quad_model import QuadModel, SensorSuite, load_vehicle
 from quad_model.frames import ned_to_geodetic
 from quad_model.model import Mount, VehicleTruth
+from quad_model.sensors import SensorReadings
 from quad_model.vehicle import VehicleFileError
 from rig.errors import RigError, ScenarioError
 from rig.faults import FaultInjector
@@ -50,7 +51,7 @@ from rig.px4_sim_api import Ports, mavlink
 from rig.rig_log import RigLog
 from rig.scenario import Scenario
 from rig.script import Action, CommandScript
-from rig.sensor_layer import ChipFrame, SensorLayer, TlmSensorLayer
+from rig.sensor_layer import ChipFrame, ChipReadout, SensorLayer, TlmSensorLayer
 from rig.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
 
 AUTOPILOTS = ("reference", "px4")
@@ -101,6 +102,29 @@ class Progress:
 
 
 @dataclass(frozen=True)
+class FrameBudget:
+    """Mean wall time of one frame, split by part of the loop (µs per frame).
+
+    Measured every run (a clock read per part costs well under 1 µs) so a slow run shows
+    where its time went. ``autopilot_wait_us`` is the time blocked on the autopilot's
+    answer: in lockstep, the autopilot's own compute time plus the two process wake-ups.
+    """
+
+    model_us: float  # motor faults, the 5 kHz model over one frame, its truth
+    sensor_physics_us: float  # sensor models and sensor faults
+    chips_us: float  # chip words, register models + PX4's drivers (or the RTL), PWM capture
+    mavlink_us: float  # HIL_* encoding and packing, parsing the autopilot's messages
+    socket_send_us: float
+    autopilot_wait_us: float
+    logging_us: float  # rig.ulg
+    other_us: float  # ground link, scenario commands, loop bookkeeping
+
+    @property
+    def total_us(self) -> float:
+        return sum(getattr(self, f.name) for f in fields(self))
+
+
+@dataclass(frozen=True)
 class RunResult:
     run_dir: Path
     rig_log: Path
@@ -109,6 +133,7 @@ class RunResult:
     wall_s: float
     frames: int
     link: LinkStats
+    budget: FrameBudget
 
     @property
     def real_time_factor(self) -> float:
@@ -168,6 +193,7 @@ class _Loop:
         self._wall_end: float | None = None
         self._process: subprocess.Popen[bytes] | None = None
         self._closers: list[Callable[[], None]] = []
+        self._spent_s = (0.0,) * 5  # model, sensor physics, chips, messages, logging
 
         try:
             vehicle = load_vehicle(scenario.vehicle)
@@ -245,16 +271,32 @@ class _Loop:
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
         poll_every = max(1, self.rates.imu_hz // 100)
         pending: list[Action] = []
+        clock = time.perf_counter
+        model_s = sensors_s = chips_s = messages_s = logging_s = 0.0
         for frame in range(1, frames_total + 1):
+            started = clock()
             self.time_us = frame * self.frame_us
             time_s = self.time_us / 1e6
             self.faults.update(self.time_us, self.model)
             self.model.advance(self.throttle, self.frame_us / 1e6)
             truth = self.model.truth
-            messages = self._sensor_messages(truth)
+            modelled = clock()
+            readings = self.faults.samples(self.sensors.sample(truth))
+            sampled = clock()
+            chip_frame, out = self._read_chips(readings)
+            read = clock()
+            self._log_readings(readings, chip_frame, out)
+            logged = clock()
+            messages = self._sensor_messages(readings, out)
             if link.state_interval_us and self.time_us >= state_next_us:
                 state_next_us = self.time_us + link.state_interval_us
                 messages.append(self._state_message(truth))
+            encoded = clock()
+            model_s += modelled - started
+            sensors_s += sampled - modelled
+            chips_s += read - sampled
+            logging_s += logged - read
+            messages_s += encoded - logged
             # Read the API link every 10 ms (every frame while PX4 owes an answer): its
             # telemetry would otherwise fill the socket buffer and the kernel would drop
             # the next COMMAND_ACK.
@@ -266,20 +308,26 @@ class _Loop:
                 pending.extend(script.due(time_s))
                 pending = self._run_actions(pending, time_s, reference)
             controls = link.exchange(self.time_us, messages)
+            answered = clock()
             if controls is not None:
                 self.armed = controls.armed
                 self.pwm.command(controls.motors, controls.armed)
+            commanded = clock()
+            if controls is not None:
                 self.log.motors(self.time_us, controls.time_us, controls.motors)
             if frame % truth_every == 0:
                 self.log.truth(self.time_us, truth)
+            chips_s += commanded - answered
+            logging_s += clock() - commanded
             self.frames = frame
             if self.progress is not None and frame % max(1, self.rates.imu_hz // 10) == 0:
                 self._report(truth)
         self._wall_end = time.monotonic()
+        self._spent_s = (model_s, sensors_s, chips_s, messages_s, logging_s)
         self.log.event(self.time_us, f"run completed: {self.frames} frames")
 
-    def _sensor_messages(self, truth: VehicleTruth) -> list[mavlink.MAVLink_message]:
-        readings = self.faults.samples(self.sensors.sample(truth))
+    def _read_chips(self, readings: SensorReadings) -> tuple[ChipFrame, ChipReadout]:
+        """Load the samples into the chips, read them as PX4's drivers do, capture the PWM."""
         imu, mag, baro = readings.imu, readings.mag, readings.baro
         pulses = self.pwm.pulses(self.time_us + 1, self.faults.pwm_dropped())
         chip_frame = ChipFrame(
@@ -294,17 +342,27 @@ class _Loop:
             pulses=tuple(pulses),
         )
         out = self.layer.frame(chip_frame)
+        self.throttle = throttle_from_capture(out.pwm_widths_us, out.pwm_timed_out)
+        return chip_frame, out
+
+    def _log_readings(self, readings: SensorReadings, chip_frame: ChipFrame,
+                      out: ChipReadout) -> None:  # fmt: skip
         for chip, error in out.bus_errors:
             self.log.bus_error(chip)
             self._event(f"bus error: {chip}: {error}", "warn")
-        self.throttle = throttle_from_capture(out.pwm_widths_us, out.pwm_timed_out)
-        if pulses:
+        if chip_frame.pulses:
             self.log.pwm(self.time_us, out.pwm_widths_us)
         self.log.imu(self.time_us, self.frame_us, out.accel_mps2, out.gyro_radps)
         if out.mag_gauss is not None:
             self.log.mag(self.time_us, out.mag_gauss, out.imu_temperature_degc)
         if out.baro_pa_degc is not None:
             self.log.baro(self.time_us, out.baro_pa_degc)
+        if readings.gps is not None:
+            self.log.gps(self.time_us, readings.gps)
+
+    def _sensor_messages(
+        self, readings: SensorReadings, out: ChipReadout
+    ) -> list[mavlink.MAVLink_message]:
         messages = [
             hil_sensor(
                 self.link.mav, self.time_us, accel_mps2=out.accel_mps2, gyro_radps=out.gyro_radps,
@@ -313,7 +371,6 @@ class _Loop:
         ]  # fmt: skip
         if readings.gps is not None:
             gps = readings.gps
-            self.log.gps(self.time_us, gps)
             messages.append(
                 hil_gps(
                     self.link.mav, self.time_us, lat_deg=gps.lat_deg, lon_deg=gps.lon_deg,
@@ -424,7 +481,17 @@ class _Loop:
             wall_s=wall_end - self._wall_start,
             frames=self.frames,
             link=self.link.stats,
+            budget=self._budget(wall_end - self._wall_start),
         )
+
+    def _budget(self, wall_s: float) -> FrameBudget:
+        frames = max(self.frames, 1)
+        model_s, sensors_s, chips_s, messages_s, logging_s = self._spent_s
+        link = self.link.stats
+        parts_s = (model_s, sensors_s, chips_s, messages_s + link.encode_s + link.decode_s,
+                   link.send_s, link.wait_s, logging_s)  # fmt: skip
+        return FrameBudget(*(part_s / frames * 1e6 for part_s in parts_s),
+                           other_us=(wall_s - sum(parts_s)) / frames * 1e6)  # fmt: skip
 
 
 def _make_sensor_layer(name: str) -> SensorLayer:
