@@ -37,6 +37,7 @@ from rig.autopilot.estimator import (
     PositionEstimator,
     pressure_altitude_m,
 )
+from rig.autopilot.land_detector import LandDetector
 from rig.autopilot.navigator import MissionItem, Navigator, NavState, Setpoint
 from rig.autopilot.params import Parameters
 from rig.autopilot.rotation import quat_conjugate
@@ -119,8 +120,7 @@ class FlightController:
         self.nav_state = NavState.AUTO_LOITER
         self.user_nav_state = NavState.AUTO_LOITER
         self.failsafe = False
-        self.landed = True
-        self.ground_contact = False
+        self.land_detector = LandDetector()
         self.time_us = 0
         self.home: tuple[float, float, float] | None = None  # lat, lon, alt AMSL
         self.motors = np.zeros(4)
@@ -140,10 +140,8 @@ class FlightController:
         self._last_position_loop_us = -POSITION_LOOP_PERIOD_US
         self._last_fast_log_us = -FAST_LOG_PERIOD_US
         self._last_slow_log_us = -POSITION_LOOP_PERIOD_US
-        self._low_thrust_since_us: int | None = None
         self._took_off = False
         self._landed_since_us = 0
-        self._height_at_arming = 0.0
         self._offboard_sp_time_us: int | None = None
         self._reported_faults: set[str] = set()
         self._use_gps_height = False
@@ -206,9 +204,8 @@ class FlightController:
         self._took_off = False
         self.gyro_calibration.reset()
         self.armed_time_us = self.time_us
-        self.landed = True
+        self.land_detector.arm(float(self.position.position_ned_m[2]))
         self._landed_since_us = self.time_us
-        self._height_at_arming = float(self.position.position_ned_m[2])
         lat, lon, alt = self.global_position()
         self.home = (lat, lon, alt)
         self.navigator.home_ned = self.position.position_ned_m.copy()
@@ -307,6 +304,10 @@ class FlightController:
         return stored
 
     # ------------------------------------------------------------------ state queries
+    @property
+    def landed(self) -> bool:
+        return self.land_detector.landed
+
     def position_valid(self) -> bool:
         return self.position.origin is not None and self._gps_good
 
@@ -471,13 +472,12 @@ class FlightController:
                 self._reported_faults.discard(key)
 
     def _land_detector(self, time_us: int) -> None:
-        p = self.params
-        vz = float(self.position.velocity_ned_mps[2])
-        if self.landed:
-            climbed = self._height_at_arming - float(self.position.position_ned_m[2])
+        p, detector = self.params, self.land_detector
+        down_m = float(self.position.position_ned_m[2])
+        velocity = self.position.velocity_ned_mps
+        if detector.landed:
             idle = self._idle()
-            if not idle and (climbed > 0.5 or vz < -0.5):
-                self.landed = False
+            if not idle and detector.detect_takeoff(down_m, float(velocity[2])):
                 self._took_off = True
                 self._status(mavlink.MAV_SEVERITY_INFO, "Takeoff detected")
             elif idle and not self._took_off:
@@ -489,19 +489,12 @@ class FlightController:
                 if limit_s >= 0 and time_us - self._landed_since_us > limit_s * 1e6:
                     self._disarm("Disarmed: landed (COM_DISARM_LAND)")
             return
-        hover, thr_min = p["MPC_THR_HOVER"], p["MPC_THR_MIN"]
-        low_thrust = self.collective_thrust < thr_min + 0.3 * (hover - thr_min)
-        descending = self.setpoint is not None and (
-            np.isnan(self.setpoint.position_ned_m[2]) and self.setpoint.velocity_ned_mps[2] > 0
-        )
-        self.ground_contact = descending and abs(vz) < p["LNDMC_Z_VEL_MAX"] and low_thrust
-        if not self.ground_contact:
-            self._low_thrust_since_us = None
-            return
-        if self._low_thrust_since_us is None:
-            self._low_thrust_since_us = time_us
-        if time_us - self._low_thrust_since_us >= p["LNDMC_TRIG_TIME"] * 1e6:
-            self.landed = True
+        rates = self._rates_filter.rates_radps
+        if detector.detect_landing(
+            p, time_us, float(velocity[2]),
+            math.hypot(velocity[0], velocity[1]) if self.position_valid() else None,
+            float(self.velocity_sp[2]), self.collective_thrust, math.hypot(rates[0], rates[1]),
+        ):  # fmt: skip
             self._landed_since_us = time_us
             self._status(mavlink.MAV_SEVERITY_INFO, "Landing detected")
             if self.nav_state == NavState.AUTO_MISSION:
@@ -579,6 +572,14 @@ class FlightController:
         else:
             setpoint = nav.hold(dt_s)
         self.setpoint = setpoint
+        if self.land_detector.ground_contact:
+            # PX4 mc_pos_control, "flying but ground contact": no corrections, minimum
+            # thrust, integrators reset, so the land detector can confirm the touchdown
+            self.position_control.reset_integral()
+            self.thrust_sp_ned = np.array([0.0, 0.0, -self.position_control.thrust_min])
+            yaw = float(euler_from_quat(self.attitude.q)[2])
+            self.q_sp, self.collective_thrust = thrust_to_attitude(self.thrust_sp_ned, yaw)
+            return
         thrust, self.velocity_sp, self.acceleration_sp = self.position_control.update(
             position,
             est.velocity_ned_mps,
@@ -612,7 +613,7 @@ class FlightController:
 
     def _disarm(self, reason: str) -> None:
         self.armed = False
-        self.landed = True
+        self.land_detector.disarm()
         self.motors = np.zeros(4)
         severity = mavlink.MAV_SEVERITY_CRITICAL if self.failsafe else mavlink.MAV_SEVERITY_INFO
         self._status(severity, reason)
@@ -699,8 +700,10 @@ class FlightController:
                   arming_state=2 if self.armed else 1, nav_state=int(self.nav_state),
                   nav_state_user_intention=int(self.user_nav_state), failsafe=self.failsafe,
                   pre_flight_checks_pass=self.preflight_failure() is None)  # fmt: skip
-        log.write("vehicle_land_detected", time_us, landed=self.landed,
-                  ground_contact=self.ground_contact)  # fmt: skip
+        detector = self.land_detector
+        log.write("vehicle_land_detected", time_us, landed=detector.landed,
+                  maybe_landed=detector.maybe_landed,
+                  ground_contact=detector.ground_contact)  # fmt: skip
         if self.truth is not None and est.origin is not None:
             self._write_truth_errors(log, time_us)
 

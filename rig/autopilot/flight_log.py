@@ -43,7 +43,8 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
         ("uint8_t", "nav_state_user_intention"), ("bool", "failsafe"),
         ("bool", "pre_flight_checks_pass"),
     ],
-    "vehicle_land_detected": [("bool", "landed"), ("bool", "ground_contact")],
+    "vehicle_land_detected": [("bool", "landed"), ("bool", "maybe_landed"),
+                              ("bool", "ground_contact")],
     "estimator_groundtruth_error": [
         ("float", "attitude_error_rad"), ("float", "tilt_error_rad"),
         ("float", "heading_error_rad"), ("float[3]", "position_error_m"),

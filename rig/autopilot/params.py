@@ -143,6 +143,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("MIS_TAKEOFF_ALT", 2.5, 0.0, _INF, "m", "Default takeoff altitude above home"),
     # src/modules/land_detector/land_detector_params_mc.yaml
     _p("LNDMC_Z_VEL_MAX", 0.25, 0.1, 10.0, "m/s", "Vertical speed below which landed is possible"),
+    _p("LNDMC_XY_VEL_MAX", 1.5, 0.0, 10.0, "m/s", "Horizontal speed limit for landed"),
+    _p("LNDMC_ROT_MAX", 20.0, 0.0, 360.0, "deg/s", "Roll/pitch rate limit for landed"),
+    # src/modules/land_detector/land_detector_params.yaml: all three stages together
     _p("LNDMC_TRIG_TIME", 1.0, 0.1, 10.0, "s", "Land detector trigger time"),
     # src/modules/mavlink/mavlink_params.yaml
     _p("MAV_SYS_ID", 1, 1, 250, "", "MAVLink system id"),
