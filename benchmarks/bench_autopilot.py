@@ -4,6 +4,11 @@ The rig targets ≥ 20× real time at a 1 kHz IMU, so one frame must cost well u
 Measured here with the whole cascade running (armed, taking off: estimation, position loop
 at 50 Hz, attitude and rate loops and allocation every frame), with and without the ULog,
 on synthetic sensors at rest (the cost does not depend on the motion).
+
+Measured on the 2-core CI machine kind (shared CPU, ±20 %): before the per-frame path was
+compiled, 127-190 µs/frame without the log; with the numba kernels (attitude filter, Kalman
+prediction, gyro filters, attitude and rate control, allocation), 34 µs without and 42 µs
+with the ULog. What remains is the Python glue of the commander and the frame bookkeeping.
 """
 
 from __future__ import annotations

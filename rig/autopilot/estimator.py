@@ -19,9 +19,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
-from quad_model.frames import STANDARD_GRAVITY_MPS2, quat_multiply, quat_to_dcm
+from quad_model import frames
+from quad_model.frames import STANDARD_GRAVITY_MPS2, quat_multiply
 from rig.autopilot.params import Parameters
 from rig.autopilot.rotation import cross3, quat_from_dcm, yaw_quat
 
@@ -31,6 +33,7 @@ _BIAS_LEARN_MAX_RATE_RADPS = 0.175
 _MAG_SPIN_RATE_RADPS = 0.873
 #: Innovations beyond this many standard deviations are rejected (PX4 EKF2_*_GATE = 5).
 _GATE_SIGMA = 5.0
+_NAN3 = np.full(3, np.nan)
 #: ISA troposphere constants for barometric altitude (ICAO Doc 7488).
 _ISA_P0_PA, _ISA_T0_K, _ISA_LAPSE_KPM, _ISA_EXPONENT = 101325.0, 288.15, 0.0065, 0.190263
 
@@ -40,8 +43,68 @@ def pressure_altitude_m(pressure_pa: float) -> float:
     return _ISA_T0_K / _ISA_LAPSE_KPM * (1.0 - (pressure_pa / _ISA_P0_PA) ** _ISA_EXPONENT)
 
 
+_quat_to_dcm = njit(cache=True)(frames.quat_to_dcm)
+
+
+@njit(cache=True)
 def _wrap_pi(angle_rad: float) -> float:
     return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@njit(cache=True)
+def _attitude_step(q, bias, rates, gyro, accel, mag, accel_ned, dt, gains, declination_rad):
+    """One complementary-filter step on ``q``, ``bias`` and ``rates`` in place.
+
+    Compiled: it runs every IMU frame, and in numpy its two dozen small-array operations
+    cost ~35 µs, here ~1 µs. ``mag`` or ``accel_ned`` all-NaN means not available;
+    ``gains`` is (ATT_W_ACC, ATT_W_MAG, ATT_W_GYRO_BIAS, ATT_BIAS_MAX).
+    """
+    w_acc, w_mag, w_bias, bias_max = gains[0], gains[1], gains[2], gains[3]
+    r = _quat_to_dcm(q)
+    spin = math.sqrt(gyro[0] ** 2 + gyro[1] ** 2 + gyro[2] ** 2)
+    correction = np.zeros(3)
+    if not math.isnan(mag[0]) and w_mag > 0.0:
+        mag_ned = r @ mag
+        heading_error = _wrap_pi(math.atan2(mag_ned[1], mag_ned[0]) - declination_rad)
+        gain = w_mag * min(max(spin / _MAG_SPIN_RATE_RADPS, 1.0), 10.0)
+        correction += r[2] * (-heading_error * gain)  # NED down axis in body = row 2 of R
+    gravity = accel.copy()
+    if not math.isnan(accel_ned[0]):
+        for i in range(3):  # minus Rᵀ·accel_ned
+            gravity[i] -= r[0, i] * accel_ned[0] + r[1, i] * accel_ned[1] + r[2, i] * accel_ned[2]
+    norm = math.sqrt(gravity[0] ** 2 + gravity[1] ** 2 + gravity[2] ** 2)
+    if norm > 1e-3:
+        correction += np.cross(r[2], gravity / norm) * w_acc
+    if spin < _BIAS_LEARN_MAX_RATE_RADPS:
+        for i in range(3):
+            bias[i] = min(max(bias[i] - correction[i] * (w_bias * dt), -bias_max), bias_max)
+    for i in range(3):
+        rates[i] = gyro[i] - bias[i]
+    omega = (rates + correction) * (0.5 * dt)
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    q[0] = w - x * omega[0] - y * omega[1] - z * omega[2]
+    q[1] = x + w * omega[0] + y * omega[2] - z * omega[1]
+    q[2] = y + w * omega[1] - x * omega[2] + z * omega[0]
+    q[3] = z + w * omega[2] + x * omega[1] - y * omega[0]
+    q /= math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
+
+
+@njit(cache=True)
+def _predict_step(x, p, transition, transition_t, process_noise, specific_force_ned, dt):
+    """Kalman prediction of the three per-axis (position, velocity, bias) filters in place.
+
+    Compiled for the same reason as :func:`_attitude_step` (~15 µs in numpy, ~1 µs here).
+    Returns the bias-corrected NED acceleration.
+    """
+    accel = specific_force_ned.copy()
+    accel[2] += STANDARD_GRAVITY_MPS2
+    for axis in range(3):
+        x[axis] = transition @ x[axis]
+        x[axis, 0] += 0.5 * dt * dt * accel[axis]
+        x[axis, 1] += dt * accel[axis]
+        p[axis] = transition @ p[axis] @ transition_t + process_noise
+        accel[axis] -= x[axis, 2]
+    return accel
 
 
 class AttitudeEstimator:
@@ -101,28 +164,14 @@ class AttitudeEstimator:
         the accelerometer so that only gravity pulls the tilt."""
         if not self.initialized:
             self.initialize(accel_mps2, mag_gauss)
-        r = quat_to_dcm(self.q)
-        spin = float(np.linalg.norm(gyro_radps))
-        correction = np.zeros(3)
-        if mag_gauss is not None and self.w_mag > 0.0:
-            mag_ned = r @ mag_gauss
-            heading_error = _wrap_pi(math.atan2(mag_ned[1], mag_ned[0]) - self.declination_rad)
-            gain = self.w_mag * min(max(spin / _MAG_SPIN_RATE_RADPS, 1.0), 10.0)
-            correction += r[2] * (-heading_error * gain)  # NED down axis in body = row 2 of R
-        gravity = accel_mps2 if accel_ned_mps2 is None else accel_mps2 - r.T @ accel_ned_mps2
-        norm = float(np.linalg.norm(gravity))
-        if norm > 1e-3:
-            correction += cross3(r[2], gravity / norm) * self.w_acc
-        if spin < _BIAS_LEARN_MAX_RATE_RADPS:
-            bias = self.gyro_bias_radps - correction * (self.w_gyro_bias * dt_s)
-            self.gyro_bias_radps = np.minimum(
-                np.maximum(bias, -self.bias_max_radps), self.bias_max_radps
-            )
-        self.rates_radps = gyro_radps - self.gyro_bias_radps
-        omega = (self.rates_radps + correction) * (0.5 * dt_s)
-        dq = np.array([1.0, omega[0], omega[1], omega[2]])
-        q = quat_multiply(self.q, dq)
-        self.q = q / np.linalg.norm(q)
+        gains = np.array([self.w_acc, self.w_mag, self.w_gyro_bias, self.bias_max_radps])
+        _attitude_step(
+            self.q, self.gyro_bias_radps, self.rates_radps, np.asarray(gyro_radps, dtype=float),
+            np.asarray(accel_mps2, dtype=float),
+            _NAN3 if mag_gauss is None else np.asarray(mag_gauss, dtype=float),
+            _NAN3 if accel_ned_mps2 is None else np.asarray(accel_ned_mps2, dtype=float),
+            dt_s, gains, self.declination_rad,
+        )  # fmt: skip
 
 
 class GyroRestCalibration:
@@ -226,17 +275,16 @@ class PositionEstimator:
         """Propagate with the accelerometer (already rotated to NED)."""
         if dt_s != self._dt_cached:
             self._transition = np.array([[1.0, dt_s, -0.5 * dt_s**2], [0.0, 1.0, -dt_s], [0, 0, 1]])
+            self._transition_t = np.ascontiguousarray(self._transition.T)
             g = np.array([0.5 * dt_s**2, dt_s, 0.0])
             self._process_noise = np.outer(g, g) * self.acc_noise**2 + np.diag(
                 [0.0, 0.0, self.acc_bias_noise**2 * dt_s]
             )
             self._dt_cached = dt_s
-        accel = specific_force_ned_mps2 + np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])
-        f = self._transition
-        self.x = self.x @ f.T
-        self.x[:, :2] += np.outer(accel, [0.5 * dt_s**2, dt_s])
-        self.p = f @ self.p @ f.T + self._process_noise
-        self.accel_ned_mps2 = accel - self.x[:, 2]
+        self.accel_ned_mps2 = _predict_step(
+            self.x, self.p, self._transition, self._transition_t, self._process_noise,
+            np.asarray(specific_force_ned_mps2, dtype=float), dt_s,
+        )  # fmt: skip
 
     def fuse_gps(
         self,
