@@ -19,7 +19,8 @@ and is logged when it starts and when it ends:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from types import MappingProxyType
 from typing import Protocol
 
 import numpy as np
@@ -70,6 +71,11 @@ class FaultInjector:
         self._active: tuple[FaultSpec, ...] = ()
         self._stuck: dict[str, object] = {}  # sensor → frozen value
         self._last: dict[str, object] = {}  # sensor → latest healthy value
+        #: Only a scenario with a stuck fault needs the latest healthy value of each sensor.
+        self._tracks_last = any(f.kind == "sensor_stuck" for f in self.faults)
+        # What the chips and the PWM lines see changes only when a fault starts or ends.
+        self._chip_faults: Mapping[str, ChipFault] = MappingProxyType({})
+        self._pwm_dropped: frozenset[int] = frozenset()
 
     def update(self, time_us: int, model: MotorHealth) -> None:
         """Start and end faults at this frame; motor faults act on the model here."""
@@ -89,11 +95,16 @@ class FaultInjector:
                     self._stuck[sensor] = self._last.get(sensor)
                 else:
                     self._stuck.pop(sensor, None)
-        self._active_index = now_active
-        self._active = tuple(self.faults[i] for i in sorted(now_active))
+        if now_active != self._active_index:
+            self._active_index = now_active
+            self._active = tuple(self.faults[i] for i in sorted(now_active))
+            self._chip_faults = MappingProxyType(self._chip_inputs())
+            self._pwm_dropped = self._dropped_channels()
 
     def samples(self, readings: SensorReadings) -> SensorReadings:
         """Sensor-physics faults: stuck, bias, noise burst, GPS loss."""
+        if not (self._active or self._tracks_last):
+            return readings  # the healthy frame: nothing to change, nothing to remember
         for sensor, (sample_name, field) in _SAMPLE_FIELD.items():
             sample = getattr(readings, sample_name)
             if sample is None:
@@ -119,8 +130,15 @@ class FaultInjector:
             readings = dataclasses.replace(readings, gps=None)
         return readings
 
-    def chip_faults(self) -> dict[str, ChipFault]:
+    def chip_faults(self) -> Mapping[str, ChipFault]:
         """Bus faults for the chips' ``fault_mute`` / ``fault_flip`` inputs."""
+        return self._chip_faults
+
+    def pwm_dropped(self) -> frozenset[int]:
+        """PWM channels that emit no pulses now."""
+        return self._pwm_dropped
+
+    def _chip_inputs(self) -> dict[str, ChipFault]:
         faults: dict[str, ChipFault] = {}
         for fault in self._active:
             chip = fault.params.get("chip")
@@ -135,8 +153,7 @@ class FaultInjector:
                 )
         return faults
 
-    def pwm_dropped(self) -> frozenset[int]:
-        """PWM channels that emit no pulses now."""
+    def _dropped_channels(self) -> frozenset[int]:
         dropped: set[int] = set()
         for fault in self._active:
             if fault.kind == "pwm_dropout":

@@ -241,6 +241,7 @@ class _Loop:
         self._closers.append(self.layer.close)
         self.pwm = PwmOutput(4, self.rates.pwm_hz)
         self.throttle = np.zeros(4)
+        self._capture: tuple[tuple[float, ...], tuple[bool, ...]] | None = None
         self.ports = Ports(options.instance)
 
     # -- run ---------------------------------------------------------------------------
@@ -342,7 +343,10 @@ class _Loop:
             pulses=tuple(pulses),
         )
         out = self.layer.frame(chip_frame)
-        self.throttle = throttle_from_capture(out.pwm_widths_us, out.pwm_timed_out)
+        capture = (out.pwm_widths_us, out.pwm_timed_out)
+        if capture != self._capture:  # it changes only at pulse ends and timeouts
+            self._capture = capture
+            self.throttle = throttle_from_capture(*capture)
         return chip_frame, out
 
     def _log_readings(self, readings: SensorReadings, chip_frame: ChipFrame,

@@ -54,25 +54,37 @@ class PwmOutput:
             raise ValueError(f"pwm_hz must be within 50..490 Hz (standard ESC PWM), got {pwm_hz}")
         self.channels = channels
         self.period_us = round(1e6 / pwm_hz)
-        self._widths_us = np.full(channels, PWM_DISARMED_US)
+        self._disarmed_us = [round(PWM_DISARMED_US)] * channels
+        self._widths_us = self._disarmed_us
+        self._latest: tuple[tuple[float, ...], bool] | None = None  # not yet converted
         self._next_start_us = 0
 
     def command(self, motors: Sequence[float], armed: bool) -> None:
-        """The latest actuator controls (0..1); latched at the next period start."""
-        self._widths_us = (
-            throttle_to_pwm(motors) if armed else np.full(self.channels, PWM_DISARMED_US)
-        )
+        """The latest actuator controls (0..1); latched at the next period start.
+
+        Converted to widths only when a period starts: the autopilot answers every frame,
+        the outputs latch at the PWM rate.
+        """
+        self._latest = (tuple(motors), armed)
 
     def pulses(self, until_us: int, dropped: Collection[int] = ()) -> list[Pulse]:
         """Pulses starting before ``until_us`` since the last call (whole µs widths)."""
         pulses = []
         while self._next_start_us < until_us:
+            widths_us = self._latched_widths_us()
             for channel in range(self.channels):
                 if channel not in dropped:
-                    width = round(float(self._widths_us[channel]))
-                    pulses.append(Pulse(channel, self._next_start_us, width))
+                    pulses.append(Pulse(channel, self._next_start_us, widths_us[channel]))
             self._next_start_us += self.period_us
         return pulses
+
+    def _latched_widths_us(self) -> list[int]:
+        if self._latest is not None:
+            motors, armed = self._latest
+            self._latest = None
+            widths = throttle_to_pwm(motors) if armed else self._disarmed_us
+            self._widths_us = [round(float(width)) for width in widths]
+        return self._widths_us
 
 
 def throttle_from_capture(widths_us: Sequence[float], timed_out: Sequence[bool]) -> np.ndarray:
@@ -109,14 +121,17 @@ class PwmCapture:
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
         """Add the new pulses; return each channel's width (µs) and timeout flag at ``now_us``.
 
-        A channel is recomputed only once a pulse may have ended or its timeout may have
-        run out since the last result: between those events the core's registers hold.
+        A channel is recomputed only once the core may have seen a pulse end (its fall plus
+        the input re-timing latency) or its timeout may have run out since the last result:
+        between those events the width and timeout registers hold (a rise changes only
+        the period, which the rig does not use).
         """
         for pulse in pulses:
             start_s = pulse.start_us / 1e6
             self._recent[pulse.channel].append((start_s, start_s + pulse.width_us / 1e6))
-            fall_us = pulse.start_us + pulse.width_us
-            self._next_change_us[pulse.channel] = min(self._next_change_us[pulse.channel], fall_us)
+            seen_fall_us = pulse.start_us + pulse.width_us + self._latency_us  # core re-times
+            next_change_us = self._next_change_us[pulse.channel]
+            self._next_change_us[pulse.channel] = min(next_change_us, seen_fall_us)
         for channel, recent in enumerate(self._recent):
             if now_us < self._next_change_us[channel]:
                 continue

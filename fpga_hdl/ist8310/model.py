@@ -1,7 +1,8 @@
 """Transaction-level IST8310: the register behaviour of ``core.py`` in plain Python.
 
 Used by :class:`fpga_hdl.buses.TlmI2cBus` for fast campaigns; the tests run the same
-driver over this model and over the RTL and compare every byte.
+driver over this model and over the RTL and compare every byte. The six data bytes are
+computed once per loaded sample and resolution, not once per byte read.
 """
 
 from fpga_hdl.buses import I2cNack
@@ -27,7 +28,8 @@ class Ist8310Model:
         #: Fault injection, as the core's ``fault_mute`` / ``fault_flip`` ports.
         self.fault_mute = False
         self.fault_flip = 0
-        self.sample = Ist8310Sample(0, 0, 0)
+        self._sample = Ist8310Sample(0, 0, 0)
+        self._data: bytes | None = None  # DATAXL..DATAZH; None once sample or CNTL3 changed
         self.pointer = 0
         self._stored = dict.fromkeys(regs.STORED_REGISTERS, 0)
         self._measuring = False
@@ -35,7 +37,8 @@ class Ist8310Model:
 
     def load_sample(self, sample: Ist8310Sample) -> None:
         """Offer a new measurement result (the host port's ``sample_stb``)."""
-        self.sample = sample
+        self._sample = sample
+        self._data = None
 
     def write_read(self, write: bytes, read_len: int) -> bytes:
         """Write ``write`` (pointer, then registers), then read ``read_len`` bytes."""
@@ -62,8 +65,9 @@ class Ist8310Model:
         if address in regs.DATA_REGISTERS:
             if finished:
                 self._measuring = False  # reading data clears DRDY
-            index = address - Register.DATAXL
-            return regs.data_bytes(self.sample, self._stored[Register.CNTL3])[index]
+            if self._data is None:
+                self._data = regs.data_bytes(self._sample, self._stored[Register.CNTL3])
+            return self._data[address - Register.DATAXL]
         if address == Register.WAI:
             return regs.DEVICE_ID
         if address == Register.STAT1:
@@ -73,6 +77,7 @@ class Ist8310Model:
         return self._stored.get(address, 0)
 
     def _write_register(self, address: int, byte: int) -> None:
+        self._data = None  # CNTL3 (resolution) or a soft reset may have changed
         if address == Register.CNTL1:
             self._measuring = byte & regs.CNTL1_MODE_MASK == regs.CNTL1_MODE_SINGLE
             self._started_us = self.now_us % 2**32

@@ -8,6 +8,7 @@ driver, running the datasheet formulas, reads back the values the rig intended.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 from fpga_hdl.ms5611 import regs
@@ -60,19 +61,29 @@ class Ms5611Model:
     def transfer(self, tx: bytes) -> bytes:
         if not tx:
             return b""
-        data = self._command(tx[0])
-        rx = bytes([0x00]) + bytes(
-            (data[i] if i < len(data) else 0) ^ self.fault_flip for i in range(len(tx) - 1)
-        )
-        return bytes([IDLE_BYTE]) * len(tx) if self.fault_mute else rx
+        count = len(tx) - 1
+        payload = self._command(tx[0])[:count].ljust(count, b"\x00")  # then zeros
+        if self.fault_mute:
+            return bytes([IDLE_BYTE]) * len(tx)
+        if self.fault_flip:
+            payload = bytes(byte ^ self.fault_flip for byte in payload)
+        return b"\x00" + payload
 
 
-def _nearest(target: int, evaluate: Callable[[int], int], name: str) -> int:
+def _nearest(
+    target: int, evaluate: Callable[[int], int], name: str, guess: int | None = None
+) -> int:
     """The 24-bit input whose non-decreasing ``evaluate`` is nearest ``target``.
 
-    Bisection, because the compensation has no closed-form inverse once the
-    second-order terms and integer shifts are in.
+    The answer is the smallest input reaching ``target`` (or the one below it, when that
+    one is nearer). A ``guess`` that is exactly that smallest input is accepted after two
+    evaluations; otherwise bisection finds it, because the compensation has no
+    closed-form inverse once the second-order terms and integer shifts are in.
     """
+    if guess is not None and 0 < guess <= ADC_MAX:
+        below, at = evaluate(guess - 1), evaluate(guess)
+        if below < target <= at:
+            return guess - 1 if target - below < at - target else guess
     low, high = 0, ADC_MAX
     if not evaluate(low) <= target <= evaluate(high):
         raise ValueError(
@@ -90,12 +101,31 @@ def _nearest(target: int, evaluate: Callable[[int], int], name: str) -> int:
     return low
 
 
+@functools.lru_cache(maxsize=4096)
+def _d2_for(temp_target: int, prom: tuple[int, ...]) -> int:
+    """D2 for a temperature in 0.01 °C: cached, as the air temperature changes slowly."""
+    return _nearest(
+        temp_target, lambda d: regs.compensate(0, d, prom).temp, "temperature (0.01 °C)"
+    )
+
+
 def raw_from_si(
     pressure_pa: float, temperature_c: float, prom: tuple[int, ...] = regs.DEFAULT_PROM
 ) -> tuple[int, int]:
-    """(D1, D2) that the datasheet compensation turns into these values, to 1 Pa / 0.01 °C."""
-    temp_target = round(temperature_c * 100)
-    d2 = _nearest(temp_target, lambda d: regs.compensate(0, d, prom).temp, "temperature (0.01 °C)")
+    """(D1, D2) that the datasheet compensation turns into these values, to 1 Pa / 0.01 °C.
+
+    Given D2, the pressure P = ((D1·SENS >> 21) − OFF) >> 15 first reaches a target at
+    D1 = ⌈(target·2¹⁵ + OFF)·2²¹ / SENS⌉ (floor shifts); that guess is checked against the
+    datasheet formula before it is used, so a PROM or formula it does not fit only costs
+    the bisection.
+    """
+    d2 = _d2_for(round(temperature_c * 100), tuple(prom))
     pressure_target = round(pressure_pa)
-    d1 = _nearest(pressure_target, lambda d: regs.compensate(d, d2, prom).pressure, "pressure (Pa)")
+    at_d2 = regs.compensate(0, d2, prom)
+    guess = None
+    if at_d2.sens > 0:
+        guess = -(-(((pressure_target << 15) + at_d2.off) << 21) // at_d2.sens)
+    d1 = _nearest(
+        pressure_target, lambda d: regs.compensate(d, d2, prom).pressure, "pressure (Pa)", guess
+    )
     return d1, d2
