@@ -85,7 +85,11 @@ class MavlinkLink:
         self.upload: _Upload | None = None
 
     def receive(self) -> list[object]:
-        """All messages waiting on the socket (bad data included, as ``BAD_DATA``)."""
+        """All messages waiting on the socket (bad data included, as ``BAD_DATA``).
+
+        The link answers the sender of the last valid message: garbage from elsewhere (a
+        port scan, a fuzzer) does not steal the ground station's telemetry.
+        """
         messages: list[object] = []
         while True:
             try:
@@ -94,8 +98,10 @@ class MavlinkLink:
                 return messages
             except OSError:  # e.g. ICMP port unreachable reported on a later call
                 continue
-            self.peer = address
-            messages.extend(self.mav.parse_buffer(data) or [])
+            parsed = self.mav.parse_buffer(data) or []
+            if any(message.get_type() != "BAD_DATA" for message in parsed):
+                self.peer = address
+            messages.extend(parsed)
 
     def send(self, message) -> None:
         # nobody listening (yet) is fine: UDP telemetry is fire-and-forget, as in PX4

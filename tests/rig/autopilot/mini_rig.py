@@ -1,8 +1,9 @@
-"""A lockstep simulator for the autopilot-process tests: the test plant behind PX4's
-simulator API on TCP, plus a pymavlink ground station on UDP.
+"""A lockstep simulator that can misbehave, for what the real rig cannot do: bytes that are
+not MAVLink on PX4's simulator link while the autopilot flies.
 
-It is the smallest rig that exercises the real process (``python -m rig.autopilot``) over real
-loopback sockets; the rig's own closed loop (``rig run``) is tested in ``tests/rig``.
+It serves quad_model's F450 and its sensor physics (SI samples, no chips) behind PX4's
+simulator API on TCP, and runs the real process (``python -m rig.autopilot``). Everything a
+well-behaved simulator does is tested through the rig itself (``test_end_to_end.py``).
 """
 
 from __future__ import annotations
@@ -14,27 +15,30 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
+from quad_model import QuadModel, SensorSuite, load_vehicle
 from rig.px4_sim_api import ActuatorMode, Ports, mavlink
 from rig.sim_messages import hil_gps, hil_sensor
-from tests.rig.autopilot.plant import QuadPlant
 
 WAIT_S = 10.0
 
 
 class MiniRig:
-    """Runs ``python -m rig.autopilot --instance I`` against a :class:`QuadPlant`."""
+    """Runs ``python -m rig.autopilot --instance I`` against the F450 model."""
 
-    def __init__(self, instance: int, plant: QuadPlant, log_path: Path, imu_rate_hz: int = 250,
-                 mag: bool = True) -> None:  # fmt: skip
-        self.ports = Ports(instance)
-        self.plant = plant
-        self.imu_rate_hz = imu_rate_hz
-        self.mag = mag
+    def __init__(self, instance: int, seed: int, log_path: Path, imu_rate_hz: int = 250) -> None:
+        vehicle = load_vehicle("f450_high_precision")
+        model_rng, sensor_rng = np.random.default_rng(seed).spawn(2)
+        self.model = QuadModel(vehicle, model_rng)
+        self.sensors = SensorSuite(vehicle, self.model.environment, sensor_rng, imu_rate_hz)
+        self.frame_us = 1_000_000 // imu_rate_hz
+        self.throttle = np.zeros(4)
         self.mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=200)
         self.parser = mavlink.MAVLink(None)
         self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.listener.bind(("127.0.0.1", self.ports.simulator_tcp))
+        self.listener.bind(("127.0.0.1", Ports(instance).simulator_tcp))
         self.listener.listen(1)
         self.listener.settimeout(30.0)
         self.process = subprocess.Popen(
@@ -43,36 +47,35 @@ class MiniRig:
         )  # fmt: skip
         self.sim, _ = self.listener.accept()
         self.sim.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.frame = 0
         self.armed = False
 
-    def step(self, seconds: float, gcs: list[GroundStation] = ()) -> None:
-        """Advance in lockstep; ground stations collect what arrives meanwhile."""
-        dt_s = 1.0 / self.imu_rate_hz
-        for _ in range(round(seconds * self.imu_rate_hz)):
-            plant = self.plant
-            frame = plant.sensors(self.frame, self.imu_rate_hz)
-            time_us = plant.time_us + 1
+    @property
+    def altitude_m(self) -> float:
+        return -float(self.model.truth.position_ned_m[2])
+
+    def step(self, seconds: float, collect=lambda: None) -> None:
+        """Advance in lockstep; ``collect`` runs after each frame (ground stations listen)."""
+        for _ in range(round(seconds * 1e6 / self.frame_us)):
+            self.model.advance(self.throttle, self.frame_us * 1e-6)
+            truth = self.model.truth
+            time_us = round(truth.time_s * 1e6)
+            readings = self.sensors.sample(truth)
+            imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
             data = b""
-            if frame.gps is not None:
-                g = frame.gps
-                data += hil_gps(self.mav, time_us, lat_deg=g.lat_deg, lon_deg=g.lon_deg,
-                                alt_amsl_m=g.alt_amsl_m, vel_ned_mps=g.velocity_ned_mps,
-                                eph_m=g.eph_m, epv_m=g.epv_m, fix_type=g.fix_type,
-                                satellites_visible=g.satellites_used).pack(self.mav)  # fmt: skip
-            mag = frame.mag_gauss if self.mag else None
-            baro = None
-            if frame.baro_pressure_pa is not None:
-                baro = (frame.baro_pressure_pa, frame.baro_temperature_degc)
-            data += hil_sensor(self.mav, time_us, accel_mps2=frame.accel_mps2,
-                               gyro_radps=frame.gyro_radps, mag_gauss=mag,
-                               baro=baro).pack(self.mav)  # fmt: skip
+            if gps is not None:
+                fix = hil_gps(self.mav, time_us, lat_deg=gps.lat_deg, lon_deg=gps.lon_deg,
+                              alt_amsl_m=gps.alt_amsl_m, vel_ned_mps=gps.vel_ned_mps,
+                              eph_m=gps.eph_m, epv_m=gps.epv_m, fix_type=gps.fix_type,
+                              satellites_visible=gps.satellites_visible)  # fmt: skip
+                data += fix.pack(self.mav)
+            data += hil_sensor(
+                self.mav, time_us, accel_mps2=imu.accel_mps2, gyro_radps=imu.gyro_radps,
+                mag_gauss=None if mag is None else mag.field_gauss,
+                baro=None if baro is None else (baro.pressure_pa, baro.temperature_degc),
+            ).pack(self.mav)  # fmt: skip
             self.sim.sendall(data)
-            motors = self._await_controls(time_us)
-            plant.step(motors, dt_s)
-            self.frame += 1
-            for station in gcs:
-                station.collect()
+            self.throttle = np.array(self._await_controls(time_us))
+            collect()
 
     def send_raw(self, data: bytes) -> None:
         """Bytes on the simulator link between frames (fuzzing)."""
@@ -102,55 +105,3 @@ class MiniRig:
         finally:
             if self.process.poll() is None:
                 self.process.kill()
-
-
-class GroundStation:
-    """A pymavlink client on one of the autopilot's UDP links; keeps everything it hears."""
-
-    def __init__(self, port: int, target_system: int) -> None:
-        self.target_system = target_system
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.setblocking(False)
-        self.target = ("127.0.0.1", port)
-        self.mav = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)
-        self.parser = mavlink.MAVLink(None)
-        self.received: list = []
-        self.statustexts: list[str] = []  # every one ever heard, never consumed
-
-    def send(self, *messages) -> None:
-        for message in messages:
-            self.sock.sendto(message.pack(self.mav), self.target)
-
-    def send_raw(self, data: bytes) -> None:
-        self.sock.sendto(data, self.target)
-
-    def collect(self) -> None:
-        while True:
-            try:
-                data = self.sock.recv(65535)
-            except BlockingIOError:
-                return
-            messages = self.parser.parse_buffer(data) or []
-            self.received.extend(messages)
-            self.statustexts += [m.text for m in messages if m.get_type() == "STATUSTEXT"]
-
-    def wait_for(self, kind: str, condition=lambda m: True, timeout_s: float = WAIT_S):
-        """The first not-yet-consumed message of ``kind`` that meets ``condition``."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            self.collect()
-            for i, message in enumerate(self.received):
-                if message.get_type() == kind and condition(message):
-                    del self.received[: i + 1]
-                    return message
-            assert time.monotonic() < deadline, f"no {kind} within {timeout_s} s"
-            time.sleep(0.005)
-
-    def command(self, command: int, *params: float):
-        padded = [*params, *[0.0] * (7 - len(params))]
-        self.send(self.mav.command_long_encode(self.target_system, 1, command, 0, *padded))
-        return self.wait_for("COMMAND_ACK", lambda m: m.command == command)
-
-    def close(self) -> None:
-        self.sock.close()
