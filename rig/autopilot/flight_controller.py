@@ -213,7 +213,7 @@ class FlightController:
         self._enter(self.nav_state)
         if self.nav_state == NavState.AUTO_TAKEOFF:
             self._prepare_takeoff()
-        self._status(mavlink.MAV_SEVERITY_INFO, "Armed by external command")
+        self.notify(mavlink.MAV_SEVERITY_INFO, "Armed by external command")
         return _ACCEPTED
 
     def disarm(self, force: bool = False) -> CommandResult:
@@ -257,7 +257,7 @@ class FlightController:
 
     def set_mission(self, items: list[MissionItem]) -> None:
         self.navigator.set_mission(items)
-        self._status(mavlink.MAV_SEVERITY_INFO, f"Mission with {len(items)} items uploaded")
+        self.notify(mavlink.MAV_SEVERITY_INFO, f"Mission with {len(items)} items uploaded")
 
     def set_mission_current(self, seq: int) -> bool:
         if not 0 <= seq < len(self.navigator.mission):
@@ -454,11 +454,11 @@ class FlightController:
         if self.nav_state in _POSITION_MODES and not self.position_valid():
             self.failsafe = True
             self._enter(NavState.DESCEND)
-            self._status(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: no position (GPS lost), Descend")
+            self.notify(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: no position (GPS lost), Descend")
         if self.nav_state == NavState.OFFBOARD and not self._offboard_fresh():
             self.failsafe = True
             self._enter(NavState.AUTO_LOITER)
-            self._status(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: offboard signal lost, Hold")
+            self.notify(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: offboard signal lost, Hold")
         self._land_detector(time_us)
 
     def _report_sensor_faults(self, time_us: int) -> None:
@@ -467,7 +467,7 @@ class FlightController:
             fault = monitor.fault(time_us) if monitor.last_time_us is not None else None
             if fault and key not in self._reported_faults:
                 self._reported_faults.add(key)
-                self._status(mavlink.MAV_SEVERITY_CRITICAL, f"{monitor.name} sensor {fault}")
+                self.notify(mavlink.MAV_SEVERITY_CRITICAL, f"{monitor.name} sensor {fault}")
             elif not fault:
                 self._reported_faults.discard(key)
 
@@ -479,7 +479,7 @@ class FlightController:
             idle = self._idle()
             if not idle and detector.detect_takeoff(down_m, float(velocity[2])):
                 self._took_off = True
-                self._status(mavlink.MAV_SEVERITY_INFO, "Takeoff detected")
+                self.notify(mavlink.MAV_SEVERITY_INFO, "Takeoff detected")
             elif idle and not self._took_off:
                 limit_s = p["COM_DISARM_PRFLT"]
                 if limit_s > 0 and time_us - self.armed_time_us > limit_s * 1e6:
@@ -496,7 +496,7 @@ class FlightController:
             float(self.velocity_sp[2]), self.collective_thrust, math.hypot(rates[0], rates[1]),
         ):  # fmt: skip
             self._landed_since_us = time_us
-            self._status(mavlink.MAV_SEVERITY_INFO, "Landing detected")
+            self.notify(mavlink.MAV_SEVERITY_INFO, "Landing detected")
             if self.nav_state == NavState.AUTO_MISSION:
                 self.navigator.land_item_done()
 
@@ -552,7 +552,7 @@ class FlightController:
         if self.nav_state == NavState.AUTO_TAKEOFF:
             setpoint = nav.takeoff(dt_s)
             if abs(position[2] - nav.takeoff_target_ned[2]) < self.params["NAV_MC_ALT_RAD"]:
-                self._status(mavlink.MAV_SEVERITY_INFO, "Takeoff complete, holding")
+                self.notify(mavlink.MAV_SEVERITY_INFO, "Takeoff complete, holding")
                 nav.hold_ned = nav.takeoff_target_ned.copy()
                 self.nav_state = self.user_nav_state = NavState.AUTO_LOITER
         elif self.nav_state == NavState.AUTO_MISSION:
@@ -616,14 +616,15 @@ class FlightController:
         self.land_detector.disarm()
         self.motors = np.zeros(4)
         severity = mavlink.MAV_SEVERITY_CRITICAL if self.failsafe else mavlink.MAV_SEVERITY_INFO
-        self._status(severity, reason)
+        self.notify(severity, reason)
 
     def refuse(self, reason: str) -> CommandResult:
         """Refuse a request: the reason goes out as a critical STATUSTEXT and into the log."""
-        self._status(mavlink.MAV_SEVERITY_CRITICAL, reason)
+        self.notify(mavlink.MAV_SEVERITY_CRITICAL, reason)
         return CommandResult(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, reason)
 
-    def _status(self, severity: int, text: str) -> None:
+    def notify(self, severity: int, text: str) -> None:
+        """Tell the ground stations (STATUSTEXT) and the log, as PX4's ``mavlink_log_*``."""
         self.status_messages.append((severity, text))
         if self.log is not None:
             self.log.log(_SEVERITY_LEVEL.get(severity, "info"), self.time_us, text)
@@ -634,7 +635,7 @@ class FlightController:
 
     def _on_item_reached(self, seq: int) -> None:
         self.mission_events.append(("reached", seq))
-        self._status(mavlink.MAV_SEVERITY_INFO, f"Mission item {seq} reached")
+        self.notify(mavlink.MAV_SEVERITY_INFO, f"Mission item {seq} reached")
 
     def _on_mission_current(self, seq: int) -> None:
         self.mission_events.append(("current", seq))

@@ -267,7 +267,7 @@ class GroundStation:
                     else _param_id(msg.param_id))  # fmt: skip
             link.send(self._param_value(name))
         except ParameterError as error:
-            self.fc.refuse(str(error))
+            self.fc.notify(mavlink.MAV_SEVERITY_WARNING, str(error))
 
     def _param_set(self, link: MavlinkLink, msg) -> None:
         name = _param_id(msg.param_id)
@@ -277,7 +277,7 @@ class GroundStation:
         try:
             self.fc.set_parameter(name, value)
         except ParameterError as error:
-            self.fc.refuse(str(error))
+            self.fc.notify(mavlink.MAV_SEVERITY_WARNING, str(error))
             if name not in self.fc.params:
                 return
         link.send(self._param_value(name))  # the value it holds now, as PX4 answers
@@ -313,7 +313,10 @@ class GroundStation:
         verdict = check_mission_item(item)
         if verdict != mavlink.MAV_MISSION_ACCEPTED:
             link.upload = None
-            self.fc.refuse(f"Mission item {msg.seq} rejected (command {msg.command})")
+            self.fc.notify(
+                mavlink.MAV_SEVERITY_WARNING,
+                f"Mission item {msg.seq} rejected (command {msg.command})",
+            )
             self.flush_events()
             self._mission_ack(link, msg, verdict)
             return
@@ -365,7 +368,7 @@ class GroundStation:
                 continue
             if upload.retries >= MISSION_RETRIES:
                 link.upload = None
-                self.fc.refuse("Mission upload timed out")
+                self.fc.notify(mavlink.MAV_SEVERITY_WARNING, "Mission upload timed out")
                 continue
             upload.retries += 1
             self._request_item(link)
