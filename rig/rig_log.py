@@ -69,6 +69,8 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
 
 _ZERO_Q = np.zeros(4)
 _ZERO_3 = np.zeros(3)
+#: ``actuator_motors.control`` and ``actuator_outputs.output`` lengths (PX4 msg/*.msg).
+_CONTROLS, _OUTPUTS = 12, 16
 
 
 class RigLog:
@@ -90,13 +92,17 @@ class RigLog:
         self._previous_rates: np.ndarray | None = None
         self._previous_rates_us = 0
         self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0}
+        # Reused every frame (the writer packs them at once): unused slots stay NaN / 0.
+        self._control = np.full(_CONTROLS, math.nan)
+        self._output = np.zeros(_OUTPUTS)
 
     def truth(self, time_us: int, truth: VehicleTruth) -> None:
         w = self.writer
         w.write("vehicle_attitude_groundtruth", time_us, timestamp_sample=time_us,
                 q=truth.attitude_quat, delta_q_reset=_ZERO_Q, quat_reset_counter=0)  # fmt: skip
-        p, v, a = truth.position_ned_m, truth.velocity_ned_mps, truth.acceleration_ned_mps2
-        q = truth.attitude_quat
+        # Plain floats: the writer turns each numpy scalar back into one anyway.
+        p, v = truth.position_ned_m.tolist(), truth.velocity_ned_mps.tolist()
+        a, q = truth.acceleration_ned_mps2.tolist(), truth.attitude_quat.tolist()
         heading = math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
         lat, lon, alt = self._home
         w.write(
@@ -154,15 +160,15 @@ class RigLog:
         )  # fmt: skip
 
     def motors(self, time_us: int, commanded_us: int, controls: Sequence[float]) -> None:
-        control = np.full(12, math.nan)
-        control[: len(controls)] = controls
+        self._control[: len(controls)] = controls
+        self._control[len(controls) :] = math.nan
         self.writer.write("actuator_motors", time_us, timestamp_sample=commanded_us,
-                          control=control, reversible_flags=0)  # fmt: skip
+                          control=self._control, reversible_flags=0)  # fmt: skip
 
     def pwm(self, time_us: int, widths_us: Sequence[float]) -> None:
-        output = np.zeros(16)
-        output[: len(widths_us)] = widths_us
-        self.writer.write("actuator_outputs", time_us, noutputs=len(widths_us), output=output)
+        self._output[: len(widths_us)] = widths_us
+        self._output[len(widths_us) :] = 0.0
+        self.writer.write("actuator_outputs", time_us, noutputs=len(widths_us), output=self._output)
 
     def event(self, time_us: int, text: str, level: str = "info") -> None:
         self.writer.log(level, time_us, text)
