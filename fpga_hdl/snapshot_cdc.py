@@ -23,8 +23,12 @@ from amaranth.lib.wiring import In, Out
 
 __all__ = ["SnapshotSynchronizer"]
 
-#: Bits of the Gray change counter; any width >= 2 works, 3 keeps an 8-state history.
-COUNT_BITS = 3
+#: Bits of the Gray change counter. While the destination clock is stopped (a gated
+#: simulation clock) the count must not wrap back to the value last copied, or the
+#: destination misses the updates: with 3 bits, 8 PWM result changes between two host
+#: reads (one 4 ms rig frame at 400 Hz PWM) left the host port a whole frame stale.
+#: 16 bits allow 65535 updates between reads.
+COUNT_BITS = 16
 
 
 def _gray(value):

@@ -1,11 +1,17 @@
 """``sensor_layer = "rtl"``: the generated Verilog under cocotb, in its own process.
 
-:class:`RtlSensorLayer` builds SensorTop's Verilog (cached by content hash under
-``build/``), starts the simulator through fpga_hdl's cocotb runner with
-``rig/cosim_worker.py`` as the cocotb module, and talks to it over the binary channel
-of :mod:`rig.cosim_channel` (one request, one response per frame). Inside the simulator
-the very same :class:`rig.sensor_layer.SensorEngine` runs over pin-level bus masters, so
-the RTL and the TLM layers differ only in the buses underneath.
+:class:`RtlSensorLayer` builds fpga_hdl's co-simulation harness (SensorTop, every chip
+and the PWM capture core as RTL, with the flight controller's SPI/I2C controllers and
+PWM timer around it as gateware; cached by content hash under ``build/``), starts the
+simulator through fpga_hdl's cocotb runner with ``rig/cosim_worker.py`` as the cocotb
+module, and talks to it over the binary channel of :mod:`rig.cosim_channel` (one
+request, one response per frame). Inside the simulator the very same
+:class:`rig.sensor_layer.SensorEngine` runs over the harness's buses, so the RTL and the
+TLM layers differ only in what is underneath, and give the same readouts.
+
+The PWM capture tick (``pwm_tick_hz``) is a build parameter of the gateware: a coarser
+tick costs fewer simulated cycles (the capture clock runs all the time, one cycle per
+tick) and measures widths in coarser steps. ``benchmarks/bench_rig.py`` has the figures.
 
 Every wait is bounded: the first build of the Verilator model takes a minute or two
 (``build_timeout_s``); each frame must come back within ``frame_timeout_s`` of wall time,
@@ -23,14 +29,15 @@ from pathlib import Path
 
 from rig.cosim_channel import (
     ERROR,
-    START,
     STOP,
     decode_readout,
     encode_frame,
+    encode_start,
     receive_message,
     send_message,
 )
 from rig.errors import CosimError
+from rig.pwm import PWM_TICK_HZ
 from rig.sensor_layer import ChipFrame, ChipReadout
 
 WORKER_MODULE = "cosim_worker"
@@ -39,16 +46,24 @@ DEFAULT_SIMULATOR = "verilator"
 
 
 class RtlSensorLayer:
-    """The chips as RTL in a cocotb simulator process, behind the binary channel."""
+    """The chips as RTL in a cocotb simulator process, behind the binary channel.
+
+    ``pwm_hz`` is the autopilot's PWM rate (its timer period is replayed by the harness's
+    PWM generator); ``pwm_tick_hz`` the capture core's tick.
+    """
 
     def __init__(
         self,
         simulator: str = DEFAULT_SIMULATOR,
         *,
+        pwm_hz: int,
+        pwm_tick_hz: float = PWM_TICK_HZ,
         build_timeout_s: float = 600.0,
         frame_timeout_s: float = 10.0,
     ) -> None:
         self.simulator = simulator
+        self.pwm_period_us = round(1e6 / pwm_hz)
+        self.pwm_tick_hz = pwm_tick_hz
         self.frame_timeout_s = frame_timeout_s
         self._folder = tempfile.TemporaryDirectory(prefix="rig-cosim-")
         path = os.path.join(self._folder.name, "channel.sock")
@@ -64,13 +79,16 @@ class RtlSensorLayer:
 
     def _simulate(self, path: str) -> None:
         """Runs in a thread: cocotb's runner blocks until the simulator process exits."""
-        from fpga_hdl.cosim.runner import run_cocotb  # the simulator toolchain, on demand
-        from fpga_hdl.top import SensorTop
+        # The simulator toolchain, on demand.
+        from fpga_hdl.cosim.harness import GATED_CLOCK_VERILOG, HARNESS_TOPLEVEL, CosimHarness
+        from fpga_hdl.cosim.runner import run_cocotb
 
+        env = {"RIG_COSIM_SOCKET": path, "RIG_COSIM_PWM_TICK_HZ": repr(self.pwm_tick_hz)}
         try:
             run_cocotb(
-                SensorTop(), "sensor_top", WORKER_MODULE, module_dir=WORKER_DIR,
-                simulator=self.simulator, extra_env={"RIG_COSIM_SOCKET": path},
+                CosimHarness(pwm_tick_hz=self.pwm_tick_hz), HARNESS_TOPLEVEL, WORKER_MODULE,
+                module_dir=WORKER_DIR, simulator=self.simulator, extra_env=env,
+                extra_verilog={"cosim_gated_clock": GATED_CLOCK_VERILOG},
             )  # fmt: skip
         except BaseException as error:  # reported by the rig's thread, with its message
             self._failure = error
@@ -113,7 +131,7 @@ class RtlSensorLayer:
         return answer[1:]
 
     def start(self) -> None:
-        self._request(bytes([START]))
+        self._request(encode_start(self.pwm_period_us))
 
     def frame(self, frame: ChipFrame) -> ChipReadout:
         return decode_readout(self._request(encode_frame(frame)))

@@ -2,15 +2,22 @@
 
 The co-simulation runs in its own process (cocotb embeds Python in the simulator), as the
 paper's FPGA sits behind the real-time computer. The rig talks to it over a Unix stream
-socket whose path the worker finds in ``RIG_COSIM_SOCKET``. Strictly one request, then one
-response; the rig waits for each response under a wall-clock bound.
+socket whose path the worker finds in ``RIG_COSIM_SOCKET`` (and the PWM capture tick, a
+build parameter of the gateware, in ``RIG_COSIM_PWM_TICK_HZ``). Strictly one request,
+then one response; the rig waits for each response under a wall-clock bound.
 
 Every message is a frame: ``u32 length`` (little endian, bytes after this field), then
 ``u8 kind``, then the body. All integers and floats are little endian.
 
 Requests (rig → co-simulation):
 
-- ``START`` (kind 1), no body: reset the chips, run PX4's probe/configure sequences.
+- ``START`` (kind 1): reset the chips, run PX4's probe/configure sequences, then start
+  the PWM generator and the capture clock; simulated time follows rig time from here.
+
+  | field | type | meaning |
+  |---|---|---|
+  | pwm_period_us | u32 | the autopilot's PWM period (``1 / pwm_hz``), whole capture ticks |
+
 - ``FRAME`` (kind 2), one lockstep frame (:class:`rig.sensor_layer.ChipFrame`):
 
   | field | type | meaning |
@@ -23,11 +30,16 @@ Requests (rig → co-simulation):
   | faults | 3 × (u8 mute, u8 flip) | mpu6000, ms5611, ist8310 |
   | pulse count | u16 | then per pulse: u8 channel, u64 start_us, u32 width_us |
 
+  The pulses are those starting after the previous frame's ``now_us`` and up to this
+  one's, at the PWM period starts (multiples of ``pwm_period_us`` from 0); a period
+  without a pulse on a channel means that output was silent (a dropout).
+
 - ``STOP`` (kind 3), no body: end the simulation; the worker answers, then exits.
 
 Responses (co-simulation → rig): kind 128 ``OK`` with an optional body, or kind 129
 ``ERROR`` with a UTF-8 message (the worker's one-line reason). The ``FRAME`` response body
-(:class:`rig.sensor_layer.ChipReadout`):
+(:class:`rig.sensor_layer.ChipReadout`), decoded by PX4's drivers from the RTL chips'
+bytes and read from the RTL PWM capture core:
 
   | field | type | meaning |
   |---|---|---|
@@ -53,11 +65,22 @@ from rig.sensor_layer import CHIPS, NO_FAULT, ChipFault, ChipFrame, ChipReadout
 
 START, FRAME, STOP, OK, ERROR = 1, 2, 3, 128, 129
 _LENGTH = struct.Struct("<I")
+_START = struct.Struct("<I")
 _FRAME_HEAD = struct.Struct("<QB7i3h2I6BH")
 _PULSE = struct.Struct("<BQI")
 _READOUT_HEAD = struct.Struct("<7dB3d2dB")
 _PWM_CHANNEL = struct.Struct("<dB")
 _ERROR_HEAD = struct.Struct("<BH")
+
+
+def encode_start(pwm_period_us: int) -> bytes:
+    return bytes([START]) + _START.pack(pwm_period_us)
+
+
+def decode_start(body: bytes) -> int:
+    """The PWM period (µs) of a ``START`` body."""
+    (pwm_period_us,) = _START.unpack(body)
+    return pwm_period_us
 
 
 def encode_frame(frame: ChipFrame) -> bytes:

@@ -1,31 +1,54 @@
 """cocotb module of the RTL sensor layer: serves the rig's channel inside the simulator.
 
-Started by :class:`rig.cosim.RtlSensorLayer` through fpga_hdl's cocotb runner on
-SensorTop's generated Verilog. It connects to the Unix socket named by
+Started by :class:`rig.cosim.RtlSensorLayer` through fpga_hdl's cocotb runner on the
+co-simulation harness (:class:`fpga_hdl.cosim.harness.CosimHarness`: SensorTop unchanged,
+with the flight controller's SPI/I2C controllers, its PWM timer and the host-port burst
+writer/reader around it as gateware). It connects to the Unix socket named by
 ``RIG_COSIM_SOCKET`` and answers the requests of :mod:`rig.cosim_channel` one by one.
-While it waits for a request no simulated time passes, and SensorTop's clock only runs
-while the host port is written or a bus transfer is under way (fpga_hdl's gated-clock
-host), so an idle millisecond costs nothing.
 
-Which parts are RTL: the MPU-6000 and MS5611 on the shared SPI bus, driven by
-fpga_hdl's pin-level SPI controller, with samples, time and faults loaded through the
-host port. The IST8310 (I2C) and the PWM capture run on their transaction-level models
-in this process until fpga_hdl ships a cocotb I2C controller and puts the PWM capture
-core in SensorTop; the rig log's ``ver_hw`` says ``RIG_RTL``.
+Everything is RTL: the MPU-6000 and the MS5611 on the shared SPI bus, the IST8310 on
+I2C, and the PWM capture core, which measures the pulses the harness's PWM generator
+replays from the autopilot's outputs. Python only asks and waits once per transaction
+(``fpga_hdl.cosim.peripherals``); the clocks are gated Verilog clocks, so no Python runs
+per cycle.
+
+Time. Simulated time follows rig time from an *epoch* (the simulated time of rig time 0,
+fixed after start-up), so the capture core sees the real pulse durations. Its tick clock
+(``pwm_tick_hz``) runs from then on with an edge a quarter system period after every rig
+tick ``k / pwm_tick_hz``: edge ``k`` of the core is sample ``k`` of fpga_hdl's tick-exact
+model, which is what the TLM layer evaluates. The generator's outputs are registered, so
+a pulse the rig starts at tick ``k`` is set up to leave the generator at edge ``k - 1``,
+and its width must be in the generator's preload register before that edge. A frame's
+widths are therefore written when its request arrives, before the bus transfers, and
+the capture is read once simulated time has reached the frame's ``now_us``.
+
+Reading the capture exactly. Its results reach the host port through SensorTop's
+snapshot synchroniser, which copies them only once its change count, two ticks behind
+the results, has moved; and the reader takes one word per system cycle, over about
+two 1 µs ticks. A read started at the tick of ``now_us`` would therefore miss a change
+made in the last two ticks (nothing moved the count yet) or see one made during the
+read. The worker knows every result change before it happens (it replays the pulses:
+a rise changes the period two ticks after its sample, a fall the width, a silent
+channel times out ``timeout_ticks`` after its last rise), so :meth:`RtlChips._read_tick`
+picks the tick nearest ``now_us`` at which the read sees exactly the results the
+tick-exact model gives at ``now_us``: no width or timeout change between the two, none
+still waiting for the count, none copied in during the read. The rig's readout then
+equals the TLM layer's; the tests check it frame by frame.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 
 import cocotb
+from cocotb.utils import get_sim_time
 
-from fpga_hdl.buses import TlmI2cBus
-from fpga_hdl.cosim.host import CocotbHost
-from fpga_hdl.cosim.spi_master import CocotbSpiMaster
-from fpga_hdl.ist8310.model import Ist8310Model
-from fpga_hdl.top import HOST_MAP, SYS_CLK_HZ
+from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, RESULT_SYNC_CYCLES
+from fpga_hdl.cosim.peripherals import Harness
+from fpga_hdl.pwm_capture.core import CHANNELS, LATENCY_TICKS, timeout_ticks
+from fpga_hdl.top import HOST_MAP, PWM_TIMEOUT_S
 from rig.cosim_channel import (
     ERROR,
     FRAME,
@@ -33,46 +56,195 @@ from rig.cosim_channel import (
     START,
     STOP,
     decode_frame,
+    decode_start,
     encode_readout,
     receive_message,
     send_message,
 )
-from rig.pwm import MOTOR_CHANNELS, Pulse, PwmCapture
+from rig.pwm import MOTOR_CHANNELS, Pulse
 from rig.sensor_layer import CHIPS, NO_FAULT, ChipFrame, SensorEngine
 
 #: SensorTop's host-port channel and fault names for the rig's chip names.
 _HOST_CHIP = {"mpu6000": "imu", "ms5611": "baro", "ist8310": "mag"}
+#: Where the harness puts the PWM clock's edges: a quarter system period after the grid
+#: (``fpga_hdl.cosim.peripherals.PWM_PHASE_PS``), so after each rig tick.
+_PWM_PHASE_PS = round(0.25e12 / HARNESS_SYS_CLK_HZ)
+#: How long the host port's result read takes: request, synchroniser wait, one word per
+#: system cycle, acknowledge (``fpga_hdl.cosim.harness.HostReader``), with a cycle spare.
+_READ_PS = round((RESULT_SYNC_CYCLES + len(HOST_MAP.reads) + 3) * 1e12 / HARNESS_SYS_CLK_HZ)
+#: The snapshot synchroniser's change count moves this many ticks after a result.
+_COUNT_LAG_TICKS = 2
+#: Ticks around ``now_us`` searched for an exact read (a result changes at most at two
+#: edges per pulse, so a few ticks hold a quiet stretch at PWM rates).
+_READ_SEARCH_TICKS = 16
+
+
+class PwmTimingError(RuntimeError):
+    """The frame's pulses cannot be replayed exactly by the harness's PWM generator."""
 
 
 class RtlChips:
-    """:class:`rig.sensor_layer.ChipHost` over SensorTop's host port."""
+    """:class:`rig.sensor_layer.ChipHost` over the harness: host port, PWM generator, capture."""
 
-    def __init__(self, host: CocotbHost) -> None:
-        self.host = host
-        self.ist8310 = Ist8310Model()
-        self.pwm = PwmCapture(MOTOR_CHANNELS)
+    def __init__(self, harness: Harness, *, pwm_tick_hz: float) -> None:
+        self.harness = harness
+        self.tick_us = 1e6 / pwm_tick_hz
+        self.tick_ps = round(1e12 / pwm_tick_hz)
+        self.period_us = 0
+        self.timeout_ticks = timeout_ticks(pwm_tick_hz, PWM_TIMEOUT_S)
+        self._window_ticks = math.ceil(_READ_PS / self.tick_ps) + 1  # edges during a read
+        self._epoch_ps = 0
+        self._next_start_us = 0  # the next PWM period start not replayed yet
+        self._loaded: list[int] = [0] * CHANNELS  # widths (ticks) in the preload register
+        self._later: list[tuple[int, list[int]]] = []  # this frame's further periods
+        #: Ticks at which the capture's results change: any result, and the rig's (motor
+        #: widths and timeouts); kept from a frame before ``now`` on.
+        self._changes: set[int] = set()
+        self._readout_changes: set[int] = set()
+        self._last_rise = [-1] * MOTOR_CHANNELS  # tick of each motor's last seen rise
+
+    async def start_pwm(self, period_us: int) -> None:
+        """Fix the epoch two ticks ahead, start the generator and the capture clock.
+
+        The generator runs from edge ``-1`` (one tick before rig time 0) with zero widths:
+        no pulse until the first frame preloads the widths of the period at rig time 0.
+        """
+        if period_us * 1_000_000 % self.tick_ps:
+            raise PwmTimingError(
+                f"the PWM period ({period_us} µs) is not a whole number of capture ticks "
+                f"({self.tick_us:g} µs)"
+            )
+        self.period_us = period_us
+        now_ps = get_sim_time("ps")
+        self._epoch_ps = (math.ceil(now_ps / self.tick_ps) + 2) * self.tick_ps
+        self.harness.pwm.write([0] * CHANNELS, period_ticks=round(period_us / self.tick_us))
+        # The gated clock's first rising edge comes half a period after it is enabled.
+        await self._wait_until_ps(self._edge_ps(-1) - _PWM_PHASE_PS - self.tick_ps // 2)
+        await self.harness.pwm.run()
+
+    def _edge_ps(self, tick: int) -> int:
+        """Simulated time of the capture clock's rising edge ``tick`` (rig tick ``tick``)."""
+        return self._epoch_ps + tick * self.tick_ps + _PWM_PHASE_PS
+
+    async def _wait_until_ps(self, time_ps: int) -> None:
+        await self.harness.wait_until_s(time_ps * 1e-12)
 
     async def load(self, frame: ChipFrame) -> None:
+        periods = self._periods(frame.pulses, frame.now_us)
+        if periods:
+            self._preload(*periods[0])
+        self._later = periods[1:]
         samples: dict[str, dict[str, int]] = {}
         if frame.imu is not None:
             samples["imu"] = frame.imu.fields()
+        if frame.mag is not None:
+            samples["mag"] = {"x": frame.mag.x_counts, "y": frame.mag.y_counts,
+                              "z": frame.mag.z_counts}  # fmt: skip
         if frame.baro_d1_d2 is not None:
             samples["baro"] = {"d1": frame.baro_d1_d2[0], "d2": frame.baro_d1_d2[1]}
         faults = {}
         for chip in CHIPS:
             fault = frame.faults.get(chip, NO_FAULT)
             faults[_HOST_CHIP[chip]] = (fault.mute, fault.flip)
-        await self.host.load(samples, now_us=frame.now_us, faults=faults)
-        mag_fault = frame.faults.get("ist8310", NO_FAULT)
-        self.ist8310.now_us = frame.now_us
-        self.ist8310.fault_mute, self.ist8310.fault_flip = mag_fault.mute, mag_fault.flip
-        if frame.mag is not None:
-            self.ist8310.load_sample(frame.mag)
+        await self.harness.host.load(samples, now_us=frame.now_us, faults=faults)
+
+    def _periods(self, pulses: tuple[Pulse, ...], now_us: int) -> list[tuple[int, list[int]]]:
+        """Widths in ticks (0: no pulse) for every PWM period starting up to ``now_us``."""
+        periods = {}
+        while self._next_start_us <= now_us:
+            periods[self._next_start_us] = [0] * CHANNELS
+            self._next_start_us += self.period_us
+        for pulse in pulses:
+            if pulse.start_us not in periods:
+                raise PwmTimingError(
+                    f"PWM pulse on channel {pulse.channel} at {pulse.start_us} µs is not at a "
+                    f"period start of this frame (period {self.period_us} µs from 0)"
+                )
+            ticks = math.ceil(pulse.width_us / self.tick_us - 1e-9)
+            if not 0 < ticks * self.tick_us < self.period_us:
+                raise PwmTimingError(
+                    f"PWM pulse width {pulse.width_us} µs on channel {pulse.channel} is not "
+                    f"within one period ({self.period_us} µs)"
+                )
+            periods[pulse.start_us][pulse.channel] = ticks
+            self._note_pulse(pulse.channel, round(pulse.start_us / self.tick_us), ticks)
+        return sorted(periods.items())
+
+    def _note_pulse(self, channel: int, start_tick: int, width_ticks: int) -> None:
+        """Record the result changes a pulse causes (core: edge + ``LATENCY_TICKS``)."""
+        rise, fall = start_tick + LATENCY_TICKS, start_tick + width_ticks + LATENCY_TICKS
+        self._changes |= {rise, fall}
+        if channel < MOTOR_CHANNELS:
+            self._readout_changes.add(fall)
+            self._last_rise[channel] = rise
+
+    def _read_tick(self, now_tick: int, earliest_tick: int) -> int:
+        """The tick nearest ``now_tick`` (not before ``earliest_tick``, the present) whose
+        read gives the results the model gives at ``now_tick``.
+
+        A read just after edge ``x`` copies the results of edge ``x`` if the change count
+        has moved since the last copy, i.e. for changes up to ``x - 2``; later changes
+        move it during the read, and a copy then brings the results of a later edge.
+        """
+        readout = self._readout_changes | {
+            rise + self.timeout_ticks for rise in self._last_rise if rise >= 0
+        }
+        changes = self._changes | readout
+        window = self._window_ticks
+        candidates = range(max(earliest_tick, now_tick - _READ_SEARCH_TICKS),
+                           now_tick + _READ_SEARCH_TICKS)  # fmt: skip
+        for x in sorted(candidates, key=lambda x: (abs(x - now_tick), x)):
+            low, high = min(x, now_tick), max(x, now_tick)
+            if any(low < t <= high or x - 1 <= t <= x for t in readout):
+                continue  # the results at x differ from those at now, or are not copied yet
+            moves = any(x - 1 <= t <= x + window - 2 for t in changes)  # during the read
+            if moves and any(x < t <= x + window for t in readout):
+                continue  # a copy during the read would bring a later result
+            return x
+        raise PwmTimingError(
+            f"no tick near {now_tick} reads the PWM capture exactly: results change too "
+            "often around it"
+        )
+
+    def _preload(self, start_us: int, widths: list[int]) -> None:
+        """Write the widths of the period at ``start_us`` before the generator takes them."""
+        if widths == self._loaded:
+            return
+        latch_ps = self._edge_ps(round(start_us / self.tick_us) - 1)
+        if get_sim_time("ps") >= latch_ps:
+            raise PwmTimingError(
+                f"the PWM period at {start_us} µs starts too soon after the previous frame "
+                "for the RTL PWM generator to take its new widths; choose rates so that no "
+                "PWM period starts within a few µs after an IMU frame"
+            )
+        self.harness.pwm.write(widths, period_ticks=round(self.period_us / self.tick_us))
+        self._loaded = widths
 
     async def capture(
         self, pulses: tuple[Pulse, ...], now_us: int
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
-        return self.pwm.capture(pulses, now_us)
+        """Replay this frame's further periods, let time reach ``now_us``, read the capture."""
+        previous_us = None
+        for start_us, widths in self._later:
+            if previous_us is not None and widths != self._loaded:
+                # After the previous period's start edge, which took the widths before.
+                await self._wait_until_ps(
+                    self._edge_ps(round(previous_us / self.tick_us) - 1) + self.tick_ps // 2
+                )
+            self._preload(start_us, widths)
+            previous_us = start_us
+        # The last tick at or before now_us; the read starts on it, a quarter system
+        # period before its edge, so the first copy (three system cycles on) follows it.
+        now_tick = now_us * 1_000_000 // self.tick_ps
+        earliest_tick = -(-(get_sim_time("ps") - self._epoch_ps) // self.tick_ps)
+        read_tick = self._read_tick(now_tick, earliest_tick)
+        await self._wait_until_ps(self._epoch_ps + read_tick * self.tick_ps)
+        captures = (await self.harness.host.pwm_capture())[:MOTOR_CHANNELS]
+        keep_from = now_tick - _READ_SEARCH_TICKS - _COUNT_LAG_TICKS
+        self._changes = {t for t in self._changes if t >= keep_from}
+        self._readout_changes = {t for t in self._readout_changes if t >= keep_from}
+        widths_us = tuple(c.width_ticks * self.tick_us for c in captures)
+        return widths_us, tuple(c.timeout for c in captures)
 
 
 @cocotb.test()
@@ -80,27 +252,17 @@ async def serve(dut) -> None:
     """Answer the rig's requests until it sends STOP (or closes the channel)."""
     channel = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     channel.connect(os.environ["RIG_COSIM_SOCKET"])
-    host = CocotbHost(dut, HOST_MAP, sys_clk_hz=SYS_CLK_HZ)
-    spi = CocotbSpiMaster(
-        sclk=dut.spi_sclk,
-        mosi=dut.spi_mosi,
-        miso=dut.spi_miso,
-        miso_oe=dut.spi_miso_oe,
-        chip_selects={"imu": dut.imu_cs_n, "baro": dut.baro_cs_n},
-        after_release=host.settle,
-    )
-    spi.idle()
-    dut.i2c_scl.value = 1
-    dut.i2c_sda_i.value = 1
-    await host.reset()
-    chips = RtlChips(host)
-    engine = SensorEngine(spi, TlmI2cBus({chips.ist8310.address: chips.ist8310}), chips)
+    harness = Harness(dut)
+    await harness.reset()
+    chips = RtlChips(harness, pwm_tick_hz=float(os.environ["RIG_COSIM_PWM_TICK_HZ"]))
+    engine = SensorEngine(harness.spi, harness.i2c, chips)
     while True:
         request = receive_message(channel)
         kind = request[0]
         try:
             if kind == START:
                 await engine.start()
+                await chips.start_pwm(decode_start(request[1:]))
                 answer = bytes([OK])
             elif kind == FRAME:
                 answer = encode_readout(await engine.frame(decode_frame(request[1:])))

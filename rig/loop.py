@@ -49,7 +49,7 @@ from rig.link import LinkStats, LinkTimeouts, SimulatorLink
 from rig.pwm import PwmOutput, throttle_from_capture
 from rig.px4_sim_api import Ports, mavlink
 from rig.rig_log import RigLog
-from rig.scenario import Scenario
+from rig.scenario import Rates, Scenario
 from rig.script import Action, CommandScript
 from rig.sensor_layer import ChipFrame, ChipReadout, SensorLayer, TlmSensorLayer
 from rig.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
@@ -237,7 +237,7 @@ class _Loop:
             self.rates.baro_hz,
         )  # fmt: skip
         self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event)
-        self.layer = _make_sensor_layer(self.sensor_layer_name)
+        self.layer = _make_sensor_layer(self.sensor_layer_name, self.rates)
         self._closers.append(self.layer.close)
         self.pwm = PwmOutput(4, self.rates.pwm_hz)
         self.throttle = np.zeros(4)
@@ -498,12 +498,12 @@ class _Loop:
                            other_us=(wall_s - sum(parts_s)) / frames * 1e6)  # fmt: skip
 
 
-def _make_sensor_layer(name: str) -> SensorLayer:
+def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:
     if name == "tlm":
-        return TlmSensorLayer()
+        return TlmSensorLayer(pwm_tick_hz=rates.pwm_tick_hz)
     from rig.cosim import RtlSensorLayer  # imported on demand: it starts a simulator
 
-    return RtlSensorLayer()
+    return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
 
 
 def _yaw_quat(yaw_rad: float) -> tuple[float, float, float, float]:

@@ -19,14 +19,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
 from quad_model.environment import Environment, GeoPoint, MagneticField, Wind
 from rig.errors import ScenarioError
+from rig.pwm import PWM_TICK_HZ
 
 SCENARIOS_DIR = Path(__file__).parent / "scenarios"
 SENSOR_LAYERS = ("tlm", "rtl")
 CONSTRAINTS = ("free", "gimbal_pitch", "gimbal_roll", "thrust_stand")
 SENSORS = ("accel", "gyro", "mag", "baro")
 CHIPS = ("mpu6000", "ms5611", "ist8310")
+#: Coarsest capture tick: 10 µs is 1 % of the 1000-2000 µs throttle range.
+MIN_PWM_TICK_HZ = 100_000
+#: Finest capture tick: SensorTop needs a system clock of at least 4 ticks
+#: (``fpga_hdl.top``), and the co-simulation's system clock runs at 10 MHz.
+MAX_PWM_TICK_HZ = round(HARNESS_SYS_CLK_HZ) // 4
 
 #: Command actions and their parameters: ``name → (kind, required)``. Kinds are checked
 #: by :func:`_typed`; the ground-station client (``rig.ground``) turns each into MAVLink.
@@ -72,7 +79,9 @@ class Rates:
     """Simulation and sensor rates (Hz); one lockstep frame is one IMU period.
 
     The GPS rate is the receiver's (``fix_rate_hz`` in the vehicle file, 10 Hz for the
-    bundled ones), with its latency.
+    bundled ones), with its latency. ``pwm_tick_hz`` is the PWM capture core's tick, the
+    resolution of the measured pulse widths; in the RTL layer its clock runs all the
+    time, one simulated cycle per tick, so a coarser tick trades resolution for speed.
     """
 
     model_hz: int = 5000
@@ -80,6 +89,7 @@ class Rates:
     mag_hz: int = 100
     baro_hz: int = 50
     pwm_hz: int = 400
+    pwm_tick_hz: int = round(PWM_TICK_HZ)  # 1 µs, the unit PX4 uses for PWM widths
 
     @property
     def frame_us(self) -> int:
@@ -300,7 +310,7 @@ def _vector3(value: Any) -> Any:
 
 
 def _rates(table: Mapping[str, Any], where: _Where) -> Rates:
-    names = ("model_hz", "imu_hz", "mag_hz", "baro_hz", "pwm_hz")
+    names = ("model_hz", "imu_hz", "mag_hz", "baro_hz", "pwm_hz", "pwm_tick_hz")
     where.no_unknown_keys(table, set(names), "rates.")
     defaults = Rates()
     values = {
@@ -317,7 +327,32 @@ def _rates(table: Mapping[str, Any], where: _Where) -> Rates:
             where.fail(
                 f"rates.{name}", getattr(rates, name), f"exceeds rates.imu_hz ({rates.imu_hz})"
             )
+    _check_pwm_tick(rates, where)
     return rates
+
+
+def _check_pwm_tick(rates: Rates, where: _Where) -> None:
+    """The capture tick must fit the gateware and hold the PWM period in whole ticks."""
+    tick_hz = rates.pwm_tick_hz
+    if not MIN_PWM_TICK_HZ <= tick_hz <= MAX_PWM_TICK_HZ:
+        where.fail(
+            "rates.pwm_tick_hz", tick_hz,
+            f"must be within {MIN_PWM_TICK_HZ}..{MAX_PWM_TICK_HZ} Hz (10 µs to 0.4 µs ticks)",
+        )  # fmt: skip
+    # Whole system-clock cycles per tick keep the co-simulation's PWM clock edges off
+    # the system clock's (fpga_hdl.cosim.harness).
+    if round(HARNESS_SYS_CLK_HZ) % tick_hz:
+        where.fail(
+            "rates.pwm_tick_hz", tick_hz,
+            f"must divide {round(HARNESS_SYS_CLK_HZ)} Hz (a whole number of 0.1 µs cycles)",
+        )  # fmt: skip
+    period_us = round(1e6 / rates.pwm_hz)
+    if period_us * tick_hz % 1_000_000:
+        where.fail(
+            "rates.pwm_tick_hz", tick_hz,
+            f"the PWM period ({period_us} µs at rates.pwm_hz = {rates.pwm_hz}) is not a whole "
+            f"number of ticks ({1e6 / tick_hz:g} µs)",
+        )  # fmt: skip
 
 
 def _environment(table: Mapping[str, Any], where: _Where) -> Environment:

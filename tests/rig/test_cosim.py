@@ -1,4 +1,9 @@
-"""The RTL sensor layer: its channel codec, and RTL readouts equal to the TLM's."""
+"""The RTL sensor layer: its channel codec, and RTL readouts equal to the TLM's.
+
+In ``rtl`` mode every chip and the PWM capture core are RTL on the co-simulation
+harness; the same frames through both layers must give the same decoded values and the
+same captured PWM, frame by frame, at the default 1 µs capture tick and at a coarser one.
+"""
 
 import numpy as np
 import pytest
@@ -6,31 +11,50 @@ import pytest
 from fpga_hdl.ist8310.driver import sample_from_field_gauss
 from fpga_hdl.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.ms5611.model import raw_from_si
-from rig.cosim_channel import decode_frame, decode_readout, encode_frame, encode_readout
+from rig.cosim_channel import (
+    decode_frame,
+    decode_readout,
+    decode_start,
+    encode_frame,
+    encode_readout,
+    encode_start,
+)
 from rig.errors import CosimError
-from rig.pwm import Pulse
+from rig.pwm import MOTOR_CHANNELS, Pulse, PwmOutput
 from rig.sensor_layer import ChipFault, ChipFrame, ChipReadout, TlmSensorLayer
 
+PWM_HZ = 400
+#: Motor 2's output stops for this span of frames: longer than the capture's 0.1 s
+#: timeout at 1 kHz, so the timeout flag and its clearing are compared too.
+DROPOUT_FRAMES = range(150, 290)
 
-def _frames(rng, count, faults=None):
+
+def _frames(rng, count, *, frame_us=1000, faults=None):
+    """Frames as the rig builds them: new motor commands every frame (armed after 20),
+    the autopilot's PWM pulses at 400 Hz, a dropout, mag and baro at their rates."""
     d1_d2 = raw_from_si(95_461.0, 21.5)
+    outputs = PwmOutput(MOTOR_CHANNELS, PWM_HZ)
     for k in range(1, count + 1):
+        now_us = k * frame_us
+        dropped = {2} if k in DROPOUT_FRAMES else set()
         yield ChipFrame(
-            now_us=k * 1000,
+            now_us=now_us,
             imu=Mpu6000Sample.from_si(rng.normal(0, 20, 3), rng.normal(0, 3, 3), 30.0),
             mag=sample_from_field_gauss(rng.normal(0, 0.4, 3)) if k % 10 == 0 else None,
             baro_d1_d2=d1_d2 if k % 20 == 0 else None,
             read_mag=k % 10 == 0,
             faults=(faults or {}).get(k, {}),
-            pulses=(Pulse(0, k * 1000, 1500), Pulse(3, k * 1000, 1100)) if k % 3 == 0 else (),
+            pulses=tuple(outputs.pulses(now_us + 1, dropped)),
         )
+        outputs.command(rng.uniform(0.0, 1.0, MOTOR_CHANNELS), armed=k > 20)
 
 
 def test_frame_codec_round_trip():
     rng = np.random.default_rng(3)
     faults = {5: {"mpu6000": ChipFault(flip=0x81), "ist8310": ChipFault(mute=True)}}
-    for frame in _frames(rng, 30, faults):
+    for frame in _frames(rng, 30, faults=faults):
         assert decode_frame(encode_frame(frame)[1:]) == frame
+    assert decode_start(encode_start(2500)[1:]) == 2500
 
 
 def test_readout_codec_round_trip():
@@ -42,32 +66,36 @@ def test_readout_codec_round_trip():
     assert decode_readout(encode_readout(readout)[1:]) == readout
 
 
+def _started(layer):
+    layer.start()
+    return layer
+
+
 @pytest.fixture(scope="module")
 def rtl_layer():
-    from rig.cosim import RtlSensorLayer  # builds SensorTop once (cached under build/)
+    from rig.cosim import RtlSensorLayer  # builds the harness once (cached under build/)
 
-    layer = RtlSensorLayer()
-    layer.start()
+    layer = _started(RtlSensorLayer(pwm_hz=PWM_HZ))
     yield layer
     layer.close()
 
 
 @pytest.mark.cosim
-def test_rtl_readouts_equal_tlm_readouts_with_bus_faults(rtl_layer):
-    """The same samples, time, faults and pulses give the same decoded values on both
-    layers: the RTL chips behave as the register models (fpga_hdl proves it per byte)."""
-    tlm, healthy = TlmSensorLayer(), TlmSensorLayer()
-    tlm.start()
-    healthy.start()
+def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer):
+    """The same samples, time, faults and pulses give the same decoded values and the same
+    captured PWM on both layers, every frame (fpga_hdl proves the chips per byte)."""
+    tlm, healthy = _started(TlmSensorLayer()), _started(TlmSensorLayer())
     faults = {k: {"mpu6000": ChipFault(flip=0x40)} for k in range(50, 55)}
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
-    corrupted = set()
-    for frame in _frames(np.random.default_rng(11), 160, faults):
+    corrupted, widths, timed_out = set(), set(), []
+    for frame in _frames(np.random.default_rng(11), 400, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
         assert rtl == reference, f"frame at {frame.now_us} µs"
         clean = healthy.frame(ChipFrame(**{**frame.__dict__, "faults": {}}))
-        if rtl != clean:
+        if (rtl.accel_mps2, rtl.baro_pa_degc) != (clean.accel_mps2, clean.baro_pa_degc):
             corrupted.add(frame.now_us // 1000)
+        widths.add(rtl.pwm_widths_us[0])
+        timed_out.append(rtl.pwm_timed_out[2])
     # The flip corrupts every IMU burst it covers; the muted MS5611 reads 0xFFFFFF, which
     # the datasheet compensation turns into a wild pressure: only at baro cycles (frames
     # 1, 11, 21, ...: PX4's 10 ms MS5611 cycle) during or just after the mute.
@@ -75,6 +103,40 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults(rtl_layer):
     baro_corrupted = corrupted - set(range(50, 55))
     assert baro_corrupted
     assert baro_corrupted <= set(range(101, 160, 10))
+    # The PWM compared is a live signal: new widths each period; motor 2's last pulse
+    # before the dropout rose at 147.5 ms, seen 2 ticks later, so it times out 0.1 s on,
+    # at 247.502 ms (read at frame 248), and recovers with its first pulse after it.
+    assert len(widths) > 100
+    assert timed_out.index(True, 20) + 1 == 248
+    assert not any(timed_out[295:])
+
+
+@pytest.mark.cosim
+def test_a_coarser_pwm_tick_is_the_same_on_both_layers():
+    """``rates.pwm_tick_hz`` = 250 kHz (4 µs) reaches SensorTop and the TLM model alike:
+    widths come in whole 4 µs ticks, identical on both layers at 250 Hz frames."""
+    from rig.cosim import RtlSensorLayer
+
+    rtl = _started(RtlSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
+    tlm = _started(TlmSensorLayer(pwm_tick_hz=250e3))
+    try:
+        for frame in _frames(np.random.default_rng(12), 120, frame_us=4000):
+            readout = rtl.frame(frame)
+            assert readout == tlm.frame(frame), f"frame at {frame.now_us} µs"
+            assert all(width % 4 == 0 for width in readout.pwm_widths_us)
+    finally:
+        rtl.close()
+
+
+@pytest.mark.cosim
+def test_a_pulse_off_the_pwm_period_is_a_one_line_error(rtl_layer):
+    imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)
+    pulses = (Pulse(1, 10**7 - 7, 1500),)
+    frame = ChipFrame(10**7, imu, mag=None, baro_d1_d2=None, read_mag=False, pulses=pulses)
+    with pytest.raises(CosimError, match=r"^the RTL co-simulation failed: PwmTimingError: "
+                       r"PWM pulse on channel 1 at 9999993 µs is not at a period start of this "
+                       r"frame \(period 2500 µs from 0\)$"):  # fmt: skip
+        rtl_layer.frame(frame)
 
 
 @pytest.mark.cosim

@@ -137,3 +137,30 @@ def test_bundled_files_are_plain_toml_without_unknown_sections():
     for path in SCENARIOS_DIR.glob("*.toml"):
         document = tomllib.loads(path.read_text())
         assert document["name"] == path.stem
+
+
+def test_pwm_capture_tick_defaults_to_1_us_and_is_a_rates_setting():
+    assert scenario_from_dict(MINIMAL).rates.pwm_tick_hz == 1_000_000
+    rates = scenario_from_dict({**MINIMAL, "rates": {"pwm_tick_hz": 250_000}}).rates
+    assert rates.pwm_tick_hz == 250_000
+
+
+@pytest.mark.parametrize(
+    ("rates", "reason"),
+    [
+        ({"pwm_tick_hz": 50_000}, "must be within 100000..2500000 Hz (10 µs to 0.4 µs ticks)"),
+        ({"pwm_tick_hz": 5_000_000}, "must be within 100000..2500000 Hz (10 µs to 0.4 µs ticks)"),
+        ({"pwm_tick_hz": 300_000}, "must divide 10000000 Hz (a whole number of 0.1 µs cycles)"),
+        ({"pwm_tick_hz": 1e6}, "expected a positive integer (Hz)"),
+        (
+            {"pwm_tick_hz": 250_000, "pwm_hz": 490},
+            "the PWM period (2041 µs at rates.pwm_hz = 490) is not a whole number of ticks (4 µs)",
+        ),
+    ],
+)
+def test_bad_pwm_capture_tick_is_one_line(rates, reason):
+    value = rates["pwm_tick_hz"]
+    message = f"<dict>: key 'rates.pwm_tick_hz' = {value!r}: {reason}"
+    with pytest.raises(ScenarioError) as error:
+        scenario_from_dict({**MINIMAL, "rates": rates})
+    assert str(error.value) == message
