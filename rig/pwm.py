@@ -8,9 +8,6 @@ next PWM period (up to 2.5 ms later at 400 Hz), as on the real rig. A dropped-ou
 emits no pulse at all. The pulses go to the PWM capture core (RTL) or its model (TLM), and
 the captured widths, not the commands, drive the motors; a channel whose capture timed out
 means zero thrust (the ESC's failsafe).
-
-Known gap: SensorTop has no PWM capture core yet, so the RTL layer also measures the
-pulses with fpga_hdl's tick-exact model of that core.
 """
 
 from __future__ import annotations
