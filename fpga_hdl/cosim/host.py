@@ -31,12 +31,18 @@ class CocotbHost:
         self.cycles_run = 0  # system-clock cycles so far: the host's simulation cost
 
     async def cycles(self, count: int) -> None:
+        """Run ``count`` cycles, each a low half then a rising edge and a high half.
+
+        The rising edge comes half a period after the caller's writes: an input written in
+        the time step of an edge is a race that the simulator decides (Icarus took the
+        old value of ``commit`` once the design's logic was continuous assignments).
+        """
         clk = self.dut.clk
         for _ in range(count):
+            await self._half
             clk.value = 1
             await self._half
             clk.value = 0
-            await self._half
         self.cycles_run += count
 
     async def reset(self) -> None:

@@ -46,16 +46,21 @@ PWM_PHASE_PS = round(0.25e12 / HARNESS_SYS_CLK_HZ)
 
 
 class _Requester:
-    """One peripheral's request toggle and acknowledge."""
+    """One peripheral's request toggle and acknowledge, and the inputs a request carries."""
 
-    def __init__(self, dut, prefix: str) -> None:
+    def __init__(self, dut, prefix: str, inputs: Sequence[str] = ()) -> None:
         self._request = getattr(dut, f"{prefix}_request")
         self._acknowledge = getattr(dut, f"{prefix}_acknowledge")
+        self._inputs = [getattr(dut, f"{prefix}_{name}") for name in inputs]
         self._level = 0
         self.count = 0  # transactions so far
 
     def reset(self) -> None:
+        """Request low and every request input 0: a simulator leaves an undriven input
+        unknown, and no net of the design should hold X after a reset."""
         self._request.value = self._level = 0
+        for handle in self._inputs:
+            handle.value = 0
 
     async def __call__(self) -> None:
         self._level ^= 1
@@ -78,7 +83,7 @@ class HarnessSpiBus:
         self.dut = dut
         self.sys_clk_hz = sys_clk_hz
         self.depth = len(dut.spi_tx) // 8
-        self._request = _Requester(dut, "spi")
+        self._request = _Requester(dut, "spi", ("device", "length", "divider", "tx"))
         dut.spi_mode3.value = int(mode == 3)
 
     @property
@@ -115,7 +120,7 @@ class HarnessI2cBus:
         self.dut = dut
         self.write_depth = len(dut.i2c_tx) // 8
         self.read_depth = len(dut.i2c_rx) // 8
-        self._request = _Requester(dut, "i2c")
+        self._request = _Requester(dut, "i2c", ("address", "write_len", "read_len", "tx", "fast"))
 
     @property
     def transfers(self) -> int:
@@ -152,7 +157,7 @@ class HarnessHost:
     def __init__(self, dut, host_map: HostPortMap = HOST_MAP) -> None:
         self.dut = dut
         self.map = host_map
-        self._write = _Requester(dut, "host")
+        self._write = _Requester(dut, "host", ("words", "count"))
         self._read = _Requester(dut, "read")
 
     def reset(self) -> None:

@@ -13,22 +13,9 @@ from fpga_hdl.top import SensorTop
 from tests.fpga_hdl.transcript import tlm_transcript
 
 HERE = Path(__file__).parent
-#: Open bug, Icarus only: after PX4's read of PWR_MGMT_1 the MPU-6000's SDO loads X for
-#: the next register (0x6C, then 0x1B in the following write) under the harness, while
-#: the same Verilog sequence on SensorTop alone and the harness on Verilator are exact.
-#: Kept as a strict xfail so it is seen, and so a fix is noticed.
-ICARUS_SDO_X = pytest.mark.xfail(
-    reason="Icarus: MPU-6000 SDO reads X after PWR_MGMT_1 under the harness (open bug)",
-    strict=True,
-    raises=AssertionError,
-)
-HARNESS_SIMULATOR_PARAMS = [
-    pytest.param(*p.values, marks=[*p.marks, ICARUS_SDO_X], id=p.id) if p.id == "icarus" else p
-    for p in SIMULATOR_PARAMS
-]
 
 
-@pytest.mark.parametrize("simulator", HARNESS_SIMULATOR_PARAMS)
+@pytest.mark.parametrize("simulator", SIMULATOR_PARAMS)
 def test_fast_path_equals_pin_level_and_tlm(simulator, tmp_path):
     fast_out, pins_out = tmp_path / "fast.json", tmp_path / "pins.json"
     run_cocotb(
