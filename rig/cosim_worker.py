@@ -29,10 +29,11 @@ two 1 µs ticks. A read started at the tick of ``now_us`` would therefore miss a
 made in the last two ticks (nothing moved the count yet) or see one made during the
 read. The worker knows every result change before it happens (it replays the pulses:
 a rise changes the period two ticks after its sample, a fall the width, a silent
-channel times out ``timeout_ticks`` after its last rise), so :meth:`RtlChips._read_tick`
-picks the tick nearest ``now_us`` at which the read sees exactly the results the
-tick-exact model gives at ``now_us``: no width or timeout change between the two, none
-still waiting for the count, none copied in during the read. The rig's readout then
+channel times out ``timeout_ticks`` after its last rise), so :meth:`RtlChips._read_plan`
+picks the tick nearest ``now_us`` at which a read sees exactly the results the tick-exact
+model gives at ``now_us`` (no width or timeout change between the two, none still
+waiting for the count, none copied in during the read), or, when changes of different
+motors straddle ``now_us``, one such tick per group of motors. The rig's readout then
 equals the TLM layer's; the tests check it frame by frame.
 """
 
@@ -100,7 +101,7 @@ class RtlChips:
         #: Ticks at which the capture's results change: any result, and the rig's (motor
         #: widths and timeouts); kept from a frame before ``now`` on.
         self._changes: set[int] = set()
-        self._readout_changes: set[int] = set()
+        self._falls: list[set[int]] = [set() for _ in range(MOTOR_CHANNELS)]
         self._last_rise = [-1] * MOTOR_CHANNELS  # tick of each motor's last seen rise
 
     async def start_pwm(self, period_us: int) -> None:
@@ -175,35 +176,49 @@ class RtlChips:
         rise, fall = start_tick + LATENCY_TICKS, start_tick + width_ticks + LATENCY_TICKS
         self._changes |= {rise, fall}
         if channel < MOTOR_CHANNELS:
-            self._readout_changes.add(fall)
+            self._falls[channel].add(fall)
             self._last_rise[channel] = rise
 
-    def _read_tick(self, now_tick: int, earliest_tick: int) -> int:
-        """The tick nearest ``now_tick`` (not before ``earliest_tick``, the present) whose
-        read gives the results the model gives at ``now_tick``.
+    def _read_plan(self, now_tick: int, earliest_tick: int) -> dict[int, list[int]]:
+        """Ticks to read at (not before ``earliest_tick``, the present), each with the
+        motor channels whose results there equal the model's at ``now_tick``.
 
         A read just after edge ``x`` copies the results of edge ``x`` if the change count
         has moved since the last copy, i.e. for changes up to ``x - 2``; later changes
-        move it during the read, and a copy then brings the results of a later edge.
+        move it during the read, and a copy then brings the results of a later edge. One
+        read near ``now_tick`` serves every channel unless changes of different channels
+        straddle it (motors at nearly equal throttle); then each channel is read where it
+        holds, a few ticks away.
         """
-        readout = self._readout_changes | {
-            rise + self.timeout_ticks for rise in self._last_rise if rise >= 0
-        }
-        changes = self._changes | readout
+        readout = [
+            falls | ({rise + self.timeout_ticks} if rise >= 0 else set())
+            for falls, rise in zip(self._falls, self._last_rise, strict=True)
+        ]
+        every_readout = set().union(*readout)
+        changes = self._changes | every_readout
         window = self._window_ticks
         candidates = range(max(earliest_tick, now_tick - _READ_SEARCH_TICKS),
                            now_tick + _READ_SEARCH_TICKS)  # fmt: skip
+        plan: dict[int, list[int]] = {}
+        missing = set(range(MOTOR_CHANNELS))
         for x in sorted(candidates, key=lambda x: (abs(x - now_tick), x)):
-            low, high = min(x, now_tick), max(x, now_tick)
-            if any(low < t <= high or x - 1 <= t <= x for t in readout):
-                continue  # the results at x differ from those at now, or are not copied yet
+            if any(abs(x - other) <= window for other in plan):
+                continue  # reads take a few ticks each
+            if {x - 1, x} & every_readout:
+                continue  # a result changed too recently to be copied at once
             moves = any(x - 1 <= t <= x + window - 2 for t in changes)  # during the read
-            if moves and any(x < t <= x + window for t in readout):
+            if moves and any(x < t <= x + window for t in every_readout):
                 continue  # a copy during the read would bring a later result
-            return x
+            low, high = min(x, now_tick), max(x, now_tick)
+            holding = [ch for ch in missing if not any(low < t <= high for t in readout[ch])]
+            if holding:
+                plan[x] = holding
+                missing -= set(holding)
+            if not missing:
+                return plan
         raise PwmTimingError(
-            f"no tick near {now_tick} reads the PWM capture exactly: results change too "
-            "often around it"
+            f"no read near tick {now_tick} gives the PWM capture of channels "
+            f"{sorted(missing)} exactly: their results change too often around it"
         )
 
     def _preload(self, start_us: int, widths: list[int]) -> None:
@@ -233,18 +248,22 @@ class RtlChips:
                 )
             self._preload(start_us, widths)
             previous_us = start_us
-        # The last tick at or before now_us; the read starts on it, a quarter system
+        # The last tick at or before now_us; a read starts on a tick, a quarter system
         # period before its edge, so the first copy (three system cycles on) follows it.
         now_tick = now_us * 1_000_000 // self.tick_ps
         earliest_tick = -(-(get_sim_time("ps") - self._epoch_ps) // self.tick_ps)
-        read_tick = self._read_tick(now_tick, earliest_tick)
-        await self._wait_until_ps(self._epoch_ps + read_tick * self.tick_ps)
-        captures = (await self.harness.host.pwm_capture())[:MOTOR_CHANNELS]
+        widths_us = [0.0] * MOTOR_CHANNELS
+        timed_out = [True] * MOTOR_CHANNELS
+        for tick, channels in sorted(self._read_plan(now_tick, earliest_tick).items()):
+            await self._wait_until_ps(self._epoch_ps + tick * self.tick_ps)
+            captures = await self.harness.host.pwm_capture()
+            for ch in channels:
+                widths_us[ch] = captures[ch].width_ticks * self.tick_us
+                timed_out[ch] = captures[ch].timeout
         keep_from = now_tick - _READ_SEARCH_TICKS - _COUNT_LAG_TICKS
         self._changes = {t for t in self._changes if t >= keep_from}
-        self._readout_changes = {t for t in self._readout_changes if t >= keep_from}
-        widths_us = tuple(c.width_ticks * self.tick_us for c in captures)
-        return widths_us, tuple(c.timeout for c in captures)
+        self._falls = [{t for t in falls if t >= keep_from} for falls in self._falls]
+        return tuple(widths_us), tuple(timed_out)
 
 
 @cocotb.test()

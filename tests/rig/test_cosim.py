@@ -46,7 +46,10 @@ def _frames(rng, count, *, frame_us=1000, faults=None):
             faults=(faults or {}).get(k, {}),
             pulses=tuple(outputs.pulses(now_us + 1, dropped)),
         )
-        outputs.command(rng.uniform(0.0, 1.0, MOTOR_CHANNELS), armed=k > 20)
+        # Random throttles, then a hover's: four motors within 4 µs of each other, whose
+        # falls straddle frame boundaries (the capture is then read per motor).
+        spread = 1.0 if k < 300 else 0.004
+        outputs.command(0.5 + rng.uniform(-spread / 2, spread / 2, MOTOR_CHANNELS), armed=k > 20)
 
 
 def test_frame_codec_round_trip():
