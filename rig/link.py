@@ -169,12 +169,24 @@ class SimulatorLink:
     ) -> ActuatorControls | None:
         """Send one sensor frame and return the motor commands for the next step.
 
-        Freewheeling: returns the latest actuator message received so far (None before the
-        first). In lockstep: blocks until the answer stamped ``time_us`` arrives.
+        :meth:`send_frame` then :meth:`answer`; the rig's loop calls the two itself, so it
+        can do what does not need the answer while the autopilot computes it.
         """
+        self.send_frame(time_us, messages)
+        return self.answer(time_us)
+
+    def send_frame(self, time_us: int, messages: list[mavlink.MAVLink_message]) -> None:
+        """Send the sensor frame stamped ``time_us`` (its HIL_SENSOR and what goes with it)."""
         self.send(*messages)
         self._sent_us = time_us
         self.stats.frames_sent += 1
+
+    def answer(self, time_us: int) -> ActuatorControls | None:
+        """The motor commands after the frame ``time_us`` was sent.
+
+        Freewheeling: the latest actuator message received so far (None before the first).
+        In lockstep: blocks until the answer stamped ``time_us`` arrives.
+        """
         if not self.lockstep:
             self.stats.freewheel_frames += 1
             self._receive(0.0)

@@ -14,6 +14,12 @@ One frame is one IMU period (1 ms by default):
    awaited under the watchdog;
 6. the controls become PWM pulses whose captured widths set the throttles of the next frame.
 
+The next frame's throttles are the widths captured up to this frame, so steps 1–2 of the
+next frame and this frame's logging do not need the autopilot's answer: the rig does them
+between sending the frame and awaiting the answer, while the autopilot computes (on another
+core when one is free). Lockstep is unchanged: PX4 never sees a frame before it answered
+the previous one, and every number is the same as in strict order (a golden test).
+
 Everything lands in ``rig.ulg``. Any failure (a stalled or dead autopilot, a refused
 command, Ctrl-C) ends the run cleanly: the reason is logged, the log is closed readable,
 and the error propagates as one line.
@@ -106,8 +112,10 @@ class FrameBudget:
     """Mean wall time of one frame, split by part of the loop (µs per frame).
 
     Measured every run (a clock read per part costs well under 1 µs) so a slow run shows
-    where its time went. ``autopilot_wait_us`` is the time blocked on the autopilot's
-    answer: in lockstep, the autopilot's own compute time plus the two process wake-ups.
+    where its time went. The lockstep is sequential, so the autopilot's compute shows up
+    here too: in ``autopilot_wait_us`` (blocked on its answer, beyond the work the rig
+    overlaps with it) and in ``socket_send_us`` (the send wakes the autopilot, which often
+    runs on the sender's core before the send returns).
     """
 
     model_us: float  # motor faults, the 5 kHz model over one frame, its truth
@@ -193,7 +201,9 @@ class _Loop:
         self._wall_end: float | None = None
         self._process: subprocess.Popen[bytes] | None = None
         self._closers: list[Callable[[], None]] = []
-        self._spent_s = (0.0,) * 5  # model, sensor physics, chips, messages, logging
+        #: Wall time of each part of the frames so far (s), for :class:`FrameBudget`.
+        self._spent_s = dict.fromkeys(("model", "sensor physics", "chips", "messages", "logging"),
+                                      0.0)  # fmt: skip
 
         try:
             vehicle = load_vehicle(scenario.vehicle)
@@ -273,31 +283,19 @@ class _Loop:
         poll_every = max(1, self.rates.imu_hz // 100)
         pending: list[Action] = []
         clock = time.perf_counter
-        model_s = sensors_s = chips_s = messages_s = logging_s = 0.0
+        truth, readings = self._advance(1)
         for frame in range(1, frames_total + 1):
             started = clock()
             self.time_us = frame * self.frame_us
             time_s = self.time_us / 1e6
-            self.faults.update(self.time_us, self.model)
-            self.model.advance(self.throttle, self.frame_us / 1e6)
-            truth = self.model.truth
-            modelled = clock()
-            readings = self.faults.samples(self.sensors.sample(truth))
-            sampled = clock()
             chip_frame, out = self._read_chips(readings)
             read = clock()
-            self._log_readings(readings, chip_frame, out)
-            logged = clock()
             messages = self._sensor_messages(readings, out)
             if link.state_interval_us and self.time_us >= state_next_us:
                 state_next_us = self.time_us + link.state_interval_us
                 messages.append(self._state_message(truth))
-            encoded = clock()
-            model_s += modelled - started
-            sensors_s += sampled - modelled
-            chips_s += read - sampled
-            logging_s += logged - read
-            messages_s += encoded - logged
+            self._spent_s["chips"] += read - started
+            self._spent_s["messages"] += clock() - read
             # Read the API link every 10 ms (every frame while PX4 owes an answer): its
             # telemetry would otherwise fill the socket buffer and the kernel would drop
             # the next COMMAND_ACK.
@@ -308,24 +306,45 @@ class _Loop:
             if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
                 pending.extend(script.due(time_s))
                 pending = self._run_actions(pending, time_s, reference)
-            controls = link.exchange(self.time_us, messages)
-            answered = clock()
-            if controls is not None:
-                self.armed = controls.armed
-                self.pwm.command(controls.motors, controls.armed)
-            commanded = clock()
-            if controls is not None:
-                self.log.motors(self.time_us, controls.time_us, controls.motors)
+            link.send_frame(self.time_us, messages)
+            # While the autopilot computes its answer, do what does not depend on it: log
+            # this frame, step the model to the next one (its throttle is the PWM captured
+            # up to now) and sample its sensors. The answer only sets the PWM widths that
+            # the next frame's pulses carry, so the result is the same as in strict order.
+            logging = clock()
+            self._log_readings(readings, chip_frame, out)
             if frame % truth_every == 0:
                 self.log.truth(self.time_us, truth)
-            chips_s += commanded - answered
-            logging_s += clock() - commanded
+            self._spent_s["logging"] += clock() - logging
+            this_truth = truth
+            if frame < frames_total:
+                truth, readings = self._advance(frame + 1)
+            controls = link.answer(self.time_us)
+            if controls is not None:
+                answered = clock()
+                self.armed = controls.armed
+                self.pwm.command(controls.motors, controls.armed)
+                commanded = clock()
+                self.log.motors(self.time_us, controls.time_us, controls.motors)
+                self._spent_s["chips"] += commanded - answered
+                self._spent_s["logging"] += clock() - commanded
             self.frames = frame
             if self.progress is not None and frame % max(1, self.rates.imu_hz // 10) == 0:
-                self._report(truth)
+                self._report(this_truth)
         self._wall_end = time.monotonic()
-        self._spent_s = (model_s, sensors_s, chips_s, messages_s, logging_s)
         self.log.event(self.time_us, f"run completed: {self.frames} frames")
+
+    def _advance(self, frame: int) -> tuple[VehicleTruth, SensorReadings]:
+        """Step the model to the end of ``frame`` and sample its sensors (faults applied)."""
+        started = time.perf_counter()
+        self.faults.update(frame * self.frame_us, self.model)
+        self.model.advance(self.throttle, self.frame_us / 1e6)
+        truth = self.model.truth
+        modelled = time.perf_counter()
+        readings = self.faults.samples(self.sensors.sample(truth))
+        self._spent_s["model"] += modelled - started
+        self._spent_s["sensor physics"] += time.perf_counter() - modelled
+        return truth, readings
 
     def _read_chips(self, readings: SensorReadings) -> tuple[ChipFrame, ChipReadout]:
         """Load the samples into the chips, read them as PX4's drivers do, capture the PWM."""
@@ -343,6 +362,9 @@ class _Loop:
             pulses=tuple(pulses),
         )
         out = self.layer.frame(chip_frame)
+        for chip, error in out.bus_errors:
+            self.log.bus_error(chip)
+            self._event(f"bus error: {chip}: {error}", "warn")
         capture = (out.pwm_widths_us, out.pwm_timed_out)
         if capture != self._capture:  # it changes only at pulse ends and timeouts
             self._capture = capture
@@ -351,9 +373,6 @@ class _Loop:
 
     def _log_readings(self, readings: SensorReadings, chip_frame: ChipFrame,
                       out: ChipReadout) -> None:  # fmt: skip
-        for chip, error in out.bus_errors:
-            self.log.bus_error(chip)
-            self._event(f"bus error: {chip}: {error}", "warn")
         if chip_frame.pulses:
             self.log.pwm(self.time_us, out.pwm_widths_us)
         self.log.imu(self.time_us, self.frame_us, out.accel_mps2, out.gyro_radps)
@@ -490,10 +509,10 @@ class _Loop:
 
     def _budget(self, wall_s: float) -> FrameBudget:
         frames = max(self.frames, 1)
-        model_s, sensors_s, chips_s, messages_s, logging_s = self._spent_s
-        link = self.link.stats
-        parts_s = (model_s, sensors_s, chips_s, messages_s + link.encode_s + link.decode_s,
-                   link.send_s, link.wait_s, logging_s)  # fmt: skip
+        spent, link = self._spent_s, self.link.stats
+        parts_s = (spent["model"], spent["sensor physics"], spent["chips"],
+                   spent["messages"] + link.encode_s + link.decode_s, link.send_s, link.wait_s,
+                   spent["logging"])  # fmt: skip
         return FrameBudget(*(part_s / frames * 1e6 for part_s in parts_s),
                            other_us=(wall_s - sum(parts_s)) / frames * 1e6)  # fmt: skip
 
