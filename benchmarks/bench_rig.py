@@ -114,6 +114,47 @@ def peak_rss() -> None:
     )
 
 
+#: ``make hil-sim``'s flight (rig/scenarios/hil_sim.toml), for the projected wall time.
+HIL_SIM_S = 60.0
+RTL_TICK_INSTANCE = INSTANCE + 1  # its own ports: the cases above may still be closing
+
+
+def rtl_pwm_tick_cases() -> None:
+    """RTL layer, reference autopilot: IMU 1 kHz / 250 Hz × PWM capture tick 1 µs / 4 µs.
+
+    The capture clock runs all the time in the RTL layer (one simulated cycle per tick),
+    so the tick sets much of the co-simulation's cost; these figures choose hil_sim's
+    rates. The last column is the 60 s hil_sim flight's wall time at that RTF.
+    """
+    print(f"{'rtl case (reference autopilot)':<34}{'RTF':>8}{'chips µs/frame':>16}"
+          f"{'hil_sim 60 s takes':>20}")  # fmt: skip
+    for imu_hz in (1000, 250):
+        for tick_hz in (1_000_000, 250_000):
+            label = f"IMU {imu_hz:>4} Hz, PWM tick {1e6 / tick_hz:g} µs"
+            scenario = scenario_from_dict(
+                {
+                    "name": "bench_rtl_tick", "vehicle": "f450_high_precision",
+                    "duration_s": SIMULATED_S["rtl"], "seed": 1, "sensor_layer": "rtl",
+                    "rates": {"imu_hz": imu_hz, "pwm_tick_hz": tick_hz},
+                    "commands": [{"at_s": 0.5, "action": "arm"},
+                                 {"at_s": 0.6, "action": "takeoff", "altitude_m": 2.0}],
+                }
+            )  # fmt: skip
+            try:
+                with tempfile.TemporaryDirectory() as folder:
+                    options = RunOptions(
+                        instance=RTL_TICK_INSTANCE, out_dir=Path(folder),
+                        timeouts=LinkTimeouts(connect_s=600, answer_s=30),
+                    )  # fmt: skip
+                    result = run_scenario(scenario, options)
+            except RigError as error:
+                print(f"{label:<34}  failed: {error}", flush=True)
+                continue
+            rtf = result.real_time_factor
+            print(f"{label:<34}{rtf:7.2f}x{result.budget.chips_us:16.0f}"
+                  f"{HIL_SIM_S / rtf:18.0f} s", flush=True)  # fmt: skip
+
+
 def main() -> None:
     autopilots = ["double"]
     if importlib.util.find_spec("rig.autopilot.__main__") is not None:
@@ -126,6 +167,7 @@ def main() -> None:
             for autopilot in autopilots:
                 _case(sensor_layer, imu_hz, autopilot)
     print("targets: rtl >= 1.0x, tlm >= 20x real time (2 cores)")
+    rtl_pwm_tick_cases()
     # A fresh process, so the peak is this run's and not the cases' above.
     subprocess.run(
         [sys.executable, "-m", "benchmarks.bench_rig", "--peak-rss"], check=True, cwd=REPO
@@ -135,5 +177,7 @@ def main() -> None:
 if __name__ == "__main__":
     if sys.argv[1:] == ["--peak-rss"]:
         peak_rss()
+    elif sys.argv[1:] == ["--rtl-pwm-tick"]:
+        rtl_pwm_tick_cases()
     else:
         main()
