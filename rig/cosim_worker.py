@@ -98,8 +98,8 @@ class RtlChips:
         self._next_start_us = 0  # the next PWM period start not replayed yet
         self._loaded: list[int] = [0] * CHANNELS  # widths (ticks) in the preload register
         self._later: list[tuple[int, list[int]]] = []  # this frame's further periods
-        #: Ticks at which the capture's results change: any result, and the rig's (motor
-        #: widths and timeouts); kept from a frame before ``now`` on.
+        #: Ticks at which the capture's results change (any result), and per motor the
+        #: ticks at which its width and timeout flag change (the readout); recent only.
         self._changes: set[int] = set()
         self._falls: list[set[int]] = [set() for _ in range(MOTOR_CHANNELS)]
         self._last_rise = [-1] * MOTOR_CHANNELS  # tick of each motor's last seen rise
