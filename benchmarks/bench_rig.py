@@ -7,11 +7,24 @@ physics, chips and PX4's drivers, HIL encoding, lockstep over TCP, PWM capture, 
 Two autopilots: the reference autopilot (the product's loop), and the PX4-side test double
 of ``tests/rig`` (answers each frame at a fixed throttle, doing almost no work), which
 shows the rig's own cost. The budget splits each frame's wall time (µs) into the parts of
-:class:`rig.loop.FrameBudget`; ``wait`` is the time blocked on the autopilot's answer, so
-the lockstep frame costs rig + autopilot, one after the other.
+:class:`rig.loop.FrameBudget`. The lockstep is sequential, so the autopilot's compute
+adds to the frame: it shows as ``wait`` (blocked on the answer beyond the model step,
+sensor sampling and logging the rig overlaps with it) and inside ``send`` (the send wakes
+the autopilot, which often runs on the sender's core before the send returns).
+
+The budget before the TLM speed work is printed first (:data:`BEFORE`), for comparison.
+
+20× is 50 µs per frame at 1 kHz and 200 µs at 250 Hz, rig and autopilot together. The
+model step and sensor physics (quad_model, numpy per sample) alone take 110-150 µs, the
+loopback round trip with its two process wake-ups 20-80 µs, and the rest of the chip path
+is fpga_hdl's numpy decode and tick-exact PWM model. Reaching it would need the whole
+frame (model, sensor physics, chip words and register models, driver decode) compiled as
+one kernel, logging batched into blocks, the autopilot compiled likewise, and an idle
+second core for the autopilot; see the README's speed section.
 
 ``python -m benchmarks.bench_rig --peak-rss`` flies one 60 s TLM run with the reference
-autopilot and prints the peak resident memory of the rig and of the autopilot process.
+autopilot and prints the peak resident memory of the rig (early in the run and at its
+end: a flat figure means no per-frame growth) and of the autopilot process.
 """
 
 from __future__ import annotations
@@ -21,11 +34,12 @@ import resource
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 from rig.errors import RigError
 from rig.link import LinkTimeouts
-from rig.loop import FrameBudget, RunOptions, RunResult, run_scenario
+from rig.loop import FrameBudget, Progress, RunOptions, RunResult, run_scenario
 from rig.px4_sim_api import Ports
 from rig.scenario import Scenario, scenario_from_dict
 
@@ -34,6 +48,15 @@ DOUBLE = REPO / "tests" / "rig" / "autopilot_double.py"
 INSTANCE = 90  # away from the instances tests and users pick first
 SIMULATED_S = {"tlm": 6.0, "rtl": 3.0}
 PEAK_RSS_SIMULATED_S = 60.0
+#: TLM budget at commit 5ba0e5d, before the speed work: µs per frame in BUDGET_COLUMNS
+#: order, then the RTF. Medians of 3 runs alternating with the speed work's code on the
+#: shared 2-core machine (load average 2-3), so the two sets of figures compare.
+BEFORE = {
+    "tlm IMU 1000 Hz double": ((21, 92, 154, 56, 80, 12, 34, 7), 2.2),
+    "tlm IMU 1000 Hz reference": ((23, 98, 165, 66, 211, 33, 39, 11), 1.5),
+    "tlm IMU  250 Hz double": ((40, 102, 206, 66, 87, 9, 67, 10), 6.8),
+    "tlm IMU  250 Hz reference": ((41, 110, 222, 78, 280, 90, 75, 16), 4.4),
+}
 #: Columns of the budget table: (heading, FrameBudget field).
 BUDGET_COLUMNS = (
     ("model", "model_us"), ("sensors", "sensor_physics_us"), ("chips", "chips_us"),
@@ -60,7 +83,13 @@ def _scenario(sensor_layer: str, imu_hz: int, autopilot: str, duration_s: float)
     )
 
 
-def _fly(sensor_layer: str, imu_hz: int, autopilot: str, duration_s: float) -> RunResult:
+def _fly(
+    sensor_layer: str,
+    imu_hz: int,
+    autopilot: str,
+    duration_s: float,
+    progress: Callable[[Progress], None] | None = None,
+) -> RunResult:
     argv = None
     if autopilot == "double":
         port = Ports(INSTANCE).simulator_tcp
@@ -73,7 +102,9 @@ def _fly(sensor_layer: str, imu_hz: int, autopilot: str, duration_s: float) -> R
             timeouts=LinkTimeouts(connect_s=600, answer_s=30),
             autopilot_argv=argv,
         )
-        return run_scenario(_scenario(sensor_layer, imu_hz, autopilot, duration_s), options)
+        return run_scenario(
+            _scenario(sensor_layer, imu_hz, autopilot, duration_s), options, progress
+        )
 
 
 def _budget_heading() -> str:
@@ -84,6 +115,12 @@ def _budget_heading() -> str:
 def _budget_row(budget: FrameBudget) -> str:
     parts = "".join(f"{getattr(budget, name):8.1f}" for _, name in BUDGET_COLUMNS)
     return f"{parts}{budget.total_us:8.1f}"
+
+
+def _print_before() -> None:
+    for label, (parts_us, rtf) in BEFORE.items():
+        budget = FrameBudget(*map(float, parts_us))
+        print(f"{label:<27}{rtf:7.1f}x{'before':>10}  {' ' * 9}{_budget_row(budget)}")
 
 
 def _case(sensor_layer: str, imu_hz: int, autopilot: str) -> None:
@@ -100,16 +137,25 @@ def _case(sensor_layer: str, imu_hz: int, autopilot: str) -> None:
     )
 
 
+def _peak_rss_mib(who: int) -> float:
+    return resource.getrusage(who).ru_maxrss / 1024  # KiB on Linux
+
+
 def peak_rss() -> None:
     """One 60 s TLM run at 1 kHz with the reference autopilot; peak RSS of both processes."""
-    result = _fly("tlm", 1000, "reference", PEAK_RSS_SIMULATED_S)
-    # ru_maxrss is in KiB on Linux; the autopilot is the rig's only (waited-for) child.
-    rig_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    autopilot_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    early_mib: list[float] = []
+
+    def first_progress(progress: Progress) -> None:
+        if not early_mib:
+            early_mib.append(_peak_rss_mib(resource.RUSAGE_SELF))
+
+    result = _fly("tlm", 1000, "reference", PEAK_RSS_SIMULATED_S, first_progress)
+    # The autopilot is the rig's only (waited-for) child process.
     print(
         f"peak RSS of a {result.simulated_s:.0f} s TLM run (1 kHz IMU, reference autopilot, "
-        f"RTF {result.real_time_factor:.2f}x): rig {rig_mib:.0f} MiB, "
-        f"autopilot {autopilot_mib:.0f} MiB",
+        f"RTF {result.real_time_factor:.2f}x): rig {early_mib[0]:.0f} MiB after 0.1 s, "
+        f"{_peak_rss_mib(resource.RUSAGE_SELF):.0f} MiB after {result.simulated_s:.0f} s; "
+        f"autopilot {_peak_rss_mib(resource.RUSAGE_CHILDREN):.0f} MiB",
         flush=True,
     )
 
@@ -162,6 +208,7 @@ def main() -> None:
     else:
         print("(reference autopilot not installed: `python -m rig.autopilot` is missing)")
     print(_budget_heading())
+    _print_before()
     for sensor_layer in ("tlm", "rtl"):
         for imu_hz in (1000, 250):
             for autopilot in autopilots:
