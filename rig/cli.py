@@ -12,7 +12,7 @@ from pathlib import Path
 
 from rich.console import Console
 from rich.live import Live
-from rich.table import Table
+from rich.text import Text
 
 from rig.errors import RigError
 from rig.link import LinkTimeouts
@@ -64,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
         f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "
         f"(RTF {result.real_time_factor:.2f}x, {result.frames} frames)\n"
         f"rig log:       {result.rig_log}\n"
-        f"autopilot log: {result.autopilot_log or '(written by the autopilot, e.g. PX4)'}"
+        f"autopilot log: {result.autopilot_log or '(written by the autopilot, e.g. PX4)'}",
+        highlight=False,
     )
     return 0
 
@@ -85,22 +86,33 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="seconds to wait for the autopilot to connect")  # fmt: skip
 
 
+#: Without a terminal (a pipe, a CI log) progress is a plain line this often, in simulated s.
+LOG_PROGRESS_EVERY_S = 10.0
+
+
+def _status(progress: Progress) -> str:
+    return (
+        f"t = {progress.time_s:6.1f} / {progress.duration_s:.0f} s  "
+        f"RTF {progress.real_time_factor:5.2f}x  alt {progress.altitude_m:6.2f} m  "
+        f"{'ARMED' if progress.armed else 'disarmed'}  {progress.last_event[:60]}"
+    )
+
+
 def _run_with_progress(scenario, options: RunOptions, console: Console) -> RunResult:
-    """Run with a live line of simulated time, RTF, altitude and mode (rich)."""
+    """Run with a live status line (simulated time, RTF, altitude, mode) on a terminal,
+    and one plain line every LOG_PROGRESS_EVERY_S of simulated time otherwise."""
+    if not console.is_terminal:
+        next_line_s = 0.0
+
+        def log_line(progress: Progress) -> None:
+            nonlocal next_line_s
+            if progress.time_s >= next_line_s:
+                console.print(_status(progress), highlight=False)
+                next_line_s += LOG_PROGRESS_EVERY_S
+
+        return run_scenario(scenario, options, log_line)
     with Live(console=console, refresh_per_second=4, transient=False) as live:
-
-        def show(progress: Progress) -> None:
-            table = Table.grid(padding=(0, 2))
-            table.add_row(
-                f"t = {progress.time_s:6.1f} / {progress.duration_s:.0f} s",
-                f"RTF {progress.real_time_factor:5.2f}x",
-                f"alt {progress.altitude_m:6.2f} m",
-                "ARMED" if progress.armed else "disarmed",
-                progress.last_event[:60],
-            )
-            live.update(table)
-
-        return run_scenario(scenario, options, show)
+        return run_scenario(scenario, options, lambda p: live.update(Text(_status(p))))
 
 
 if __name__ == "__main__":
