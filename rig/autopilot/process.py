@@ -22,7 +22,16 @@ from rig.autopilot.flight_log import open_flight_log
 from rig.autopilot.gcs import GroundStation, MavlinkLink
 from rig.autopilot.params import Parameters
 from rig.autopilot.sensors import GpsFix, GroundTruth, SensorFrame
-from rig.px4_sim_api import LOCKSTEP_FLAG, ActuatorMode, HilSensorFields, Ports, mavlink
+from rig.px4_sim_api import (
+    DEFAULT_HOME_ALT_AMSL_M,
+    DEFAULT_HOME_LAT_DEG,
+    DEFAULT_HOME_LON_DEG,
+    LOCKSTEP_FLAG,
+    ActuatorMode,
+    HilSensorFields,
+    Ports,
+    mavlink,
+)
 
 #: PX4 asks the simulator for ground truth every 5000 µs (PX4_SIM_CONTRACT.md).
 GROUND_TRUTH_INTERVAL_US = 5000
@@ -79,6 +88,29 @@ def ground_truth(message) -> GroundTruth:
     )
 
 
+def warm_up() -> None:
+    """Compile the flight controller's numba kernels before talking to the simulator.
+
+    PX4 boots before it connects; a cold numba cache costs seconds of compiling, which the
+    rig would spend freewheeling frames unanswered. A throwaway controller flies a few
+    frames of a vehicle at rest, disarmed and then armed, so every compiled path runs once.
+    """
+    controller = FlightController(Parameters())
+    at_home = GpsFix(
+        DEFAULT_HOME_LAT_DEG, DEFAULT_HOME_LON_DEG, DEFAULT_HOME_ALT_AMSL_M, (0.0, 0.0, 0.0),
+        eph_m=0.5, epv_m=0.8, fix_type=3, satellites_used=10,
+    )  # fmt: skip
+    frame = SensorFrame(
+        accel_mps2=np.array([0.0, 0.0, -9.81]), gyro_radps=np.zeros(3),
+        mag_gauss=np.array([0.21, 0.01, 0.43]), baro_pressure_pa=95_460.0,
+        baro_temperature_degc=15.0, gps=at_home,
+    )  # fmt: skip
+    for k in range(1, 60):
+        if k == 30:
+            controller.arm(force=True)
+        controller.update(frame, k * 4000)
+
+
 class Autopilot:
     """The process: the flight controller, the simulator link and the ground-station links."""
 
@@ -125,6 +157,7 @@ class Autopilot:
 
     def run(self) -> str:
         """Serve until the simulator closes the link; returns why it stopped."""
+        warm_up()
         self.connect()
         while True:
             readable, _, _ = select.select([self.sim, *(link.sock for link in self.links)],
