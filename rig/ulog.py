@@ -107,7 +107,8 @@ class ULogWriter:
         self.path = Path(path)
         self._flush_interval_s = flush_interval_s
         self._topics: dict[str, _Topic] = {}
-        self._subscriptions: dict[tuple[str, int], int] = {}
+        #: Header and message id of each subscribed (topic, instance), in order.
+        self._data_prefixes: dict[tuple[str, int], bytes] = {}
         definitions = bytearray()
         definitions += _message(b"B", bytes(16) + bytes(24))  # no compat/incompat flags
         for msg_id, (name, fields) in enumerate(topics.items()):
@@ -135,42 +136,48 @@ class ULogWriter:
         self._last_flush = time.monotonic()
 
     def write(self, topic: str, timestamp_us: int, multi_id: int = 0, **values: object) -> None:
-        """Append one sample of ``topic``; every declared field must be given."""
+        """Append one sample of ``topic``; every declared field must be given.
+
+        Runs for every logged sample, so it avoids numpy conversions: scalars go to
+        ``struct`` as they are, arrays as their flattened list.
+        """
         spec = self._topics.get(topic)
         if spec is None:
             raise ULogWriteError(f"topic {topic!r} was not declared when the log was opened")
-        key = (topic, multi_id)
-        if key not in self._subscriptions:
-            msg_id = len(self._subscriptions)
-            self._subscriptions[key] = msg_id
-            self._file.write(_message(b"A", struct.pack("<BH", multi_id, msg_id) + topic.encode()))
-        flat: list[object] = [int(timestamp_us)]
-        for name, length in spec.fields:
-            try:
-                value = values[name]
-            except KeyError:
-                raise ULogWriteError(f"topic {topic!r}: field {name!r} missing") from None
-            if length:
-                array = np.asarray(value).ravel()
-                if array.dtype.kind in "SU":  # char[n]: one string
-                    flat.append(str(value).encode())
-                    continue
-                if array.size != length:
-                    raise ULogWriteError(
-                        f"topic {topic!r}: field {name!r} needs {length} values, got {array.size}"
-                    )
-                flat.extend(array.tolist())
-            else:
-                flat.append(value.item() if isinstance(value, np.generic) else value)
         if len(values) != len(spec.fields):
-            extra = sorted(set(values) - {name for name, _ in spec.fields})
-            raise ULogWriteError(f"topic {topic!r}: unknown fields {extra}")
+            raise _field_error(spec, values)
+        prefix = self._data_prefixes.get((topic, multi_id)) or self._subscribe(spec, multi_id)
+        flat: list[object] = [int(timestamp_us)]
         try:
+            for name, length in spec.fields:
+                value = values[name]
+                if not length:
+                    flat.append(value)
+                elif isinstance(value, str | bytes):  # char[n]: one string
+                    flat.append(value.encode() if isinstance(value, str) else value)
+                else:
+                    items = value.ravel().tolist() if isinstance(value, np.ndarray) else list(value)
+                    if len(items) != length:
+                        raise ULogWriteError(
+                            f"topic {topic!r}: field {name!r} needs {length} values, "
+                            f"got {len(items)}"
+                        )
+                    flat.extend(items)
             payload = spec.packer.pack(*flat)
+        except KeyError:
+            raise _field_error(spec, values) from None
         except struct.error as error:
             raise ULogWriteError(f"topic {topic!r}: {error}") from None
-        self._file.write(_message(b"D", struct.pack("<H", self._subscriptions[key]) + payload))
+        self._file.write(prefix + payload)
         self._maybe_flush()
+
+    def _subscribe(self, spec: _Topic, multi_id: int) -> bytes:
+        """Add the subscription of an instance; returns its data-message prefix."""
+        msg_id = len(self._data_prefixes)
+        self._file.write(_message(b"A", struct.pack("<BH", multi_id, msg_id) + spec.name.encode()))
+        prefix = struct.pack("<HBH", 2 + spec.packer.size, ord("D"), msg_id)
+        self._data_prefixes[(spec.name, multi_id)] = prefix
+        return prefix
 
     def log(self, level: str, timestamp_us: int, text: str) -> None:
         """Append a logged string (shown by Flight Review and pyulog as a log message)."""
@@ -206,6 +213,16 @@ class ULogWriter:
     def _maybe_flush(self) -> None:
         if time.monotonic() - self._last_flush >= self._flush_interval_s:
             self.flush()
+
+
+def _field_error(spec: _Topic, values: Mapping[str, object]) -> ULogWriteError:
+    declared = [name for name, _ in spec.fields]
+    missing = [name for name in declared if name not in values]
+    if missing:
+        return ULogWriteError(f"topic {spec.name!r}: field {missing[0]!r} missing")
+    return ULogWriteError(
+        f"topic {spec.name!r}: unknown fields {sorted(set(values) - set(declared))}"
+    )
 
 
 def _message(kind: bytes, body: bytes) -> bytes:
