@@ -58,6 +58,56 @@ class I2cBus(Protocol):
     ) -> bytes: ...
 
 
+class I2cByteController(Protocol):
+    """A bit-level I2C controller: bus conditions and whole bytes with their acknowledge bit.
+
+    The pin-level master under cocotb and the amaranth.sim test controller implement it
+    over their own primitives and share :func:`combined_transfer` for the sequence.
+    """
+
+    async def start(self) -> None: ...  # START, or repeated START while SCL is held low
+
+    async def stop(self) -> None: ...
+
+    async def write_byte(self, byte: int) -> bool: ...  # True when the target ACKs
+
+    async def read_byte(self, *, ack: bool) -> int: ...  # then ACK (``ack``) or NACK it
+
+
+async def combined_transfer(
+    controller: I2cByteController, address: int, write: bytes, read_len: int
+) -> bytes:
+    """One :meth:`I2cBus.write_read` as bus conditions (UM10204 rev. 7, 3.1.10, combined format).
+
+    START, address+W, the ``write`` bytes, repeated START, address+R, ``read_len`` bytes
+    ACKed but the last, which is NACKed, then STOP. An empty ``write`` skips the write
+    part; an empty transfer is an address probe. A NACK ends the transfer with a STOP and
+    raises :class:`I2cNack`, as PX4's ``I2C::transfer`` reports it.
+    """
+    if read_len < 0:
+        raise ValueError(f"read_len must be >= 0, not {read_len}")
+    await controller.start()
+    if write or not read_len:
+        if not await controller.write_byte(address << 1):
+            await controller.stop()
+            raise I2cNack(address)
+        for index, byte in enumerate(write, start=1):
+            if not await controller.write_byte(byte):
+                await controller.stop()
+                raise I2cNack(address, index)
+        if read_len:
+            await controller.start()
+    data = bytearray()
+    if read_len:
+        if not await controller.write_byte(address << 1 | 1):
+            await controller.stop()
+            raise I2cNack(address)
+        for index in range(read_len):
+            data.append(await controller.read_byte(ack=index < read_len - 1))
+    await controller.stop()
+    return bytes(data)
+
+
 @runtime_checkable
 class SpiDeviceModel(Protocol):
     """A transaction-level SPI chip: one call per chip-select assertion."""

@@ -21,7 +21,7 @@ from cocotb.clock import Clock
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
-from fpga_hdl.buses import I2cNack
+from fpga_hdl.buses import combined_transfer
 from fpga_hdl.i2c_controller import timing_for  # one place for the stretched timing
 from fpga_hdl.i2c_target import FAST_MODE, I2cTiming
 
@@ -254,25 +254,4 @@ class CocotbI2cMaster:
     ) -> bytes:
         """Write, repeated START, read (PX4 ``I2C::transfer``); raises :class:`I2cNack`."""
         self._t = self.timing or timing_for(scl_hz)
-        if read_len < 0:
-            raise ValueError(f"read_len must be >= 0, not {read_len}")
-        await self.start()
-        if write or not read_len:
-            if not await self.write_byte(address << 1):
-                await self.stop()
-                raise I2cNack(address)
-            for index, byte in enumerate(write, start=1):
-                if not await self.write_byte(byte):
-                    await self.stop()
-                    raise I2cNack(address, index)
-            if read_len:
-                await self.start()
-        data = bytearray()
-        if read_len:
-            if not await self.write_byte(address << 1 | 1):
-                await self.stop()
-                raise I2cNack(address)
-            for index in range(read_len):
-                data.append(await self.read_byte(ack=index < read_len - 1))
-        await self.stop()
-        return bytes(data)
+        return await combined_transfer(self, address, write, read_len)

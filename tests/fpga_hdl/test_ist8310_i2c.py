@@ -14,7 +14,7 @@ import pytest
 from amaranth.hdl import Module, Signal
 from amaranth.sim import Simulator
 
-from fpga_hdl.buses import I2cNack, TlmI2cBus
+from fpga_hdl.buses import I2cNack, TlmI2cBus, combined_transfer
 from fpga_hdl.i2c_target import FAST_MODE, I2cTarget, TargetSampling
 from fpga_hdl.ist8310 import regs
 from fpga_hdl.ist8310.core import Ist8310Core
@@ -81,7 +81,7 @@ class SimController:
             await self.clock_bit(byte >> i & 1)
         return await self.clock_bit(1) == 0
 
-    async def read_byte(self, ack: bool) -> int:
+    async def read_byte(self, *, ack: bool) -> int:
         byte = 0
         for _ in range(8):
             byte = byte << 1 | await self.clock_bit(1)
@@ -89,26 +89,7 @@ class SimController:
         return byte
 
     async def write_read(self, address: int, write: bytes, read_len: int, *, scl_hz: float):
-        await self.start()
-        if write or not read_len:
-            if not await self.write_byte(address << 1):
-                await self.stop()
-                raise I2cNack(address)
-            for index, byte in enumerate(write, start=1):
-                if not await self.write_byte(byte):
-                    await self.stop()
-                    raise I2cNack(address, index)
-            if read_len:
-                await self.start()
-        out = bytearray()
-        if read_len:
-            if not await self.write_byte(address << 1 | 1):
-                await self.stop()
-                raise I2cNack(address)
-            for i in range(read_len):
-                out.append(await self.read_byte(ack=i < read_len - 1))
-        await self.stop()
-        return bytes(out)
+        return await combined_transfer(self, address, write, read_len)
 
 
 def simulate(core: Ist8310Core, bench):
