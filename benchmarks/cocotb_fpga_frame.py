@@ -12,31 +12,19 @@ import time
 import cocotb
 import numpy as np
 
-from fpga_hdl.cosim.host import CocotbHost
-from fpga_hdl.cosim.spi_master import CocotbSpiMaster
+from fpga_hdl.cosim.sensor_top import SensorTopPins
 from fpga_hdl.mpu6000 import regs as mpu
 from fpga_hdl.mpu6000.driver import Mpu6000Driver
 from fpga_hdl.ms5611 import regs as baro
 from fpga_hdl.ms5611.driver import Ms5611Driver
-from fpga_hdl.top import HOST_MAP, SYS_CLK_HZ
 
 FRAMES = int(os.environ.get("BENCH_FRAMES", "200"))
 
 
 @cocotb.test()
 async def frames(dut):
-    host = CocotbHost(dut, HOST_MAP, sys_clk_hz=SYS_CLK_HZ)
-    spi = CocotbSpiMaster(
-        sclk=dut.spi_sclk,
-        mosi=dut.spi_mosi,
-        miso=dut.spi_miso,
-        miso_oe=dut.spi_miso_oe,
-        chip_selects={"imu": dut.imu_cs_n, "baro": dut.baro_cs_n},
-        after_release=host.settle,
-    )
-    spi.idle()
-    dut.i2c_scl.value = 1
-    dut.i2c_sda_i.value = 1
+    pins = SensorTopPins(dut)
+    host, spi = pins.host, pins.spi
     await host.reset()
     now_us = [1]
 

@@ -14,14 +14,13 @@ import pytest
 from cocotb.triggers import FallingEdge, RisingEdge, Timer
 
 from fpga_hdl.buses import I2cNack, TlmI2cBus
-from fpga_hdl.cosim.host import CocotbHost
-from fpga_hdl.cosim.i2c_master import CocotbI2cMaster
+from fpga_hdl.cosim.sensor_top import SensorTopPins
 from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
 from fpga_hdl.ist8310 import regs
 from fpga_hdl.ist8310.driver import Ist8310Driver, sample_from_field_gauss
 from fpga_hdl.ist8310.model import Ist8310Model
 from fpga_hdl.ist8310.regs import Ist8310Sample, Register
-from fpga_hdl.top import HOST_MAP, SYS_CLK_HZ
+from fpga_hdl.top import HOST_MAP
 
 SEED = int(os.environ.get("COSIM_SEED", "20240612"))
 ADDRESS = regs.DEFAULT_ADDRESS
@@ -32,24 +31,13 @@ class Ist8310Bench:
 
     def __init__(self, dut, timing: I2cTiming | None = None) -> None:
         self.dut = dut
-        self.host = CocotbHost(dut, HOST_MAP, sys_clk_hz=SYS_CLK_HZ)
-        self.i2c = CocotbI2cMaster(
-            scl=dut.i2c_scl,
-            sda_i=dut.i2c_sda_i,
-            sda_oe=dut.i2c_sda_oe,
-            clk=dut.clk,
-            sys_clk_hz=SYS_CLK_HZ,
-            timing=timing,
-        )
+        pins = SensorTopPins(dut, i2c_timing=timing)
+        self.host, self.i2c = pins.host, pins.i2c
         self.model = Ist8310Model()
         self.tlm = TlmI2cBus({ADDRESS: self.model})
         self.now_us = 1
 
     async def start(self) -> None:
-        for name in ("spi_sclk", "spi_mosi"):
-            getattr(self.dut, name).value = 0
-        self.dut.imu_cs_n.value = 1
-        self.dut.baro_cs_n.value = 1
         await self.host.reset()
         await self.host.load({}, now_us=self.now_us)
 

@@ -14,15 +14,15 @@ from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
 from fpga_hdl.buses import TlmSpiBus
-from fpga_hdl.cosim.host import CocotbHost
-from fpga_hdl.cosim.spi_master import DEFAULT_TIMING, CocotbSpiMaster, SpiMasterTiming
+from fpga_hdl.cosim.sensor_top import SensorTopPins
+from fpga_hdl.cosim.spi_master import DEFAULT_TIMING, SpiMasterTiming
 from fpga_hdl.mpu6000 import regs as mpu
 from fpga_hdl.mpu6000.driver import Mpu6000Driver
 from fpga_hdl.mpu6000.model import Mpu6000Model
 from fpga_hdl.ms5611 import regs as baro_regs
 from fpga_hdl.ms5611.driver import Ms5611Driver
 from fpga_hdl.ms5611.model import Ms5611Model, raw_from_si
-from fpga_hdl.top import HOST_MAP, SYS_CLK_HZ
+from fpga_hdl.top import SYS_CLK_HZ
 
 SEED = int(os.environ.get("COSIM_SEED", "20240611"))
 
@@ -31,31 +31,14 @@ class SensorTopBench:
     """Host port + SPI controller on the DUT, with TLM models fed the same samples."""
 
     def __init__(self, dut, timing: SpiMasterTiming = DEFAULT_TIMING) -> None:
-        self.dut = dut
-        self.host = CocotbHost(dut, HOST_MAP, sys_clk_hz=SYS_CLK_HZ)
-        self.spi = self.master(timing)
+        pins = SensorTopPins(dut, spi_timing=timing)
+        self.host, self.spi = pins.host, pins.spi
         self.imu_model = Mpu6000Model()
         self.baro_model = Ms5611Model()
         self.tlm = TlmSpiBus({"imu": self.imu_model, "baro": self.baro_model})
         self.now_us = 1
 
-    def master(self, timing: SpiMasterTiming) -> CocotbSpiMaster:
-        dut = self.dut
-        master = CocotbSpiMaster(
-            sclk=dut.spi_sclk,
-            mosi=dut.spi_mosi,
-            miso=dut.spi_miso,
-            miso_oe=dut.spi_miso_oe,
-            chip_selects={"imu": dut.imu_cs_n, "baro": dut.baro_cs_n},
-            timing=timing,
-            after_release=self.host.settle,
-        )
-        master.idle()
-        return master
-
     async def start(self) -> None:
-        self.dut.i2c_scl.value = 1
-        self.dut.i2c_sda_i.value = 1
         await self.host.reset()
         await self.host.load({}, now_us=self.now_us)
 

@@ -1,0 +1,51 @@
+"""SensorTop's pins under cocotb, wired the way a flight controller wires them.
+
+The one place that knows SensorTop's port names for the pin-level masters, so every
+cocotb bench on the generated ``sensor_top`` starts from the same idle bus levels.
+"""
+
+from __future__ import annotations
+
+from fpga_hdl.cosim.host import CocotbHost
+from fpga_hdl.cosim.i2c_master import CocotbI2cMaster
+from fpga_hdl.cosim.spi_master import DEFAULT_TIMING, CocotbSpiMaster, SpiMasterTiming
+from fpga_hdl.i2c_target import I2cTiming
+from fpga_hdl.top import HOST_MAP, SYS_CLK_HZ
+
+
+class SensorTopPins:
+    """Host port, SPI controller (``imu``, ``baro``) and I2C controller on a SensorTop DUT.
+
+    Construction drives every input to its idle level (chip selects high, SCL and SDA
+    released, PWM inputs low with their domain unclocked); ``await pins.host.reset()``
+    then resets the design before the first transfer.
+    """
+
+    def __init__(
+        self,
+        dut,
+        *,
+        spi_timing: SpiMasterTiming = DEFAULT_TIMING,
+        i2c_timing: I2cTiming | None = None,
+    ) -> None:
+        self.host = CocotbHost(dut, HOST_MAP, sys_clk_hz=SYS_CLK_HZ)
+        self.spi = CocotbSpiMaster(
+            sclk=dut.spi_sclk,
+            mosi=dut.spi_mosi,
+            miso=dut.spi_miso,
+            miso_oe=dut.spi_miso_oe,
+            chip_selects={"imu": dut.imu_cs_n, "baro": dut.baro_cs_n},
+            timing=spi_timing,
+            after_release=self.host.settle,  # a released CS clocks the deferred sample in
+        )
+        self.spi.idle()
+        self.i2c = CocotbI2cMaster(
+            scl=dut.i2c_scl,
+            sda_i=dut.i2c_sda_i,
+            sda_oe=dut.i2c_sda_oe,
+            clk=dut.clk,
+            sys_clk_hz=SYS_CLK_HZ,
+            timing=i2c_timing,
+        )
+        for name in ("pwm", "pwm_clk", "pwm_rst"):
+            getattr(dut, name).value = 0
