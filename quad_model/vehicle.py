@@ -7,7 +7,6 @@ file. Rotors are listed in PX4's order (quad X: 0 front-right CCW, 1 rear-left C
 """
 
 import math
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, get_origin
@@ -15,6 +14,7 @@ from typing import Any, get_origin
 import numpy as np
 
 from quad_model.frames import STANDARD_GRAVITY_MPS2
+from quad_model.toml_file import read_toml_file
 
 #: Where the bundled vehicle files live (``load_vehicle("f450_high_precision")``).
 VEHICLES_DIR = Path(__file__).parent / "vehicles"
@@ -205,16 +205,13 @@ _SECTIONS = {
 
 def load_vehicle(name_or_path: str | Path) -> Vehicle:
     """Load a vehicle file: a bundled name (``"x500_v2"``) or a path to a TOML file."""
-    path = Path(name_or_path)
-    if path.suffix != ".toml":
-        path = VEHICLES_DIR / f"{name_or_path}.toml"
-    try:
-        document = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        bundled = ", ".join(sorted(p.stem for p in VEHICLES_DIR.glob("*.toml")))
-        raise VehicleFileError(f"{path}: no such vehicle file (bundled: {bundled})") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
-        raise VehicleFileError(f"{path}: not a readable TOML file ({error})") from None
+    document, path = read_toml_file(
+        name_or_path,
+        VEHICLES_DIR,
+        kind="vehicle",
+        error=VehicleFileError,
+        invalid_toml="not a readable TOML file",
+    )
     return vehicle_from_dict(document, str(path))
 
 

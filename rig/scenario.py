@@ -13,7 +13,6 @@ Times are simulated seconds from the start of the run. Units are in the key name
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import Any
 
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
 from quad_model.environment import Environment, GeoPoint, MagneticField, Wind
+from quad_model.toml_file import read_toml_file
 from rig.errors import ScenarioError
 from rig.pwm import PWM_TICK_HZ
 
@@ -150,18 +150,9 @@ _TOP_KEYS = {
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load a bundled scenario by name (``"hover"``) or any scenario file by path."""
-    path = Path(name_or_path)
-    if path.suffix != ".toml":
-        path = SCENARIOS_DIR / f"{name_or_path}.toml"
-    try:
-        document = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        bundled = ", ".join(sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")))
-        raise ScenarioError(f"{path}: no such scenario file (bundled: {bundled})") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise ScenarioError(f"{path}: cannot read ({error})") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ScenarioError(f"{path}: not valid TOML ({error})") from None
+    document, path = read_toml_file(
+        name_or_path, SCENARIOS_DIR, kind="scenario", error=ScenarioError
+    )
     return scenario_from_dict(document, str(path))
 
 
