@@ -6,6 +6,11 @@ injects, so adding a sensor or changing a rate never changes another sensor's nu
 
 White noise follows the discrete-time convention of Gazebo/PX4 SITL and Kalibr: a sensor
 with noise density N sampled at rate f has per-sample σ = N·√f (N/√Δt).
+
+Speed: the rig samples every 1 ms frame, so each model draws its normal variates in blocks
+(:class:`NormalBlocks`) and the IMU's arithmetic is one compiled call
+(:mod:`quad_model._sensor_kernels`). The draws keep their order, so a seed gives the same
+numbers as the plain numpy formulation (a test compares the two).
 """
 
 import math
@@ -15,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from quad_model import _sensor_kernels as _kernels
 from quad_model.environment import Environment
-from quad_model.frames import ned_to_body, ned_to_geodetic
+from quad_model.frames import ned_to_geodetic
 from quad_model.model import VehicleTruth
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
 
@@ -79,6 +85,39 @@ def _small_rotation(angles_rad: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.array([[1.0, -z, y], [z, 1.0, -x], [-y, x, 1.0]])
 
 
+class NormalBlocks:
+    """Standard normal variates read ahead from one generator and handed out in order.
+
+    One ``standard_normal(block_size)`` call replaces a call per sample (each costs ~0.6 µs
+    of numpy overhead for three numbers). A Generator fills an array draw by draw from its
+    stream, so the values equal those of consecutive small calls: the same seed gives the
+    same numbers. The owner must be the generator's only user from then on, since the
+    generator runs ahead of the values handed out.
+    """
+
+    def __init__(self, rng: np.random.Generator, block_size: int = 2048) -> None:
+        self._rng = rng
+        self._values = self._readonly(rng.standard_normal(block_size))
+        self._next = 0
+
+    @staticmethod
+    def _readonly(values: NDArray[np.float64]) -> NDArray[np.float64]:
+        values.flags.writeable = False  # callers get views: none may change the stream
+        return values
+
+    def take(self, count: int) -> NDArray[np.float64]:
+        """The next ``count`` variates of the stream."""
+        start = self._next
+        values = self._values
+        if start + count > values.size:
+            unread = values[start:]
+            fresh = self._rng.standard_normal(max(values.size, count) - unread.size)
+            values = self._values = self._readonly(np.concatenate((unread, fresh)))
+            start = 0
+        self._next = start + count
+        return values[start : start + count]
+
+
 class ImuModel:
     """Accelerometer + gyroscope: white noise, bias random walk, turn-on bias, scale factor,
     misalignment, temperature, and vibration driven by rotor speed.
@@ -87,6 +126,11 @@ class ImuModel:
     passing, ...) with amplitude ∝ (ω/ω_ref)², phase-locked to the rotor angle, plus
     broadband frame noise with the same speed scaling; nothing vibrates when rotors stop,
     which reproduces the paper's motors-off/motors-on sensor test.
+
+    The model owns ``rng``. It draws, in this order, the unit's fixed errors (gyro then accel
+    turn-on bias; gyro misalignment and scale; accel misalignment and scale; accel then gyro
+    tone phases), then per sample: gyro and accel bias walk (when time advanced), accel and
+    gyro broadband vibration, accel and gyro white noise.
     """
 
     def __init__(
@@ -97,99 +141,82 @@ class ImuModel:
         rate_hz: float = DEFAULT_IMU_RATE_HZ,
     ) -> None:
         self.rate_hz = _check_rate(rate_hz, "imu rate_hz")
-        self._imu = vehicle.imu
-        self._vib = vehicle.vibration
+        imu = self._imu = vehicle.imu
+        vib = vehicle.vibration
+        self._reference_rotor_speed_radps = vib.reference_rotor_speed_radps
         self._environment = environment
-        self._rng = rng
-        imu = self._imu
         self.gyro_noise_std_radps = imu.gyro_noise_density_radps_per_sqrthz * math.sqrt(rate_hz)
         self.accel_noise_std_mps2 = imu.accel_noise_density_mps2_per_sqrthz * math.sqrt(rate_hz)
         # Fixed errors of this unit, drawn once.
-        self._gyro_bias = rng.normal(0.0, imu.gyro_turn_on_bias_std_radps, 3)
-        self._accel_bias = rng.normal(0.0, imu.accel_turn_on_bias_std_mps2, 3)
-        self._gyro_matrix = _small_rotation(rng.normal(0.0, imu.misalignment_std_rad, 3)) * (
+        gyro_bias = rng.normal(0.0, imu.gyro_turn_on_bias_std_radps, 3)
+        accel_bias = rng.normal(0.0, imu.accel_turn_on_bias_std_mps2, 3)
+        gyro_matrix = _small_rotation(rng.normal(0.0, imu.misalignment_std_rad, 3)) * (
             1.0 + rng.normal(0.0, imu.gyro_scale_error_std, 3)
         )
-        self._accel_matrix = _small_rotation(rng.normal(0.0, imu.misalignment_std_rad, 3)) * (
+        accel_matrix = _small_rotation(rng.normal(0.0, imu.misalignment_std_rad, 3)) * (
             1.0 + rng.normal(0.0, imu.accel_scale_error_std, 3)
         )
-        # Vibration: harmonic numbers and one random phase per (harmonic, rotor, axis).
-        vib = self._vib
-        self._accel_harmonics = np.arange(1, len(vib.accel_harmonic_amplitude_mps2) + 1)
-        self._gyro_harmonics = np.arange(1, len(vib.gyro_harmonic_amplitude_radps) + 1)
-        self._accel_phase = rng.uniform(0, 2 * np.pi, (len(self._accel_harmonics), ROTOR_COUNT, 3))
-        self._gyro_phase = rng.uniform(0, 2 * np.pi, (len(self._gyro_harmonics), ROTOR_COUNT, 3))
+        amplitudes = (vib.accel_harmonic_amplitude_mps2, vib.gyro_harmonic_amplitude_radps)
+        # One random phase per (harmonic, rotor, axis); accel's drawn first.
+        phases = [rng.uniform(0, 2 * np.pi, (len(a), ROTOR_COUNT, 3)) for a in amplitudes]
+        self._normals = NormalBlocks(rng)
+        # The kernel's flat layout: one row per triad, in the order (ACCEL, GYRO).
+        k = _kernels
+        triad = self._triad = np.zeros((k.TRIADS, k.T_SIZE))
+        triad[:, k.T_NOISE_STD] = self.accel_noise_std_mps2, self.gyro_noise_std_radps
+        triad[:, k.T_BIAS_WALK] = (
+            imu.accel_bias_random_walk_mps3_per_sqrthz,
+            imu.gyro_bias_random_walk_radps2_per_sqrthz,
+        )
+        triad[:, k.T_TEMPCO] = imu.accel_bias_tempco_mps2_per_k, imu.gyro_bias_tempco_radps_per_k
+        triad[:, k.T_BROADBAND_STD] = vib.accel_broadband_std_mps2, vib.gyro_broadband_std_radps
+        triad[:, k.T_AXIS_GAIN : k.T_AXIS_GAIN + 3] = vib.accel_axis_gain, vib.gyro_axis_gain
+        triad[:, k.T_MATRIX : k.T_MATRIX + 9] = accel_matrix.ravel(), gyro_matrix.ravel()
+        self._bias = np.array([accel_bias, gyro_bias])  # the bias walks: kernel state
+        # Each tone as its (A·cos φ, A·sin φ) pair; a triad with fewer harmonics is padded
+        # with silent ones.
+        harmonics = max(map(len, amplitudes))
+        self._tone_quadrature = np.zeros((k.TRIADS, harmonics, ROTOR_COUNT, 3, 2))
+        for quadrature, amplitude, phase in zip(
+            self._tone_quadrature, amplitudes, phases, strict=True
+        ):
+            weight = np.asarray(amplitude)[:, None, None]
+            quadrature[: len(amplitude), ..., 0] = weight * np.cos(phase)
+            quadrature[: len(amplitude), ..., 1] = weight * np.sin(phase)
         self._last_time_s: float | None = None
-
-    def _vibration(
-        self,
-        speed_ratio_sq: NDArray[np.float64],
-        rotor_angle_rad: NDArray[np.float64],
-        harmonics: NDArray[np.int_],
-        amplitudes: tuple[float, ...],
-        phases: NDArray[np.float64],
-        broadband_std: float,
-        axis_gain: tuple[float, ...],
-    ) -> NDArray[np.float64]:
-        angle = harmonics[:, None, None] * rotor_angle_rad[None, :, None] + phases
-        weight = np.asarray(amplitudes)[:, None] * speed_ratio_sq[None, :]
-        tones = np.einsum("hr,hra->a", weight, np.sin(angle))
-        broadband = broadband_std * math.sqrt(float(np.mean(speed_ratio_sq**2)))
-        return (tones + broadband * self._rng.standard_normal(3)) * np.asarray(axis_gain)
 
     def sample(self, truth: VehicleTruth) -> ImuSample:
         """One IMU reading of ``truth`` (call at ``rate_hz`` for the stated noise)."""
-        imu, vib = self._imu, self._vib
-        dt = 1.0 / self.rate_hz if self._last_time_s is None else truth.time_s - self._last_time_s
-        self._last_time_s = truth.time_s
+        now = truth.time_s
+        dt = 1.0 / self.rate_hz if self._last_time_s is None else now - self._last_time_s
+        self._last_time_s = now
         if dt > 0:
             sqrt_dt = math.sqrt(dt)
-            self._gyro_bias += (
-                imu.gyro_bias_random_walk_radps2_per_sqrthz
-                * sqrt_dt
-                * (self._rng.standard_normal(3))
-            )
-            self._accel_bias += (
-                imu.accel_bias_random_walk_mps3_per_sqrthz
-                * sqrt_dt
-                * (self._rng.standard_normal(3))
-            )
-        altitude = self._environment.altitude_amsl_m(truth.position_ned_m)
-        temperature = self._environment.air_temperature_degc(altitude) + imu.self_heating_k
-        delta_t = temperature - imu.reference_temperature_degc
-        ratio_sq = (truth.rotor_speed_radps / vib.reference_rotor_speed_radps) ** 2
-        angles = truth.rotor_angle_rad
-        accel_vibration = self._vibration(
-            ratio_sq,
-            angles,
-            self._accel_harmonics,
-            vib.accel_harmonic_amplitude_mps2,
-            self._accel_phase,
-            vib.accel_broadband_std_mps2,
-            vib.accel_axis_gain,
+            normals = self._normals.take(_kernels.WALK_DRAWS + _kernels.SAMPLE_DRAWS)
+        else:
+            sqrt_dt = 0.0
+            normals = self._normals.take(_kernels.SAMPLE_DRAWS)
+        environment = self._environment
+        temperature = (
+            environment.air_temperature_degc(environment.altitude_amsl_m(truth.position_ned_m))
+            + self._imu.self_heating_k
         )
-        gyro_vibration = self._vibration(
-            ratio_sq,
-            angles,
-            self._gyro_harmonics,
-            vib.gyro_harmonic_amplitude_radps,
-            self._gyro_phase,
-            vib.gyro_broadband_std_radps,
-            vib.gyro_axis_gain,
+        out = np.empty((_kernels.TRIADS, 3))
+        _kernels.imu_sample(
+            truth.specific_force_frd_mps2,
+            truth.angular_rate_frd_radps,
+            truth.rotor_speed_radps,
+            truth.rotor_angle_rad,
+            self._reference_rotor_speed_radps,
+            sqrt_dt,
+            temperature - self._imu.reference_temperature_degc,
+            self._triad,
+            self._bias,
+            self._tone_quadrature,
+            normals,
+            out,
         )
-        accel = (
-            self._accel_matrix @ (truth.specific_force_frd_mps2 + accel_vibration)
-            + self._accel_bias
-            + imu.accel_bias_tempco_mps2_per_k * delta_t
-            + self.accel_noise_std_mps2 * self._rng.standard_normal(3)
-        )
-        gyro = (
-            self._gyro_matrix @ (truth.angular_rate_frd_radps + gyro_vibration)
-            + self._gyro_bias
-            + imu.gyro_bias_tempco_radps_per_k * delta_t
-            + self.gyro_noise_std_radps * self._rng.standard_normal(3)
-        )
-        return ImuSample(truth.time_s, accel, gyro, temperature)
+        return ImuSample(now, out[_kernels.ACCEL], out[_kernels.GYRO], temperature)
 
 
 class BaroModel:
@@ -200,26 +227,29 @@ class BaroModel:
     ) -> None:
         self._baro = vehicle.baro
         self._environment = environment
-        self._rng = rng
+        self._normals = NormalBlocks(rng)  # per sample: drift step (when time advanced), noise
         self._drift_pa = 0.0
         self._last_time_s: float | None = None
 
     def sample(self, truth: VehicleTruth) -> BaroSample:
         baro = self._baro
-        if self._last_time_s is not None and truth.time_s > self._last_time_s:
-            dt = truth.time_s - self._last_time_s
+        now = truth.time_s
+        if self._last_time_s is not None and now > self._last_time_s:
+            step, noise = self._normals.take(2)
             self._drift_pa += (
-                baro.drift_random_walk_pa_per_sqrts * math.sqrt(dt) * (self._rng.standard_normal())
+                baro.drift_random_walk_pa_per_sqrts * math.sqrt(now - self._last_time_s) * step
             )
-        self._last_time_s = truth.time_s
+        else:
+            (noise,) = self._normals.take(1)
+        self._last_time_s = now
         altitude = self._environment.altitude_amsl_m(truth.position_ned_m)
         pressure = (
             self._environment.static_pressure_pa(altitude)
             + self._drift_pa
-            + baro.noise_std_pa * self._rng.standard_normal()
+            + baro.noise_std_pa * noise
         )
         temperature = self._environment.air_temperature_degc(altitude) + baro.self_heating_k
-        return BaroSample(truth.time_s, float(pressure), temperature)
+        return BaroSample(now, float(pressure), temperature)
 
 
 class MagModel:
@@ -230,12 +260,17 @@ class MagModel:
     ) -> None:
         self._mag = vehicle.mag
         self._field_ned = environment.magnetic_field.ned_gauss()
-        self._hard_iron = np.asarray(vehicle.mag.hard_iron_frd_gauss)
-        self._rng = rng
+        self._hard_iron = np.asarray(vehicle.mag.hard_iron_frd_gauss, dtype=float)
+        self._normals = NormalBlocks(rng)
 
     def sample(self, truth: VehicleTruth) -> MagSample:
-        field = ned_to_body(truth.attitude_quat, self._field_ned) + self._hard_iron
-        field = field + self._mag.noise_std_gauss * self._rng.standard_normal(3)
+        field = _kernels.mag_sample(
+            truth.attitude_quat,
+            self._field_ned,
+            self._hard_iron,
+            self._mag.noise_std_gauss,
+            self._normals.take(3),
+        )
         return MagSample(truth.time_s, field)
 
 
@@ -244,7 +279,8 @@ class GpsModel:
 
     Call :meth:`sample` every rig frame: it keeps the recent truth and returns a fix when
     one is due (epochs every 1/fix_rate s, each output ``latency_s`` after its epoch),
-    otherwise None. Latency resolves to the calling period.
+    otherwise None. Latency resolves to the calling period. Draws: the initial position
+    error, then per fix the position error's innovation and the velocity noise.
     """
 
     def __init__(
@@ -252,38 +288,45 @@ class GpsModel:
     ) -> None:
         self._gps = vehicle.gps
         self._home = environment.home
-        self._rng = rng
         gps = self._gps
         self._period_s = 1.0 / gps.fix_rate_hz
         self._error_std = np.array(
             [gps.horizontal_error_std_m, gps.horizontal_error_std_m, gps.vertical_error_std_m]
         )
         self._error_m = self._error_std * rng.standard_normal(3)
+        self._normals = NormalBlocks(rng)
         self._next_epoch_s = 0.0
-        self._history: deque[tuple[float, NDArray[np.float64], NDArray[np.float64]]] = deque()
+        self._next_output_s = gps.latency_s
+        # Truths are read-only snapshots: keeping them is cheaper than copying two vectors.
+        self._history: deque[VehicleTruth] = deque()
 
     def sample(self, truth: VehicleTruth) -> GpsSample | None:
-        gps = self._gps
+        self._history.append(truth)
         now = truth.time_s
-        self._history.append((now, truth.position_ned_m.copy(), truth.velocity_ned_mps.copy()))
-        if now + 1e-9 < self._next_epoch_s + gps.latency_s:
+        if now + 1e-9 < self._next_output_s:
             return None
+        gps = self._gps
         epoch = self._next_epoch_s
         # Skip epochs that were missed entirely (caller slower than the fix rate).
         while epoch + self._period_s + gps.latency_s <= now + 1e-9:
             epoch += self._period_s
         self._next_epoch_s = epoch + self._period_s
-        while len(self._history) > 1 and self._history[1][0] <= epoch + 1e-9:
-            self._history.popleft()
-        _, position, velocity = self._history[0]
+        self._next_output_s = self._next_epoch_s + gps.latency_s
+        history = self._history
+        while len(history) > 1 and history[1].time_s <= epoch + 1e-9:
+            history.popleft()
+        at_epoch = history[0]
         decay = math.exp(-self._period_s / gps.error_correlation_time_s)
         self._error_m = self._error_m * decay + self._error_std * math.sqrt(
             1.0 - decay * decay
-        ) * self._rng.standard_normal(3)
+        ) * self._normals.take(3)
         lat, lon, alt = ned_to_geodetic(
-            position + self._error_m, self._home.lat_deg, self._home.lon_deg, self._home.alt_amsl_m
+            at_epoch.position_ned_m + self._error_m,
+            self._home.lat_deg,
+            self._home.lon_deg,
+            self._home.alt_amsl_m,
         )
-        velocity = velocity + gps.velocity_noise_std_mps * self._rng.standard_normal(3)
+        velocity = at_epoch.velocity_ned_mps + gps.velocity_noise_std_mps * self._normals.take(3)
         return GpsSample(
             time_s=now,
             lat_deg=lat,
@@ -295,6 +338,23 @@ class GpsModel:
             fix_type=GPS_FIX_3D,
             satellites_visible=gps.satellites_visible,
         )
+
+
+class _SlotGrid:
+    """A sensor's sampling slots k/rate: due once the time reaches the next slot (1 ns
+    tolerance for float frame times); a late call skips the slots it missed."""
+
+    __slots__ = ("_next_s", "_period_s")
+
+    def __init__(self, rate_hz: float) -> None:
+        self._period_s = 1.0 / rate_hz
+        self._next_s = 0.0
+
+    def __call__(self, time_s: float) -> bool:
+        if time_s + 1e-9 < self._next_s:
+            return False
+        self._next_s = (math.floor(time_s / self._period_s + 1e-6) + 1) * self._period_s
+        return True
 
 
 @dataclass(frozen=True)
@@ -328,28 +388,17 @@ class SensorSuite:
         self.mag = MagModel(vehicle, environment, mag_rng)
         self.baro = BaroModel(vehicle, environment, baro_rng)
         self.gps = GpsModel(vehicle, environment, gps_rng)
-        self._periods_s = {
-            "imu": 1.0 / self.imu.rate_hz,
-            "mag": 1.0 / _check_rate(mag_rate_hz, "mag_rate_hz"),
-            "baro": 1.0 / _check_rate(baro_rate_hz, "baro_rate_hz"),
-        }
-        self._next_slot = dict.fromkeys(self._periods_s, 0)
-
-    def _due(self, name: str, time_s: float) -> bool:
-        slot = self._next_slot[name]
-        period = self._periods_s[name]
-        if time_s + 1e-9 < slot * period:
-            return False
-        self._next_slot[name] = math.floor(time_s / period + 1e-6) + 1
-        return True
+        self._imu_due = _SlotGrid(self.imu.rate_hz)
+        self._mag_due = _SlotGrid(_check_rate(mag_rate_hz, "mag_rate_hz"))
+        self._baro_due = _SlotGrid(_check_rate(baro_rate_hz, "baro_rate_hz"))
 
     def sample(self, truth: VehicleTruth) -> SensorReadings:
         t = truth.time_s
         return SensorReadings(
-            imu=self.imu.sample(truth) if self._due("imu", t) else None,
-            mag=self.mag.sample(truth) if self._due("mag", t) else None,
-            baro=self.baro.sample(truth) if self._due("baro", t) else None,
-            gps=self.gps.sample(truth),
+            self.imu.sample(truth) if self._imu_due(t) else None,
+            self.mag.sample(truth) if self._mag_due(t) else None,
+            self.baro.sample(truth) if self._baro_due(t) else None,
+            self.gps.sample(truth),
         )
 
 
@@ -362,6 +411,7 @@ __all__ = [
     "ImuSample",
     "MagModel",
     "MagSample",
+    "NormalBlocks",
     "SensorConfigError",
     "SensorReadings",
     "SensorSuite",
