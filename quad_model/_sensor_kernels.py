@@ -1,8 +1,8 @@
 """The compiled per-sample physics behind :mod:`quad_model.sensors` (IMU and magnetometer).
 
-Why compiled: one IMU sample is two triads of about forty rotor-phase sines and a few
-3-vectors. numpy spent ~40 µs of dispatch on those tiny arrays; one numba call does the
-arithmetic in well under a microsecond (``cache=True`` keeps the machine code between
+Why compiled: one IMU sample sums 48 rotor-phase tones (2 triads × 3 axes × 4 rotors × 2
+harmonics) and moves a few 3-vectors. numpy spent ~40 µs of dispatch on those tiny arrays;
+one numba call does the arithmetic in well under a microsecond (``cache=True`` keeps the machine code between
 runs). The model keeps the parameters and draws the normal variates; the kernel only does
 arithmetic, so the random stream is decided in one place.
 
@@ -35,7 +35,7 @@ T_SIZE = 16
 # Where each triad's variates sit in one sample's draws. The order is the model's since its
 # first release, so a seed reproduces earlier runs: gyro bias walk, accel bias walk (only
 # when time advanced), then accel and gyro broadband vibration, then accel and gyro white
-# noise. Offsets below count from after the walk draws.
+# noise. ``_WALK_AT`` counts from the sample's first draw, the others from after the walk.
 WALK_DRAWS = 6
 SAMPLE_DRAWS = 12
 _WALK_AT = (3, 0)  # indexed by triad: accel, gyro
