@@ -2,9 +2,9 @@
 
 Why compiled: one IMU sample sums 48 rotor-phase tones (2 triads × 3 axes × 4 rotors × 2
 harmonics) and moves a few 3-vectors. numpy spent ~40 µs of dispatch on those tiny arrays;
-one numba call does the arithmetic in well under a microsecond (``cache=True`` keeps the machine code between
-runs). The model keeps the parameters and draws the normal variates; the kernel only does
-arithmetic, so the random stream is decided in one place.
+one numba call does the arithmetic in well under a microsecond (``cache=True`` keeps the
+machine code between runs). The model keeps the parameters and draws the normal variates;
+the kernel only does arithmetic, so the random stream is decided in one place.
 
 Why flat arrays: as in :mod:`quad_model.dynamics`, numba dispatches a few float64 arrays
 far faster than a record of named ones; the layout below names every slot once.
