@@ -3,7 +3,8 @@
 Exact to the tick, including sampling and latency, so the tests can demand equality with
 the RTL: clock edge ``k`` (at ``first_edge_s + k / tick_hz``) samples the input; an edge
 landing exactly on a clock edge counts as already there. The core acts on a sample
-``LATENCY_TICKS`` edges later.
+``LATENCY_TICKS`` edges later; a reader behind a synchroniser sees it later still
+(``latency_ticks``: SensorTop's host port reads ``fpga_hdl.top.PWM_RESULT_LATENCY_TICKS``).
 """
 
 import math
@@ -25,11 +26,25 @@ class ChannelCapture:
 
 
 class PwmCaptureModel:
-    """The core's arithmetic for one channel at a time, event by event (no per-tick loop)."""
+    """The core's arithmetic for one channel at a time, event by event (no per-tick loop).
 
-    def __init__(self, *, tick_hz: float = 1e6, timeout_s: float = 0.1) -> None:
+    ``latency_ticks`` counts the clock edges from the one that samples an input edge to
+    the results the reader sees: the core's own registers by default; more for a reader
+    whose copy of them is that many edges younger (the whole result set moves as one, so
+    the timeout runs from the delayed rise as well).
+    """
+
+    def __init__(
+        self, *, tick_hz: float = 1e6, timeout_s: float = 0.1, latency_ticks: int = LATENCY_TICKS
+    ) -> None:
+        if not (isinstance(latency_ticks, int) and latency_ticks >= LATENCY_TICKS):
+            raise ValueError(
+                f"latency_ticks must be a whole number of ticks >= the core's {LATENCY_TICKS}, "
+                f"not {latency_ticks!r}"
+            )
         self.timeout_ticks = timeout_ticks(tick_hz, timeout_s)
         self.tick_hz = float(tick_hz)
+        self.latency_ticks = latency_ticks
 
     def capture(
         self, pulses_s: Sequence[tuple[float, float]], *, at_s: float, first_edge_s: float = 0.0
@@ -51,7 +66,8 @@ class PwmCaptureModel:
             rise_edge = self._edge(rise_s, first_edge_s)
             fall_edge = self._edge(fall_s, first_edge_s)
             if rise_edge != fall_edge:  # a pulse between two samples is never seen
-                events += [(rise_edge + LATENCY_TICKS, True), (fall_edge + LATENCY_TICKS, False)]
+                latency = self.latency_ticks
+                events += [(rise_edge + latency, True), (fall_edge + latency, False)]
         now = math.floor((at_s - first_edge_s) * self.tick_hz + 1e-9)
 
         width = period = 0

@@ -122,3 +122,33 @@ def test_model_latency_and_a_pulse_too_short_to_sample():
     assert model.capture(pulses, at_s=60e-6) == ChannelCapture(5, 30, False)
     with pytest.raises(ValueError, match=r"^pulses must be increasing"):
         model.capture([(2.0, 1.0)], at_s=3.0)
+
+
+def test_a_later_reader_sees_every_result_the_same_ticks_later():
+    """``latency_ticks`` delays the whole result set: widths, periods and the timeout
+    (which runs from the delayed rise). Closed form at 1 µs ticks: a 10 µs pulse from
+    10.5 µs, its fall sampled at tick 21; the core shows it at 23, a reader 3 ticks
+    behind the sampling at 24; the timeout (0.1 ms) follows the rise the same way."""
+    core = PwmCaptureModel(tick_hz=1e6, timeout_s=1e-4)
+    reader = PwmCaptureModel(tick_hz=1e6, timeout_s=1e-4, latency_ticks=LATENCY_TICKS + 1)
+    pulses = [(10.5e-6, 20.5e-6)]
+    assert reader.capture(pulses, at_s=23e-6).timeout
+    assert reader.capture(pulses, at_s=24e-6) == ChannelCapture(10, 0, False)
+    # The rise sampled at tick 11: core timeout at 11 + 2 + 100, the reader's a tick on.
+    assert not reader.capture(pulses, at_s=113e-6).timeout
+    assert reader.capture(pulses, at_s=114e-6) == ChannelCapture(0, 0, True)
+    rng = np.random.default_rng(3)
+    trains = [pulse_train(float(rng.uniform(0, 5)), 3.3, 7.1, 30) for _ in range(3)]
+    for train in trains:
+        train_s = [(r * 1e-6, f * 1e-6) for r, f in train]
+        for tick in range(1, 260):
+            assert reader.capture(train_s, at_s=tick * 1e-6) == core.capture(
+                train_s, at_s=(tick - 1) * 1e-6
+            ), tick
+
+
+def test_model_refuses_a_latency_below_the_cores():
+    with pytest.raises(
+        ValueError, match=r"^latency_ticks must be a whole number of ticks >= the core's 2, not 1$"
+    ):
+        PwmCaptureModel(latency_ticks=1)
