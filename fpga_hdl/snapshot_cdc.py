@@ -2,16 +2,27 @@
 
 Why not an ``FFSynchronizer`` per bit: a multi-bit value sampled while it changes can
 arrive with some bits old and some new. The usual cure, used here, is to send a *change
-count* instead: the source domain counts its updates in Gray code (one bit flips per
-update, so a sample is always the old or the new count), the count crosses through an
-``amaranth.lib.cdc.FFSynchronizer``, and the destination copies the value, which has
-been stable since before the count changed, whenever the count it sees moves. Updates
-that happen while the destination clock is stopped (a gated simulation clock) are not
-lost: the count still differs when the clock runs again, and the latest value is copied.
+count* beside a *published* copy of the value. The source domain publishes in one edge:
+``held`` takes the new value and the count steps, in Gray code (one bit flips per step,
+so a sample is always the old or the new count). The count crosses through an
+``amaranth.lib.cdc.FFSynchronizer``; the destination copies ``held`` whenever the count
+it sees moves. The destination therefore only ever shows published values, never the
+source's live registers, and a value's age is fixed:
 
-The value must stay stable for ``stages + 1`` destination cycles after each update;
-:class:`SnapshotSynchronizer` is meant for values that change once per event (a PWM
-capture result changes once per pulse edge, at most once per microsecond tick).
+- it is published :data:`PUBLISH_TICKS` source edge after ``data_i`` changed;
+- it is in ``data_o`` after the ``stages + 1``-th destination edge that follows the
+  publication (:attr:`SnapshotSynchronizer.copy_cycles`: the synchroniser's flip-flops,
+  then the copy).
+
+The source may publish at most once per source cycle, and ``held`` must then stay put
+while the destination copies it: the destination clock must run at least
+``stages + 2`` times as fast as the source's (the copy lands ``stages + 1`` destination
+edges after a publication, before the next one can).
+
+A stopped destination clock (a gated simulation clock) loses nothing as long as the
+count does not come round to the value last copied: up to ``2**COUNT_BITS - 1``
+publications while it is stopped, and then the destination copies the latest once it
+runs again.
 """
 
 from __future__ import annotations
@@ -21,14 +32,14 @@ from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["SnapshotSynchronizer"]
+__all__ = ["COUNT_BITS", "PUBLISH_TICKS", "SnapshotSynchronizer"]
 
-#: Bits of the Gray change counter. While the destination clock is stopped (a gated
-#: simulation clock) the count must not wrap back to the value last copied, or the
-#: destination misses the updates: with 3 bits, 8 PWM result changes between two host
-#: reads (one 4 ms rig frame at 400 Hz PWM) left the host port a whole frame stale.
-#: 16 bits allow 65535 updates between reads.
+#: Bits of the Gray change counter: publications a stopped destination may miss without
+#: aliasing. With 3 bits, 8 PWM result changes between two host reads (one 4 ms rig
+#: frame at 400 Hz PWM) left the host a whole frame stale; 16 bits allow 65535.
 COUNT_BITS = 16
+#: Source edges from a change of ``data_i`` to its publication (``held`` and the count).
+PUBLISH_TICKS = 1
 
 
 def _gray(value):
@@ -46,39 +57,44 @@ class SnapshotSynchronizer(wiring.Component):
         Source and destination clock domains.
     stages : int
         Synchroniser flip-flops for the change count.
+    init : value or mapping, optional
+        Reset value of ``data_i``, of its published copy and of ``data_o``: a source whose
+        registers reset to it publishes nothing until they change.
 
     Attributes
     ----------
     data_i : In(shape)
         The value, in ``i_domain``.
     data_o : Out(shape)
-        Its copy in ``o_domain``, at most ``stages + 2`` destination cycles behind.
+        The last published value, in ``o_domain`` (see the module docstring for its age).
+    copy_cycles : int
+        Destination edges after a publication until ``data_o`` holds it: ``stages + 1``.
     """
 
-    def __init__(self, shape, *, i_domain: str, o_domain: str, stages: int = 2) -> None:
+    def __init__(self, shape, *, i_domain: str, o_domain: str, stages: int = 2, init=None) -> None:
         self._i_domain, self._o_domain, self._stages = i_domain, o_domain, stages
-        super().__init__({"data_i": In(shape), "data_o": Out(shape)})
+        self.copy_cycles = stages + 1
+        super().__init__({"data_i": In(shape, init=init), "data_o": Out(shape, init=init)})
 
     def elaborate(self, platform) -> Module:
         m = Module()
-        previous = Signal.like(self.data_i)
+        held = Signal.like(self.data_i, name="held")
         count = Signal(COUNT_BITS)
+        next_count = Signal(COUNT_BITS)  # wraps, so the Gray code wraps by one bit too
         gray = Signal(COUNT_BITS)
-        m.d[self._i_domain] += [previous.eq(self.data_i), gray.eq(_gray(count))]
-        # The count moves the cycle after the value did, so the value is already stable.
-        with m.If(Value.cast(previous) != Value.cast(self.data_i)):
-            m.d[self._i_domain] += count.eq(count + 1)
+        m.d.comb += next_count.eq(count + 1)
+        with m.If(Value.cast(held) != Value.cast(self.data_i)):
+            m.d[self._i_domain] += [
+                held.eq(self.data_i),
+                count.eq(next_count),
+                gray.eq(_gray(next_count)),
+            ]
 
         seen_gray = Signal(COUNT_BITS)
         m.submodules.count_sync = FFSynchronizer(
             gray, seen_gray, o_domain=self._o_domain, stages=self._stages
         )
         copied_gray = Signal(COUNT_BITS)
-        primed = Signal()  # the first destination cycle after reset copies the reset value
-        with m.If((seen_gray != copied_gray) | ~primed):
-            m.d[self._o_domain] += [
-                self.data_o.eq(self.data_i),
-                copied_gray.eq(seen_gray),
-                primed.eq(1),
-            ]
+        with m.If(seen_gray != copied_gray):
+            m.d[self._o_domain] += [self.data_o.eq(held), copied_gray.eq(seen_gray)]
         return m

@@ -12,27 +12,37 @@ Buses, as on a Pixhawk FMU (e.g. FMUv2/v3, where the MPU-6000 and MS5611 share S
 - eight PWM inputs (``pwm``) into the PWM capture core, which runs in its own slow
   ``pwm`` domain at ``pwm_tick_hz`` (one tick per cycle, so a simulation pays the tick
   rate, not the system clock, to watch the motors). Its width, period and timeout
-  results cross into ``sync`` through a :class:`~fpga_hdl.snapshot_cdc.SnapshotSynchronizer`
-  and are read as host-port result words (:data:`HOST_MAP`).
+  results cross into ``sync`` through a :class:`~fpga_hdl.snapshot_cdc.SnapshotSynchronizer`;
+  a one-cycle ``read_latch`` freezes all of them at once in a result register file,
+  which the host then reads word by word (:data:`HOST_MAP`): a read never mixes two
+  result sets however long it takes.
+
+PWM result latency, fixed so that a read has a known age (the TLM models it): an input
+edge first sampled at capture tick ``k`` changes the core's results at tick
+``k + 2`` (``pwm_capture.core.LATENCY_TICKS``), the synchroniser publishes them at tick
+``k + 3`` (:data:`PWM_RESULT_LATENCY_TICKS`), they are in its ``sync`` output after the
+third system clock edge that follows (:data:`PWM_RESULT_COPY_CYCLES`: two synchroniser
+flip-flops, then the copy), and a ``read_latch`` asserted in any later cycle takes them.
+At the 16 MHz default that is 3 µs plus at most 4 system cycles (250 ns).
 
 The host port (``fpga_hdl.host_port``) loads samples, time and faults; ``now_us`` goes
 to every chip with a conversion time. ``pending`` tells a simulation that gates the
 system clock that a chip still waits to take a sample at a transfer's end.
 """
 
-from amaranth.hdl import ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal
+from amaranth.hdl import ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.host_port import HostPort, host_port_map
+from fpga_hdl.host_port import HostPort, HostPortMap, host_port_map
 from fpga_hdl.ist8310 import regs as ist8310_regs
 from fpga_hdl.ist8310.core import Ist8310Core
 from fpga_hdl.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.mpu6000.core import Mpu6000
 from fpga_hdl.ms5611 import regs as ms5611_regs
 from fpga_hdl.ms5611.core import Ms5611
-from fpga_hdl.pwm_capture.core import CHANNELS, PwmCapture, timeout_ticks
-from fpga_hdl.snapshot_cdc import SnapshotSynchronizer
+from fpga_hdl.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture, timeout_ticks
+from fpga_hdl.snapshot_cdc import PUBLISH_TICKS, SnapshotSynchronizer
 
 #: Default system clock: above the SPI chips' 8 MHz floor (see ``spi_target``) and fast
 #: enough for the I2C target's Fast-mode timing, as slow as possible because the system
@@ -52,6 +62,16 @@ PWM_TICK_HZ = 1e6
 PWM_TIMEOUT_S = 0.1
 
 
+#: Synchroniser flip-flops of the PWM results' change count.
+PWM_RESULT_SYNC_STAGES = 2
+#: Capture ticks from the one that first samples a PWM input edge to the publication of
+#: the results it changes, which the host can then read (module docstring).
+PWM_RESULT_LATENCY_TICKS = LATENCY_TICKS + PUBLISH_TICKS
+#: System clock edges after that publication until the results are in ``sync``; a
+#: ``read_latch`` in the cycle after the last of them, or later, takes them.
+PWM_RESULT_COPY_CYCLES = PWM_RESULT_SYNC_STAGES + 1
+
+
 def pwm_result_words(tick_hz: float, timeout_s: float) -> dict[str, dict[str, int]]:
     """The capture results as host-port read words: width and period per channel, timeouts."""
     bits = timeout_ticks(tick_hz, timeout_s).bit_length()
@@ -60,8 +80,16 @@ def pwm_result_words(tick_hz: float, timeout_s: float) -> dict[str, dict[str, in
     return {"pwm": fields | {"timeout": CHANNELS}}
 
 
-#: The host port's word map, for the rig side (no need to build the gateware for it).
-HOST_MAP = host_port_map(SAMPLE_CHANNELS, FAULT_CHIPS, pwm_result_words(PWM_TICK_HZ, PWM_TIMEOUT_S))
+def sensor_top_host_map(
+    pwm_tick_hz: float = PWM_TICK_HZ, pwm_timeout_s: float = PWM_TIMEOUT_S
+) -> HostPortMap:
+    """The host port's word map of a SensorTop built with this PWM tick and timeout (the
+    result words' widths depend on them), for the rig side without building the gateware."""
+    return host_port_map(SAMPLE_CHANNELS, FAULT_CHIPS, pwm_result_words(pwm_tick_hz, pwm_timeout_s))
+
+
+#: The host port's word map at the default PWM tick and timeout.
+HOST_MAP = sensor_top_host_map()
 
 
 class SensorTop(wiring.Component):
@@ -79,8 +107,11 @@ class SensorTop(wiring.Component):
     ----------
     write_addr : In(8), write_data : In(32), write_en : In(1), commit : In(1)
         Host port writes and commit (word map: :attr:`host_map`).
+    read_latch : In(1)
+        One cycle: freeze every result word at once for the host's reads (the PWM
+        results as they stand in ``sync``; see the module docstring for their age).
     read_addr : In(8), read_data : Out(32)
-        Host port result reads.
+        Host port result reads, from the words frozen by the last ``read_latch``.
     pending : Out(1)
         A chip still waits to take an offered sample (keep the clock running).
     spi_sclk, spi_mosi : In(1)
@@ -103,6 +134,7 @@ class SensorTop(wiring.Component):
     write_data: In(32)
     write_en: In(1)
     commit: In(1)
+    read_latch: In(1)
     read_addr: In(8)
     read_data: Out(32)
     pending: Out(1)
@@ -133,11 +165,12 @@ class SensorTop(wiring.Component):
         self.baro = Ms5611(sys_clk_hz=sys_clk_hz)
         self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
         self.capture = PwmCapture(tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s)
-        # The synchroniser copies a result stable for its stages + 2 system cycles; the
-        # capture changes a result at most once per tick.
-        if not sys_clk_hz >= 4 * pwm_tick_hz:
+        # The synchroniser copies a published result within its stages + 1 system
+        # cycles, before the next publication (at most one per tick) replaces it.
+        ratio = PWM_RESULT_SYNC_STAGES + 2
+        if not sys_clk_hz >= ratio * pwm_tick_hz:
             raise ValueError(
-                f"sys_clk_hz {sys_clk_hz:g} must be at least 4 × pwm_tick_hz "
+                f"sys_clk_hz {sys_clk_hz:g} must be at least {ratio} × pwm_tick_hz "
                 f"({pwm_tick_hz:g}) for the capture results to cross into sync whole"
             )
         results = pwm_result_words(pwm_tick_hz, pwm_timeout_s)
@@ -189,7 +222,7 @@ class SensorTop(wiring.Component):
         return m
 
     def _capture_results(self, m: Module, capture: PwmCapture) -> None:
-        """PWM pins → capture (``pwm``) → snapshot synchroniser (``sync``) → host words."""
+        """PWM pins → capture (``pwm``) → snapshot synchroniser → ``read_latch`` → host words."""
         layout = data.StructLayout(
             {
                 "width": capture.width_ticks.shape(),
@@ -197,18 +230,24 @@ class SensorTop(wiring.Component):
                 "timeout": CHANNELS,
             }
         )
+        init = {"timeout": capture.timeout.init}  # no pulse yet: every channel timed out
         m.submodules.capture_cdc = cdc = SnapshotSynchronizer(
-            layout, i_domain="pwm", o_domain="sync"
+            layout, i_domain="pwm", o_domain="sync", stages=PWM_RESULT_SYNC_STAGES, init=init
         )
         m.d.comb += [
             capture.pwm.eq(self.pwm),
             cdc.data_i.width.eq(capture.width_ticks),
             cdc.data_i.period.eq(capture.period_ticks),
             cdc.data_i.timeout.eq(capture.timeout),
-            self.host.pwm_timeout.eq(cdc.data_o.timeout),
         ]
+        # The register file the host reads: written whole in one cycle, so the words
+        # read one by one afterwards all belong to the same result set.
+        frozen = Signal(layout, init=init)
+        with m.If(self.read_latch):
+            m.d.sync += frozen.eq(cdc.data_o)
+        m.d.comb += self.host.pwm_timeout.eq(frozen.timeout)
         for ch in range(CHANNELS):
             m.d.comb += [
-                getattr(self.host, f"pwm_width_ticks_{ch}").eq(cdc.data_o.width[ch]),
-                getattr(self.host, f"pwm_period_ticks_{ch}").eq(cdc.data_o.period[ch]),
+                getattr(self.host, f"pwm_width_ticks_{ch}").eq(frozen.width[ch]),
+                getattr(self.host, f"pwm_period_ticks_{ch}").eq(frozen.period[ch]),
             ]

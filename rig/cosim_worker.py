@@ -22,19 +22,13 @@ and its width must be in the generator's preload register before that edge. A fr
 widths are therefore written when its request arrives, before the bus transfers, and
 the capture is read once simulated time has reached the frame's ``now_us``.
 
-Reading the capture exactly. Its results reach the host port through SensorTop's
-snapshot synchroniser, which copies them only once its change count, two ticks behind
-the results, has moved; and the reader takes one word per system cycle, over about
-two 1 µs ticks. A read started at the tick of ``now_us`` would therefore miss a change
-made in the last two ticks (nothing moved the count yet) or see one made during the
-read. The worker knows every result change before it happens (it replays the pulses:
-a rise changes the period two ticks after its sample, a fall the width, a silent
-channel times out ``timeout_ticks`` after its last rise), so :meth:`RtlChips._read_plan`
-picks the tick nearest ``now_us`` at which a read sees exactly the results the tick-exact
-model gives at ``now_us`` (no width or timeout change between the two, none still
-waiting for the count, none copied in during the read), or, when changes of different
-motors straddle ``now_us``, one such tick per group of motors. The rig's readout then
-equals the TLM layer's; the tests check it frame by frame.
+Reading the capture. The read is requested at the frame time, on rig tick
+``now_us / tick`` just before the capture clock's edge of that tick: the harness's
+reader freezes every result word in one system cycle once the results' synchroniser has
+caught up (SensorTop's fixed latency, ``fpga_hdl.top``), so the read sees exactly the
+results published up to that edge, whole. The TLM layer models the same latency
+(``rig.pwm.PwmCapture``), so both layers agree by construction; the tests compare them
+frame by frame, and nothing here looks at the model.
 """
 
 from __future__ import annotations
@@ -46,10 +40,8 @@ import socket
 import cocotb
 from cocotb.utils import get_sim_time
 
-from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, RESULT_SYNC_CYCLES
-from fpga_hdl.cosim.peripherals import Harness
-from fpga_hdl.pwm_capture.core import CHANNELS, LATENCY_TICKS, timeout_ticks
-from fpga_hdl.top import HOST_MAP, PWM_TIMEOUT_S
+from fpga_hdl.cosim.peripherals import PWM_PHASE_PS, Harness
+from fpga_hdl.pwm_capture.core import CHANNELS
 from rig.cosim_channel import (
     ERROR,
     FRAME,
@@ -67,21 +59,10 @@ from rig.sensor_layer import CHIPS, NO_FAULT, ChipFrame, SensorEngine
 
 #: SensorTop's host-port channel and fault names for the rig's chip names.
 _HOST_CHIP = {"mpu6000": "imu", "ms5611": "baro", "ist8310": "mag"}
-#: Where the harness puts the PWM clock's edges: a quarter system period after the grid
-#: (``fpga_hdl.cosim.peripherals.PWM_PHASE_PS``), so after each rig tick.
-_PWM_PHASE_PS = round(0.25e12 / HARNESS_SYS_CLK_HZ)
-#: How long the host port's result read takes: request, synchroniser wait, one word per
-#: system cycle, acknowledge (``fpga_hdl.cosim.harness.HostReader``), with a cycle spare.
-_READ_PS = round((RESULT_SYNC_CYCLES + len(HOST_MAP.reads) + 3) * 1e12 / HARNESS_SYS_CLK_HZ)
-#: The snapshot synchroniser's change count moves this many ticks after a result.
-_COUNT_LAG_TICKS = 2
-#: Ticks around ``now_us`` searched for an exact read (a result changes at most at two
-#: edges per pulse, so a few ticks hold a quiet stretch at PWM rates).
-_READ_SEARCH_TICKS = 16
 
 
 class PwmTimingError(RuntimeError):
-    """The frame's pulses cannot be replayed exactly by the harness's PWM generator."""
+    """The frame's pulses cannot be replayed, or its capture read, at their exact times."""
 
 
 class RtlChips:
@@ -92,17 +73,10 @@ class RtlChips:
         self.tick_us = 1e6 / pwm_tick_hz
         self.tick_ps = round(1e12 / pwm_tick_hz)
         self.period_us = 0
-        self.timeout_ticks = timeout_ticks(pwm_tick_hz, PWM_TIMEOUT_S)
-        self._window_ticks = math.ceil(_READ_PS / self.tick_ps) + 1  # edges during a read
         self._epoch_ps = 0
         self._next_start_us = 0  # the next PWM period start not replayed yet
         self._loaded: list[int] = [0] * CHANNELS  # widths (ticks) in the preload register
         self._later: list[tuple[int, list[int]]] = []  # this frame's further periods
-        #: Ticks at which the capture's results change (any result), and per motor the
-        #: ticks at which its width and timeout flag change (the readout); recent only.
-        self._changes: set[int] = set()
-        self._falls: list[set[int]] = [set() for _ in range(MOTOR_CHANNELS)]
-        self._last_rise = [-1] * MOTOR_CHANNELS  # tick of each motor's last seen rise
 
     async def start_pwm(self, period_us: int) -> None:
         """Fix the epoch two ticks ahead, start the generator and the capture clock.
@@ -120,12 +94,12 @@ class RtlChips:
         self._epoch_ps = (math.ceil(now_ps / self.tick_ps) + 2) * self.tick_ps
         self.harness.pwm.write([0] * CHANNELS, period_ticks=round(period_us / self.tick_us))
         # The gated clock's first rising edge comes half a period after it is enabled.
-        await self._wait_until_ps(self._edge_ps(-1) - _PWM_PHASE_PS - self.tick_ps // 2)
+        await self._wait_until_ps(self._edge_ps(-1) - PWM_PHASE_PS - self.tick_ps // 2)
         await self.harness.pwm.run()
 
     def _edge_ps(self, tick: int) -> int:
         """Simulated time of the capture clock's rising edge ``tick`` (rig tick ``tick``)."""
-        return self._epoch_ps + tick * self.tick_ps + _PWM_PHASE_PS
+        return self._epoch_ps + tick * self.tick_ps + PWM_PHASE_PS
 
     async def _wait_until_ps(self, time_ps: int) -> None:
         await self.harness.wait_until_s(time_ps * 1e-12)
@@ -168,58 +142,7 @@ class RtlChips:
                     f"within one period ({self.period_us} µs)"
                 )
             periods[pulse.start_us][pulse.channel] = ticks
-            self._note_pulse(pulse.channel, round(pulse.start_us / self.tick_us), ticks)
         return sorted(periods.items())
-
-    def _note_pulse(self, channel: int, start_tick: int, width_ticks: int) -> None:
-        """Record the result changes a pulse causes (core: edge + ``LATENCY_TICKS``)."""
-        rise, fall = start_tick + LATENCY_TICKS, start_tick + width_ticks + LATENCY_TICKS
-        self._changes |= {rise, fall}
-        if channel < MOTOR_CHANNELS:
-            self._falls[channel].add(fall)
-            self._last_rise[channel] = rise
-
-    def _read_plan(self, now_tick: int, earliest_tick: int) -> dict[int, list[int]]:
-        """Ticks to read at (not before ``earliest_tick``, the present), each with the
-        motor channels whose results there equal the model's at ``now_tick``.
-
-        A read just after edge ``x`` copies the results of edge ``x`` if the change count
-        has moved since the last copy, i.e. for changes up to ``x - 2``; later changes
-        move it during the read, and a copy then brings the results of a later edge. One
-        read near ``now_tick`` serves every channel unless changes of different channels
-        straddle it (motors at nearly equal throttle); then each channel is read where it
-        holds, a few ticks away.
-        """
-        readout = [
-            falls | ({rise + self.timeout_ticks} if rise >= 0 else set())
-            for falls, rise in zip(self._falls, self._last_rise, strict=True)
-        ]
-        every_readout = set().union(*readout)
-        changes = self._changes | every_readout
-        window = self._window_ticks
-        candidates = range(max(earliest_tick, now_tick - _READ_SEARCH_TICKS),
-                           now_tick + _READ_SEARCH_TICKS)  # fmt: skip
-        plan: dict[int, list[int]] = {}
-        missing = set(range(MOTOR_CHANNELS))
-        for x in sorted(candidates, key=lambda x: (abs(x - now_tick), x)):
-            if any(abs(x - other) <= window for other in plan):
-                continue  # reads take a few ticks each
-            if {x - 1, x} & every_readout:
-                continue  # a result changed too recently to be copied at once
-            moves = any(x - 1 <= t <= x + window - 2 for t in changes)  # during the read
-            if moves and any(x < t <= x + window for t in every_readout):
-                continue  # a copy during the read would bring a later result
-            low, high = min(x, now_tick), max(x, now_tick)
-            holding = [ch for ch in missing if not any(low < t <= high for t in readout[ch])]
-            if holding:
-                plan[x] = holding
-                missing -= set(holding)
-            if not missing:
-                return plan
-        raise PwmTimingError(
-            f"no read near tick {now_tick} gives the PWM capture of channels "
-            f"{sorted(missing)} exactly: their results change too often around it"
-        )
 
     def _preload(self, start_us: int, widths: list[int]) -> None:
         """Write the widths of the period at ``start_us`` before the generator takes them."""
@@ -248,22 +171,19 @@ class RtlChips:
                 )
             self._preload(start_us, widths)
             previous_us = start_us
-        # The last tick at or before now_us; a read starts on a tick, a quarter system
-        # period before its edge, so the first copy (three system cycles on) follows it.
+        # The read starts on the last tick at or before now_us, just before that tick's
+        # capture edge (PWM_PHASE_PS later), and freezes the results of that edge.
         now_tick = now_us * 1_000_000 // self.tick_ps
-        earliest_tick = -(-(get_sim_time("ps") - self._epoch_ps) // self.tick_ps)
-        widths_us = [0.0] * MOTOR_CHANNELS
-        timed_out = [True] * MOTOR_CHANNELS
-        for tick, channels in sorted(self._read_plan(now_tick, earliest_tick).items()):
-            await self._wait_until_ps(self._epoch_ps + tick * self.tick_ps)
-            captures = await self.harness.host.pwm_capture()
-            for ch in channels:
-                widths_us[ch] = captures[ch].width_ticks * self.tick_us
-                timed_out[ch] = captures[ch].timeout
-        keep_from = now_tick - _READ_SEARCH_TICKS - _COUNT_LAG_TICKS
-        self._changes = {t for t in self._changes if t >= keep_from}
-        self._falls = [{t for t in falls if t >= keep_from} for falls in self._falls]
-        return tuple(widths_us), tuple(timed_out)
+        read_ps = self._epoch_ps + now_tick * self.tick_ps
+        if get_sim_time("ps") > read_ps:
+            raise PwmTimingError(
+                f"the frame's bus transfers ran past its time ({now_us} µs): the PWM capture "
+                "cannot be read then; lower the sensor rates or the frame rate"
+            )
+        await self._wait_until_ps(read_ps)
+        captures = (await self.harness.host.pwm_capture())[:MOTOR_CHANNELS]
+        widths_us = tuple(capture.width_ticks * self.tick_us for capture in captures)
+        return widths_us, tuple(capture.timeout for capture in captures)
 
 
 @cocotb.test()
@@ -271,9 +191,10 @@ async def serve(dut) -> None:
     """Answer the rig's requests until it sends STOP (or closes the channel)."""
     channel = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     channel.connect(os.environ["RIG_COSIM_SOCKET"])
-    harness = Harness(dut)
+    pwm_tick_hz = float(os.environ["RIG_COSIM_PWM_TICK_HZ"])
+    harness = Harness(dut, pwm_tick_hz=pwm_tick_hz)
     await harness.reset()
-    chips = RtlChips(harness, pwm_tick_hz=float(os.environ["RIG_COSIM_PWM_TICK_HZ"]))
+    chips = RtlChips(harness, pwm_tick_hz=pwm_tick_hz)
     engine = SensorEngine(harness.spi, harness.i2c, chips)
     while True:
         request = receive_message(channel)

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fpga_hdl.pwm_capture.core import LATENCY_TICKS
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
+from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS
 from quad_model.frames import PWM_MIN_US, pwm_to_throttle, throttle_to_pwm
 
 #: PX4 PWM_MAIN_DISn default: the pulse an ESC sees while the vehicle is disarmed.
@@ -92,8 +92,11 @@ def throttle_from_capture(widths_us: Sequence[float], timed_out: Sequence[bool])
 
 
 class PwmCapture:
-    """The PWM capture core's results for the pulses so far (fpga_hdl's tick-exact model).
+    """The PWM capture results the rig reads at a frame time (fpga_hdl's tick-exact model).
 
+    What SensorTop's host port shows, so with its fixed latency: a pulse edge first
+    sampled at tick ``k`` is in a read at tick ``k + PWM_RESULT_LATENCY_TICKS`` (the
+    core's input re-timing, then the publication into the system clock domain).
     :class:`fpga_hdl.pwm_capture.model.PwmCaptureModel` recomputes a channel from its
     pulse history. Its results depend only on the last two rising edges, the last
     complete pulse and the time since the last rise, so the last three pulses of a
@@ -103,10 +106,12 @@ class PwmCapture:
 
     def __init__(self, channels: int, tick_hz: float = PWM_TICK_HZ,
                  timeout_s: float = PWM_TIMEOUT_S) -> None:  # fmt: skip
-        self.model = PwmCaptureModel(tick_hz=tick_hz, timeout_s=timeout_s)
+        self.model = PwmCaptureModel(
+            tick_hz=tick_hz, timeout_s=timeout_s, latency_ticks=PWM_RESULT_LATENCY_TICKS
+        )
         self._tick_us = 1e6 / tick_hz
         self._timeout_us = timeout_s * 1e6
-        self._latency_us = LATENCY_TICKS * self._tick_us
+        self._latency_us = PWM_RESULT_LATENCY_TICKS * self._tick_us
         self._recent: list[deque[tuple[float, float]]] = [deque(maxlen=3) for _ in range(channels)]
         self._widths_us = [0.0] * channels
         self._timed_out = [True] * channels
@@ -118,15 +123,15 @@ class PwmCapture:
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
         """Add the new pulses; return each channel's width (µs) and timeout flag at ``now_us``.
 
-        A channel is recomputed only once the core may have seen a pulse end (its fall plus
-        the input re-timing latency) or its timeout may have run out since the last result:
+        A channel is recomputed only once a read may show a pulse end (its fall plus the
+        result latency) or its timeout may have run out since the last result:
         between those events the width and timeout registers hold (a rise changes only
         the period, which the rig does not use).
         """
         for pulse in pulses:
             start_s = pulse.start_us / 1e6
             self._recent[pulse.channel].append((start_s, start_s + pulse.width_us / 1e6))
-            seen_fall_us = pulse.start_us + pulse.width_us + self._latency_us  # core re-times
+            seen_fall_us = pulse.start_us + pulse.width_us + self._latency_us  # seen by a read
             next_change_us = self._next_change_us[pulse.channel]
             self._next_change_us[pulse.channel] = min(next_change_us, seen_fall_us)
         for channel, recent in enumerate(self._recent):
@@ -136,7 +141,7 @@ class PwmCapture:
             self._widths_us[channel] = result.width_ticks * self._tick_us
             self._timed_out[channel] = result.timeout
             last_rise_us, last_fall_us = (t * 1e6 for t in recent[-1])
-            seen_fall_us = last_fall_us + self._latency_us  # the core re-times its inputs
+            seen_fall_us = last_fall_us + self._latency_us  # seen by a read
             pending_fall = seen_fall_us if seen_fall_us > now_us else math.inf
             timeout_at = math.inf if result.timeout else last_rise_us + self._timeout_us
             self._next_change_us[channel] = min(pending_fall, timeout_at)

@@ -10,7 +10,8 @@ inside the simulator and Python only asks and waits once:
   SDA resolved here), :class:`~fpga_hdl.pwm_generator.PwmGenerator` on the PWM pins;
 - the real-time computer's side of the host port: :class:`HostWriter` writes a list of
   staged words, commits and waits until every chip has taken its sample;
-  :class:`HostReader` reads every result word (the PWM capture) into one wide port.
+  :class:`HostReader` lets the PWM results settle in ``sync``, freezes them with
+  SensorTop's ``read_latch`` and reads every result word into one wide port.
 
 Each peripheral takes a *request toggle* and answers with an *acknowledge*: Python flips
 ``<name>_request`` and awaits a change of ``<name>_acknowledge``, two wake-ups per
@@ -20,10 +21,18 @@ Clocks, without Python per cycle: two :data:`GATED_CLOCK_VERILOG` instances, a
 behavioural Verilog clock that *waits* on its enable (no polling, so a stopped clock
 costs nothing). The system clock (``sync``, :data:`HARNESS_SYS_CLK_HZ`) runs while
 a request is pending, a peripheral is busy, a chip still waits to take a sample, or
-``rst`` is high. The PWM tick clock (``pwm``, :data:`~fpga_hdl.top.PWM_TICK_HZ`) runs
-while ``pwm_run`` is high: the capture must count every tick of every period, so in a
-closed loop it runs all the time. Verilator needs ``--timing`` for these delays
-(``fpga_hdl.cosim.runner`` adds it when a design brings behavioural Verilog).
+``rst`` is high. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while ``pwm_run`` is
+high: the capture must count every tick of every period, so in a closed loop it runs all
+the time. Verilator needs ``--timing`` for these delays (``fpga_hdl.cosim.runner`` adds
+it when a design brings behavioural Verilog).
+
+The age of a result read (SensorTop's fixed latency, ``fpga_hdl.top``): the system
+clock starts half a period after a read request, and the reader latches at its
+``PWM_RESULT_COPY_CYCLES + 1``-th edge, so it takes every result published at a tick
+edge before the clock's first edge. A read requested just before tick edge ``k`` (and
+ticks longer than ``PWM_RESULT_COPY_CYCLES + 0.5`` system periods, which SensorTop's
+``sys_clk_hz >= 4 × pwm_tick_hz`` ensures) sees exactly the results published at edge
+``k`` and before: no later edge falls inside the read.
 """
 
 from __future__ import annotations
@@ -44,7 +53,7 @@ from fpga_hdl.host_port import WORD_BITS, HostPortMap
 from fpga_hdl.i2c_controller import I2cController
 from fpga_hdl.pwm_generator import PwmGenerator
 from fpga_hdl.spi_controller import SpiController
-from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ, SensorTop
+from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, SensorTop
 
 __all__ = [
     "GATED_CLOCK_VERILOG",
@@ -65,10 +74,6 @@ HARNESS_TOPLEVEL = "cosim_harness"
 HARNESS_SYS_CLK_HZ = 10e6
 #: Chip-select order of the SPI controller: index 0 is the MPU-6000, 1 the MS5611.
 SPI_DEVICES = ("imu", "baro")
-#: Cycles the result reader waits before reading: the PWM results' synchroniser
-#: (two flip-flops, then the copy) must see the system clock run after a gated pause.
-RESULT_SYNC_CYCLES = 4
-
 #: A simulation-only clock that waits on ``enable`` (Amaranth cannot express delays, so
 #: this one module is Verilog text, written to ``build/`` beside the generated design).
 #: The first rising edge comes half a period after ``enable`` rises; it stops low.
@@ -165,7 +170,12 @@ class HostWriter(wiring.Component):
 
 
 class HostReader(wiring.Component):
-    """Reads every result word of the host port into one wide register.
+    """Freezes SensorTop's result words in one cycle, then reads them into one wide register.
+
+    Timeline from the request, in system cycles: the first edge leaves IDLE and, with the
+    next ``PWM_RESULT_COPY_CYCLES - 1``, lets the PWM results' synchroniser catch up
+    after a gated pause; the following cycle asserts ``read_latch``; then one word per
+    cycle from the frozen register file, and the acknowledge a cycle after the last.
 
     Attributes
     ----------
@@ -173,7 +183,7 @@ class HostReader(wiring.Component):
         Request toggle and its acknowledge.
     words : Out(ArrayLayout(32, n))
         Result word ``i`` of the host-port map at index ``i``.
-    read_addr : Out(8), read_data : In(32)
+    read_latch : Out(1), read_addr : Out(8), read_data : In(32)
         To SensorTop's host port.
     """
 
@@ -185,6 +195,7 @@ class HostReader(wiring.Component):
                 "acknowledge": Out(1),
                 "busy": Out(1),
                 "words": Out(data.ArrayLayout(WORD_BITS, self.count)),
+                "read_latch": Out(1),
                 "read_addr": Out(8),
                 "read_data": In(WORD_BITS),
             }
@@ -192,22 +203,29 @@ class HostReader(wiring.Component):
 
     def elaborate(self, platform) -> Module:
         m = Module()
-        wait = Signal(range(RESULT_SYNC_CYCLES))
+        settle = Signal(range(PWM_RESULT_COPY_CYCLES))
         address = Signal(range(self.count))
         with m.FSM() as fsm:
             with m.State("IDLE"), m.If(self.request != self.acknowledge):
-                m.d.sync += [wait.eq(RESULT_SYNC_CYCLES - 1), address.eq(0)]
-                m.next = "SYNC"
-            with m.State("SYNC"):  # let the results' synchroniser catch up
-                m.d.sync += wait.eq(wait - 1)
-                with m.If(wait == 0):
-                    m.next = "READ"
+                m.d.sync += [settle.eq(PWM_RESULT_COPY_CYCLES - 2), address.eq(0)]
+                m.next = "SETTLE"
+            with m.State("SETTLE"):  # the synchroniser's flip-flops and copy catch up
+                m.d.sync += settle.eq(settle - 1)
+                with m.If(settle == 0):
+                    m.next = "LATCH"
+            with m.State("LATCH"):  # every result word frozen in this one cycle
+                m.d.comb += self.read_latch.eq(1)
+                m.next = "READ"
             with m.State("READ"):  # one word per cycle (``read_data`` is combinational)
                 m.d.comb += self.read_addr.eq(address)
                 m.d.sync += [self.words[address].eq(self.read_data), address.eq(address + 1)]
                 with m.If(address == self.count - 1):
-                    m.d.sync += self.acknowledge.eq(self.request)
-                    m.next = "IDLE"
+                    m.next = "DONE"
+            with m.State("DONE"):
+                # A cycle after the last word: a testbench woken by the acknowledge may
+                # read ``words`` before the rest of that edge's updates (Icarus does).
+                m.d.sync += self.acknowledge.eq(self.request)
+                m.next = "IDLE"
         m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
         return m
 
@@ -243,8 +261,8 @@ class CosimHarness(wiring.Component):
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz)
         self.pwm_generator = PwmGenerator()
-        self.host_writer = HostWriter(HOST_MAP)
-        self.host_reader = HostReader(HOST_MAP)
+        self.host_writer = HostWriter(self.top.host.map)
+        self.host_reader = HostReader(self.top.host.map)
         members = {"rst": In(1), "pwm_run": In(1)}
         for prefix, part, names in self._forwarded():
             members |= {f"{prefix}_{n}": part.signature.members[n] for n in names}
@@ -333,6 +351,7 @@ class CosimHarness(wiring.Component):
             top.write_en.eq(writer.write_en),
             top.commit.eq(writer.commit),
             writer.pending.eq(top.pending),
+            top.read_latch.eq(reader.read_latch),
             top.read_addr.eq(reader.read_addr),
             reader.read_data.eq(top.read_data),
         ]

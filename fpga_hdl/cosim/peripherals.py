@@ -29,7 +29,7 @@ from fpga_hdl.i2c_controller import RATES_HZ, controller_rate_hz
 from fpga_hdl.pwm_capture.core import CHANNELS
 from fpga_hdl.pwm_capture.model import ChannelCapture
 from fpga_hdl.spi_controller import divider_for
-from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ
+from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ, sensor_top_host_map
 
 __all__ = [
     "Harness",
@@ -243,14 +243,19 @@ class HarnessPwm:
 
 
 class Harness:
-    """Host port, SPI, I2C and PWM of a :class:`~fpga_hdl.cosim.harness.CosimHarness`."""
+    """Host port, SPI, I2C and PWM of a :class:`~fpga_hdl.cosim.harness.CosimHarness`.
 
-    def __init__(self, dut, *, spi_mode: int = 0) -> None:
+    ``pwm_tick_hz`` must be the one the harness was built with: it sets the result words'
+    widths (:func:`fpga_hdl.top.sensor_top_host_map`) and how long the reset holds.
+    """
+
+    def __init__(self, dut, *, spi_mode: int = 0, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
         self.dut = dut
-        self.host = HarnessHost(dut)
+        self.pwm_tick_hz = pwm_tick_hz
+        self.host = HarnessHost(dut, sensor_top_host_map(pwm_tick_hz))
         self.spi = HarnessSpiBus(dut, mode=spi_mode)
         self.i2c = HarnessI2cBus(dut)
-        self.pwm = HarnessPwm(dut)
+        self.pwm = HarnessPwm(dut, tick_hz=pwm_tick_hz)
 
     async def reset(self) -> None:
         """Reset both clock domains (both clocks run for it), then leave them stopped."""
@@ -259,10 +264,11 @@ class Harness:
             part.reset()
         dut.pwm_run.value = 0
         self.pwm.write([0] * CHANNELS, period_ticks=0)
+        tick_ps = round(1e12 / self.pwm_tick_hz)
         dut.rst.value = 1
-        await Timer(round(3e12 / PWM_TICK_HZ), unit="ps")  # three ticks: both domains reset
+        await Timer(3 * tick_ps, unit="ps")  # three ticks: both domains reset
         dut.rst.value = 0
-        await Timer(round(1e12 / PWM_TICK_HZ), unit="ps")  # let both clocks stop
+        await Timer(tick_ps, unit="ps")  # let both clocks stop
 
     def cycles(self) -> tuple[int, int]:
         """(system, PWM) clock cycles so far: what the simulation has cost."""

@@ -7,6 +7,7 @@ outputs; the PWM capture read through the host port against its tick-exact model
 """
 
 import json
+import math
 import os
 
 import cocotb
@@ -16,12 +17,12 @@ from cocotb.utils import get_sim_time
 from transcript import run_script, tlm_transcript_now
 
 from fpga_hdl.buses import I2cNack
-from fpga_hdl.cosim.peripherals import Harness
+from fpga_hdl.cosim.peripherals import PWM_PHASE_PS, Harness
 from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE
 from fpga_hdl.ist8310 import regs as ist
 from fpga_hdl.mpu6000 import regs as mpu
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
-from fpga_hdl.top import PWM_TICK_HZ, PWM_TIMEOUT_S
+from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS, PWM_TICK_HZ, PWM_TIMEOUT_S
 
 #: PS-MPU-6000A-00 §6.8: CS setup/hold, SDI setup/hold (ns); the controller's CS idle.
 T_SU_CS_NS, T_HD_CS_NS, T_SU_SDI_NS, T_HD_SDI_NS, T_CS_IDLE_NS = 8, 500, 5, 7, 100
@@ -227,48 +228,70 @@ async def i2c_nacks_are_reported_with_the_byte_index(dut):
 
 @cocotb.test()
 async def pwm_capture_through_the_host_port_equals_the_model(dut):
-    """The PWM generator drives SensorTop's capture; widths change once per frame and
-    take effect at the next period; a channel set to 0 stops and times out; every
-    probe of the host port's result words equals the tick-exact model."""
+    """The PWM generator drives SensorTop's capture; new widths every period take effect
+    at the next one; a channel set to 0 stops and times out. Reads start, as the rig's
+    do, on the grid just before a capture tick, at ticks around the moment channel 0's
+    fall becomes readable: each must equal the tick-exact model with SensorTop's
+    documented result latency, and many land where one tick less or more of latency
+    would read otherwise."""
     harness = await started(dut)
     monitor = PinMonitor(dut, ("pwm",))
+    tick_s, phase_s = 1 / PWM_TICK_HZ, PWM_PHASE_PS / 1e12
+    period_ticks = 2500  # 400 Hz
+    steps = [
+        ([1000, 1100, 1200, 1300, 0, 0, 0, 0], 12),
+        ([1500, 1100, 1900, 1301, 0, 0, 0, 2000], 12),
+        ([2000, 0, 1000, 1302, 0, 0, 0, 2000], 50),  # channel 1 stops: 125 ms > timeout
+    ]
+    plan = [  # widths per period: channels 0 and 3 change every period
+        [base[0] + n % 2, *base[1:3], base[3] + n % 3, *base[4:]]
+        for base, count in steps
+        for n in range(count)
+    ]
+    models = {
+        latency: PwmCaptureModel(
+            tick_hz=PWM_TICK_HZ, timeout_s=PWM_TIMEOUT_S, latency_ticks=latency
+        )
+        for latency in (PWM_RESULT_LATENCY_TICKS - 1, PWM_RESULT_LATENCY_TICKS,
+                        PWM_RESULT_LATENCY_TICKS + 1)
+    }  # fmt: skip
+    harness.pwm.write(plan[0], period_ticks=period_ticks)
     first_tick = cocotb.start_soon(dut.pwm_clk.rising_edge)
     await harness.pwm.run()
-    start_s = get_sim_time("ps") / 1e12
     await first_tick
     first_edge_s = get_sim_time("ps") / 1e12
-    period_ticks = 2500  # 400 Hz
-    schedule = [
-        [1000, 1100, 1200, 1300, 0, 0, 0, 0],
-        [1500, 1100, 1900, 1301, 0, 0, 0, 2000],
-        [2000, 0, 1000, 1302, 0, 0, 0, 2000],
-    ]
-    model = PwmCaptureModel(tick_hz=PWM_TICK_HZ, timeout_s=PWM_TIMEOUT_S)
-    probes = 0
-    for step, widths in enumerate(schedule):
-        harness.pwm.write(widths, period_ticks=period_ticks)
-        for period in range(12 if step < 2 else 50):
-            # Probe when no result can be changing: 2.3 ms after a period start.
-            base_s = first_edge_s + (step * 12 + period + 1) * period_ticks / PWM_TICK_HZ
-            await harness.wait_until_s(base_s + 2300e-6)
-            got = await harness.host.pwm_capture()
-            pulses = _pulses(monitor.events)
-            for ch in range(8):
-                expected = model.capture(
-                    pulses[ch], at_s=get_sim_time("ps") / 1e12, first_edge_s=first_edge_s
-                )
-                assert got[ch] == expected, f"step {step} ch {ch}: {got[ch]} != {expected}"
-            probes += 1
+    await harness.wait_until_s(first_edge_s + 10 * tick_s)
+    boundary = 0
+    for index, widths in enumerate(plan):
+        if index + 1 < len(plan):
+            harness.pwm.write(plan[index + 1], period_ticks=period_ticks)  # next period's
+        rise_s = _pulses(monitor.events)[0][-1][0]  # channel 0's pulse of this period
+        # The capture edge that samples channel 0's fall, then a tick around the one at
+        # which the fall becomes readable.
+        fall_tick = math.ceil((rise_s + widths[0] * tick_s - first_edge_s) / tick_s)
+        tick = fall_tick + PWM_RESULT_LATENCY_TICKS + index % 6 - 3
+        await harness.wait_until_s(first_edge_s + tick * tick_s - phase_s)
+        got = await harness.host.pwm_capture()
+        pulses, at_s = _pulses(monitor.events), first_edge_s + tick * tick_s
+        expected = {
+            latency: [
+                model.capture(pulses[ch], at_s=at_s, first_edge_s=first_edge_s) for ch in range(8)
+            ]
+            for latency, model in models.items()
+        }
+        assert got == expected[PWM_RESULT_LATENCY_TICKS], f"period {index}, tick {tick}"
+        boundary += len({str(e) for e in expected.values()}) > 1
+        await harness.wait_until_s(rise_s + (period_ticks + 10) * tick_s)
     final = await harness.host.pwm_capture()
     assert [capture.timeout for capture in final] == [False, True, False, False] + [True] * 3 + [
         False
     ]
-    assert (final[0].width_ticks, final[0].period_ticks) == (2000, period_ticks)
+    assert (final[0].width_ticks, final[0].period_ticks) == (plan[-1][0], period_ticks)
+    assert boundary >= len(plan) // 4, f"only {boundary} of {len(plan)} probes at a change"
     # Preload: a width written mid-period never cuts or stretches the running pulse.
     widths_us = [round((fall - rise) * 1e6) for rise, fall in _pulses(monitor.stop())[0]]
-    assert set(widths_us) == {1000, 1500, 2000}
-    assert widths_us == sorted(widths_us)
-    dut._log.info("%d probes from %.6f s, all equal to the model", probes, start_s)
+    assert widths_us[: len(plan)] == [widths[0] for widths in plan]
+    dut._log.info("%d probes, %d at a change, all equal to the model", len(plan), boundary)
 
 
 def _pulses(events) -> list[list[tuple[float, float]]]:

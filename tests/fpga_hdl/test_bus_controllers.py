@@ -1,20 +1,19 @@
 # amaranth: UnusedElaboratable=no
-"""amaranth.sim tests of the autopilot-side peripherals: SPI and I2C controllers, PWM
-generator, and the snapshot synchroniser that carries the PWM results into ``sync``."""
+"""amaranth.sim tests of the autopilot-side peripherals: SPI and I2C controllers and the
+PWM generator (the PWM results' synchroniser: ``test_snapshot_cdc.py``)."""
 
 import math
 import re
 
 import numpy as np
 import pytest
-from amaranth.hdl import ClockDomain, Module, Signal
+from amaranth.hdl import Module, Signal
 from amaranth.sim import Simulator
 
 from fpga_hdl.i2c_controller import I2cBitCycles, I2cController, controller_rate_hz
 from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE
 from fpga_hdl.ist8310.core import Ist8310Core
 from fpga_hdl.pwm_generator import PwmGenerator
-from fpga_hdl.snapshot_cdc import SnapshotSynchronizer
 from fpga_hdl.spi_controller import SpiController, SpiControllerTiming, divider_for
 
 SYS_CLK_HZ = 10e6
@@ -221,32 +220,3 @@ def test_pwm_generator_widths_take_effect_at_the_next_period():
     assert sum(high[1]) == 0
     assert all(high[2])
     assert sum(high[7][:30]) == 3
-
-
-def test_snapshot_synchroniser_never_mixes_two_values():
-    """A 24-bit value changing every 37 source cycles (two halves that always differ);
-    the destination at a coprime rate must only ever show whole values."""
-    m = Module()
-    m.domains.src = ClockDomain()
-    m.submodules.cdc = cdc = SnapshotSynchronizer(24, i_domain="src", o_domain="sync")
-    sim = Simulator(m)
-    sim.add_clock(1 / SYS_CLK_HZ)
-    sim.add_clock(1 / 1.3e6, domain="src")
-    seen = set()
-
-    async def source(ctx):
-        for k in range(1, 40):
-            ctx.set(cdc.data_i, k << 12 | (0xFFF - k))
-            await ctx.tick("src").repeat(37)
-
-    async def sink(ctx):
-        for _ in range(11_500):  # 1.15 ms: past the source's last change
-            await ctx.tick()
-            seen.add(ctx.get(cdc.data_o))
-
-    sim.add_testbench(source)
-    sim.add_testbench(sink)
-    sim.run()
-    values = {k << 12 | (0xFFF - k) for k in range(1, 40)}
-    assert seen - {0} <= values
-    assert len(seen & values) == len(values)  # every value arrived, whole

@@ -3,6 +3,7 @@
 In ``rtl`` mode every chip and the PWM capture core are RTL on the co-simulation
 harness; the same frames through both layers must give the same decoded values and the
 same captured PWM, frame by frame, at the default 1 µs capture tick and at a coarser one.
+The RTL is read at the frame time, whatever the pulses do; nothing steers it.
 """
 
 import numpy as np
@@ -27,6 +28,13 @@ PWM_HZ = 400
 #: Motor 2's output stops for this span of frames: longer than the capture's 0.1 s
 #: timeout at 1 kHz, so the timeout flag and its clearing are compared too.
 DROPOUT_FRAMES = range(150, 290)
+#: Frames whose PWM periods put the motors' falls 3, 2, 1 and 0 µs before a 1 ms frame
+#: time: the documented read latency (an edge is readable 3 ticks after the tick that
+#: samples it, ``fpga_hdl.top.PWM_RESULT_LATENCY_TICKS``) splits them.
+BOUNDARY_FRAMES = range(340, 400)
+#: Widths of those periods: a period starting 1.5 ms before a frame time ends 3..0 µs
+#: before it; the others in between change every width back to 1200 µs.
+BOUNDARY_WIDTHS_US, BETWEEN_WIDTH_US = (1497, 1498, 1499, 1500), 1200
 
 
 def _frames(rng, count, *, frame_us=1000, faults=None):
@@ -46,8 +54,15 @@ def _frames(rng, count, *, frame_us=1000, faults=None):
             faults=(faults or {}).get(k, {}),
             pulses=tuple(outputs.pulses(now_us + 1, dropped)),
         )
+        if frame_us == 1000 and k in BOUNDARY_FRAMES:
+            # The periods take the last command before their start: one starting at
+            # 2.5 ms mod 5 the command after frames 0, 1, 2 mod 5, one at 0 ms mod 5 the
+            # command after frames 3, 4 mod 5.
+            widths_us = BOUNDARY_WIDTHS_US if k % 5 < 3 else [BETWEEN_WIDTH_US] * 4
+            outputs.command([(width - 1000) / 1000 for width in widths_us], armed=True)
+            continue
         # Random throttles, then a hover's: four motors within 4 µs of each other, whose
-        # falls straddle frame boundaries (the capture is then read per motor).
+        # falls straddle frame boundaries.
         spread = 1.0 if k < 300 else 0.004
         outputs.command(0.5 + rng.uniform(-spread / 2, spread / 2, MOTOR_CHANNELS), armed=k > 20)
 
@@ -90,10 +105,16 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer):
     tlm, healthy = _started(TlmSensorLayer()), _started(TlmSensorLayer())
     faults = {k: {"mpu6000": ChipFault(flip=0x40)} for k in range(50, 55)}
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
-    corrupted, widths, timed_out = set(), set(), []
+    corrupted, widths, timed_out, pwm, boundary = set(), set(), [], [], 0
     for frame in _frames(np.random.default_rng(11), 400, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
-        assert rtl == reference, f"frame at {frame.now_us} µs"
+        assert rtl == reference, f"frame at {frame.now_us} µs: RTL {rtl} != TLM {reference}"
+        pwm.append(rtl.pwm_widths_us)
+        if pwm[-1] == BOUNDARY_WIDTHS_US != pwm[-2]:
+            # The falls came 3, 2, 1, 0 µs before the previous frame: there, only motor 0
+            # showed its new width, the others still the one of the frame before.
+            boundary += 1
+            assert pwm[-2] == (BOUNDARY_WIDTHS_US[0], *pwm[-3][1:]), f"frame {len(pwm) - 1}"
         clean = healthy.frame(ChipFrame(**{**frame.__dict__, "faults": {}}))
         if (rtl.accel_mps2, rtl.baro_pa_degc) != (clean.accel_mps2, clean.baro_pa_degc):
             corrupted.add(frame.now_us // 1000)
@@ -107,9 +128,10 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer):
     assert baro_corrupted
     assert baro_corrupted <= set(range(101, 160, 10))
     # The PWM compared is a live signal: new widths each period; motor 2's last pulse
-    # before the dropout rose at 147.5 ms, seen 2 ticks later, so it times out 0.1 s on,
-    # at 247.502 ms (read at frame 248), and recovers with its first pulse after it.
+    # before the dropout rose at 147.5 ms, readable 3 ticks later, so it times out 0.1 s
+    # on, at 247.503 ms (read at frame 248), and recovers with its first pulse after it.
     assert len(widths) > 100
+    assert boundary >= 10  # the latency boundary was read often
     assert timed_out.index(True, 20) + 1 == 248
     assert not any(timed_out[295:])
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
+from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS as HOST_LATENCY
 from quad_model.sensors import ImuSample, SensorReadings
 from rig.errors import AutopilotProtocolError
 from rig.faults import FaultInjector
@@ -30,8 +31,8 @@ DOUBLE = Path(__file__).with_name("autopilot_double.py")
 
 def test_capture_every_microsecond_around_the_falls_equals_the_whole_history():
     """Results are asked at every µs near each fall, so skipping the recompute until the
-    core has re-timed the fall (2 ticks) would show if it skipped one tick too many."""
-    model = PwmCaptureModel(tick_hz=1e6, timeout_s=PWM_TIMEOUT_S)
+    host can read the fall (3 ticks) would show if it skipped one tick too many."""
+    model = PwmCaptureModel(tick_hz=1e6, timeout_s=PWM_TIMEOUT_S, latency_ticks=HOST_LATENCY)
     out, capture, history = PwmOutput(1, 400), PwmCapture(1), []
     now_us = 0
     for period in range(40):

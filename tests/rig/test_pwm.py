@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
+from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS as HOST_LATENCY
 from rig.pwm import PWM_TIMEOUT_S, Pulse, PwmCapture, PwmOutput, throttle_from_capture
 
 
@@ -30,7 +31,7 @@ def test_pwm_rate_outside_esc_range_is_refused():
 
 def test_capture_of_the_last_pulses_equals_the_model_over_the_whole_history():
     rng = np.random.default_rng(5)
-    model = PwmCaptureModel(tick_hz=1e6, timeout_s=PWM_TIMEOUT_S)
+    model = PwmCaptureModel(tick_hz=1e6, timeout_s=PWM_TIMEOUT_S, latency_ticks=HOST_LATENCY)
     capture = PwmCapture(1)
     history, start_us = [], 0
     for _ in range(300):
@@ -47,7 +48,7 @@ def test_capture_of_the_last_pulses_equals_the_model_over_the_whole_history():
 
 def test_capture_on_the_frame_grid_equals_the_whole_history():
     """Frames every 1 ms, pulses every 2.5 ms whose falls land on frame times, dropouts."""
-    model = PwmCaptureModel(tick_hz=1e6, timeout_s=PWM_TIMEOUT_S)
+    model = PwmCaptureModel(tick_hz=1e6, timeout_s=PWM_TIMEOUT_S, latency_ticks=HOST_LATENCY)
     out, capture, history = PwmOutput(1, 400), PwmCapture(1), []
     for frame in range(1, 1500):
         now_us = frame * 1000
