@@ -1,4 +1,5 @@
-"""``rig``: run scenarios closed-loop (``rig run``) and the demo flight (``rig hil-sim``).
+"""``rig``: run scenarios closed-loop (``rig run``), the demo flight (``rig hil-sim``) and
+campaigns of many runs (``rig campaign``).
 
 Errors are one line on stderr (exit 1); Ctrl-C stops the run cleanly with the logs
 readable (exit 130).
@@ -16,7 +17,7 @@ from rich.text import Text
 
 from rig.errors import RigError
 from rig.link import LinkTimeouts
-from rig.loop import AUTOPILOTS, Progress, RunOptions, RunResult, run_scenario
+from rig.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
 from rig.px4_sim_api import Ports
 from rig.scenario import SENSOR_LAYERS, load_scenario
 
@@ -33,8 +34,25 @@ def main(argv: list[str] | None = None) -> int:
         "hil-sim", help="take off, hover, step, land with RTL sensors and the reference autopilot"
     )
     _add_run_options(demo)
+    campaign = commands.add_parser(
+        "campaign", help="run a campaign file (resumable), or `campaign report DIR`"
+    )
+    campaign.add_argument("campaign", help="campaign TOML (or bundled name), or 'report'")
+    campaign.add_argument("folder", nargs="?", type=Path, help="with 'report': the results folder")
+    campaign.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="results folder (default runs/campaign-<name>; reruns resume)",
+    )
+    campaign.add_argument("--workers", type=int, default=None,
+                          help="local processes (default: the cores given)")  # fmt: skip
+    campaign.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
+                          help="run on this Dask cluster instead of local processes")  # fmt: skip
     args = parser.parse_args(argv)
     console = Console(stderr=True)
+    if args.command == "campaign":
+        return _campaign(args, console)
     try:
         scenario = load_scenario(HIL_SIM_SCENARIO if args.command == "hil-sim" else args.scenario)
         options = RunOptions(
@@ -84,6 +102,33 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="reference-autopilot parameter (repeatable)")  # fmt: skip
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to wait for the autopilot to connect")  # fmt: skip
+
+
+def _campaign(args: argparse.Namespace, console: Console) -> int:
+    from rig.campaign import campaign_executor, load_campaign, run_campaign  # on demand
+    from rig.campaign_report import write_report
+
+    try:
+        if args.campaign == "report":
+            if args.folder is None:
+                raise RigError("campaign report: give the results folder (rig campaign report DIR)")
+            console.print(f"report: {write_report(args.folder)}", highlight=False)
+            return 0
+        campaign = load_campaign(args.campaign)
+        out = args.out or RUNS_DIR / f"campaign-{campaign.name}"
+        console.print(f"[bold]{campaign.name}[/]: {campaign.description}\nresults in {out}")
+        with campaign_executor(args.scheduler, args.workers) as executor:
+            run_campaign(campaign, out, executor, lambda r: console.print(
+                f"case {r.index:4d} {r.status:8s} {r.wall_s:6.1f} s  {r.reason}", highlight=False
+            ))  # fmt: skip
+        console.print(f"report: {write_report(out)}", highlight=False)
+    except RigError as error:
+        print(f"rig: error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("rig: interrupted; finished cases are saved, rerun to resume", file=sys.stderr)
+        return 130
+    return 0
 
 
 #: Without a terminal (a pipe, a CI log) progress is a plain line this often, in simulated s.

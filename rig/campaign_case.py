@@ -1,0 +1,137 @@
+"""One campaign case in its own process: ``python -m rig.campaign_case CASE_DIR``.
+
+Reads ``case.json`` and ``scenario.toml`` (written by :func:`rig.campaign.run_case`),
+flies it on a free SITL instance, computes the metrics from the run's logs and writes
+``outcome.json`` (``{"error": ..., "metrics": {...}}``) atomically. A process of its own
+per case keeps ports, sockets, the autopilot and any crash inside the case; SIGINT (the
+campaign's timeout or Ctrl-C) ends the run cleanly with its logs readable.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyulog
+
+from rig.errors import RigError
+from rig.link import LinkTimeouts
+from rig.loop import RunOptions, run_scenario
+from rig.px4_sim_api import Ports
+from rig.scenario import load_scenario
+
+#: Altitude (m) under which a downward speed counts as the ground impact speed; at the
+#: 250 Hz truth rate a 10 m/s fall moves 4 cm per sample, so the last sample is caught.
+IMPACT_ALTITUDE_M = 0.2
+
+
+def main(argv: list[str] | None = None) -> int:
+    run_dir = Path((sys.argv[1:] if argv is None else argv)[0])
+    case = json.loads((run_dir / "case.json").read_text())
+    try:
+        instance = free_instance(case["first_instance"], case["instances"], case["index"])
+        options = RunOptions(
+            instance=instance,
+            out_dir=run_dir,
+            sensor_layer=case["sensor_layer"],
+            timeouts=LinkTimeouts(connect_s=60.0, answer_s=case["answer_timeout_s"]),
+            autopilot_params=tuple(case["autopilot_params"]),
+        )
+        result = run_scenario(load_scenario(run_dir / "scenario.toml"), options)
+        metrics = case_metrics(
+            result.rig_log, result.autopilot_log, case["onset_s"], **case["crash"]
+        )
+        outcome: dict[str, Any] = {"error": None, "metrics": metrics}
+    except RigError as error:
+        outcome = {"error": str(error), "metrics": {}}
+    except KeyboardInterrupt:
+        return 130  # stopped by the campaign: no outcome, the campaign knows why
+    written = run_dir / "outcome.json.part"
+    written.write_text(json.dumps(outcome, sort_keys=True))
+    os.replace(written, run_dir / "outcome.json")  # all or nothing
+    return 0
+
+
+def free_instance(first: int, count: int, index: int) -> int:
+    """The first instance from ``first + index % count`` on whose ports are free, so
+    concurrent cases (consecutive indices) start on different instances and a port held
+    by anyone else is skipped."""
+    for step in range(count):
+        instance = first + (index + step) % count
+        ports = Ports(instance)
+        tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            tcp.bind(("127.0.0.1", ports.simulator_tcp))
+            udp.bind(("127.0.0.1", ports.api_remote_udp))
+        except OSError:
+            continue
+        finally:
+            tcp.close()
+            udp.close()
+        return instance
+    raise RigError(f"no free SITL instance in {first}..{first + count - 1}")
+
+
+def case_metrics(
+    rig_log: Path,
+    autopilot_log: Path | None,
+    onset_s: float | None,
+    tilt_deg: float,
+    impact_speed_mps: float,
+) -> dict[str, Any]:
+    """The case's metrics from the ground truth in ``rig.ulg`` (and the autopilot's
+    messages): over the window from ``onset_s`` (the whole run without one)."""
+    log = pyulog.ULog(
+        str(rig_log), ["vehicle_attitude_groundtruth", "vehicle_local_position_groundtruth"]
+    )
+    attitude = log.get_dataset("vehicle_attitude_groundtruth").data
+    position = log.get_dataset("vehicle_local_position_groundtruth").data
+    start_s = onset_s or 0.0
+    tilts = tilt_from_level_deg(*(attitude[f"q[{i}]"] for i in range(4)))
+    in_window = attitude["timestamp"] / 1e6 >= start_s
+    time_s, altitude_m = position["timestamp"] / 1e6, -position["z"].astype(float)
+    after = time_s >= start_s
+    altitude_at_onset_m = float(np.interp(start_s, time_s, altitude_m))
+    near_ground = altitude_m < IMPACT_ALTITUDE_M
+    impact = float(max(0.0, *position["vz"][near_ground])) if near_ground.any() else 0.0
+    max_tilt = float(tilts[in_window].max()) if in_window.any() else 0.0
+    return {
+        "max_tilt_deg": round(max_tilt, 6),
+        "altitude_loss_m": round(
+            max(0.0, altitude_at_onset_m - float(altitude_m[after].min())) if after.any() else 0.0,
+            6,
+        ),
+        "time_to_failsafe_s": _time_to_failsafe(autopilot_log, start_s),
+        "impact_speed_mps": round(impact, 6),
+        "crashed": bool(tilts.max() > tilt_deg or impact > impact_speed_mps),
+    }
+
+
+def tilt_from_level_deg(w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Angle between the body z axis and the vertical: R[2,2] = 1 − 2(x² + y²) of the
+    body-to-NED rotation of a unit quaternion (w, x, y, z)."""
+    del w, z  # the tilt does not depend on them
+    return np.degrees(np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y), -1.0, 1.0)))
+
+
+def _time_to_failsafe(autopilot_log: Path | None, start_s: float) -> float | None:
+    """Seconds from ``start_s`` to the autopilot's first "Failsafe" message (PX4 words its
+    failsafe notices so), None without one."""
+    if autopilot_log is None:
+        return None
+    messages = pyulog.ULog(str(autopilot_log), []).logged_messages
+    times = [
+        m.timestamp / 1e6
+        for m in messages
+        if "failsafe" in m.message.lower() and m.timestamp / 1e6 >= start_s
+    ]
+    return round(min(times) - start_s, 6) if times else None
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""Campaign files, case expansion, pass criteria and metrics (no runs: fast)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rig.campaign import CampaignError, Criterion, campaign_from_dict, expand
+from rig.campaign_case import tilt_from_level_deg
+from rig.errors import ScenarioError
+
+
+def document(**overrides):
+    base = {
+        "name": "t",
+        "scenario": "takeoff_hover_land",
+        "duration_s": 3.0,
+        "axes": {
+            "fault": ["none", "m0"],
+            "fault_onset_s": [1.0, 2.0],
+            "mass_scale": [1.0, 1.2],
+            "wind_north_mps": [3.0],
+            "seed": [4],
+        },
+        "faults": {
+            "m0": {"kind": "motor_degradation", "motor": 0, "severity": "efficiency",
+                   "efficiency": [0.5, 0.8], "duration_s": 0.5},
+        },
+        "criteria": {"max_tilt_deg": {"max": 30.0}, "crashed": {"equals": False}},
+    }  # fmt: skip
+    return {**base, **overrides}
+
+
+def test_cases_are_the_cartesian_product_with_severities_and_onsets_applied(tmp_path):
+    campaign = campaign_from_dict(document(), "c.toml")
+    cases = expand(campaign, tmp_path)
+    assert len(cases) == 3 * 2 * 2  # fault (none + 2 severities) × onset × mass
+    assert len({case.case_id for case in cases}) == len(cases)
+    labels = [dict(case.labels) for case in cases]
+    assert labels[0] == {"fault": "none", "fault_onset_s": "1", "mass_scale": "1",
+                         "wind_north_mps": "3", "seed": "4"}  # fmt: skip
+    degraded = next(c for c, lab in zip(cases, labels, strict=True)
+                    if lab["fault"] == "m0 efficiency=0.8" and lab["fault_onset_s"] == "2"
+                    and lab["mass_scale"] == "1.2")  # fmt: skip
+    assert degraded.scenario_document["faults"] == [
+        {"kind": "motor_degradation", "motor": 0, "efficiency": 0.8, "start_s": 2.0, "end_s": 2.5}
+    ]
+    assert degraded.onset_s == 2.0
+    assert degraded.scenario_document["seed"] == 4
+    assert degraded.scenario_document["duration_s"] == 3.0
+    assert degraded.scenario_document["environment"]["wind_steady_ned_mps"] == [3.0, 0.0, 0.0]
+    # The F450 file's 1.4 kg, scaled; the inertia untouched.
+    assert degraded.vehicle_document["body"]["mass_kg"] == pytest.approx(1.4 * 1.2)
+    assert degraded.vehicle_document["body"]["inertia_kgm2"][0][0] == 0.0211
+    assert "faults" not in cases[0].scenario_document  # the takeoff_hover_land file has none
+
+
+def test_case_ids_are_stable_so_a_rerun_finds_its_cases(tmp_path):
+    first = [c.case_id for c in expand(campaign_from_dict(document(), "c.toml"), tmp_path)]
+    again = [c.case_id for c in expand(campaign_from_dict(document(), "c.toml"), tmp_path)]
+    assert first == again
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"axes": {"colour": [1]}}, "c.toml: key 'axes.colour' = [1]: unknown key (known: "),
+        ({"axes": {"seed": [-1]}}, "c.toml: key 'axes.seed' = -1: expected a integer >= 0"),
+        ({"axes": {"fault": ["nope"]}}, "c.toml: key 'axes.fault' = 'nope': expected a fault"),
+        ({"axes": {"mass_scale": []}}, "c.toml: key 'axes.mass_scale' = []: expected a non-empty"),
+        ({"sensor_layer": "fpga"}, "c.toml: key 'sensor_layer' = 'fpga': expected one of tlm, rtl"),
+        ({"criteria": {"crashed": {"max": 1}}}, "c.toml: key 'criteria.crashed' = {'max': 1}"),
+        ({"criteria": {"speed": {"max": 1}}}, "c.toml: key 'criteria.speed' = {'max': 1}: unknown"),
+        ({"case_timeout_s": 0}, "c.toml: key 'case_timeout_s' = 0: expected a number > 0"),
+        ({"instances": 90}, "c.toml: key 'instances' = [20, 90]: first_instance + instances"),
+        ({"scenario": "no_such"}, "no_such.toml: no such scenario file (bundled: "),
+    ],
+)
+def test_bad_campaign_files_fail_with_one_line_naming_key_and_value(overrides, message):
+    with pytest.raises(CampaignError) as error:
+        campaign_from_dict(document(**overrides), "c.toml")
+    assert message in str(error.value)
+    assert "\n" not in str(error.value)
+
+
+def test_a_case_that_makes_a_bad_scenario_is_named_by_its_axis_values():
+    """An onset after the end of the run is refused before anything runs."""
+    with pytest.raises(ScenarioError, match=r"case 1 \(fault=m0 efficiency=0.5, fault_onset_s=5"):
+        campaign_from_dict(document(axes={"fault": ["m0"], "fault_onset_s": [1.0, 5.0]}), "c.toml")
+
+
+def test_a_severity_must_name_a_listed_parameter_of_the_fault():
+    faults = {"m0": {"kind": "motor_loss", "motor": 0, "severity": "motor"}}
+    with pytest.raises(CampaignError, match=r"key 'faults\.m0\.severity' = 'motor': expected a"):
+        campaign_from_dict(document(faults=faults, axes={"fault": ["m0"]}), "c.toml")
+
+
+def test_criteria_bounds_equality_and_missing_values():
+    tilt = Criterion("max_tilt_deg", maximum=30.0)
+    assert tilt.violation(29.9) is None
+    assert tilt.violation(31.0) == "max_tilt_deg = 31 > 30"
+    failsafe = Criterion("time_to_failsafe_s", minimum=0.0, maximum=2.0)
+    assert failsafe.violation(None) == "time_to_failsafe_s not measured (none in the run)"
+    assert failsafe.violation(1.0) is None
+    assert Criterion("crashed", equals=False).violation(True) == "crashed = True != False"
+
+
+def test_tilt_from_level_matches_closed_form_rotations():
+    """A rotation by θ about a horizontal axis tilts the body by θ; a yaw does not tilt."""
+    angles = np.radians([0.0, 10.0, 45.0, 90.0, 150.0])
+    roll = tilt_from_level_deg(np.cos(angles / 2), np.sin(angles / 2), 0 * angles, 0 * angles)
+    np.testing.assert_allclose(roll, np.degrees(angles), atol=1e-6)
+    # About the horizontal axis (1, 1, 0)/√2, then a yaw: still θ from level.
+    s = np.sin(angles / 2) / math.sqrt(2)
+    pitch_roll = tilt_from_level_deg(np.cos(angles / 2), s, s, 0 * angles)
+    np.testing.assert_allclose(pitch_roll, np.degrees(angles), atol=1e-6)
+    yaw = tilt_from_level_deg(np.cos(angles / 2), 0 * angles, 0 * angles, np.sin(angles / 2))
+    np.testing.assert_allclose(yaw, 0.0, atol=1e-6)
