@@ -119,7 +119,9 @@ def _campaign(args: argparse.Namespace, console: Console) -> int:
         console.print(f"[bold]{campaign.name}[/]: {campaign.description}\nresults in {out}")
         with campaign_executor(args.scheduler, args.workers) as executor:
             run_campaign(campaign, out, executor, lambda r: console.print(
-                f"case {r.index:4d} {r.status:8s} {r.wall_s:6.1f} s  {r.reason}", highlight=False
+                f"case {r.index:4d} {r.status:8s} {r.wall_s:6.1f} s  {r.reason}",
+                    highlight=False,
+                    soft_wrap=True,
             ))  # fmt: skip
         console.print(f"report: {write_report(out)}", highlight=False)
     except RigError as error:
