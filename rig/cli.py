@@ -120,8 +120,7 @@ def _campaign(args: argparse.Namespace, console: Console) -> int:
         with campaign_executor(args.scheduler, args.workers) as executor:
             run_campaign(campaign, out, executor, lambda r: console.print(
                 f"case {r.index:4d} {r.status:8s} {r.wall_s:6.1f} s  {r.reason}",
-                    highlight=False,
-                    soft_wrap=True,
+                highlight=False, soft_wrap=True,
             ))  # fmt: skip
         console.print(f"report: {write_report(out)}", highlight=False)
     except RigError as error:
