@@ -36,18 +36,32 @@ from typing import Any
 
 import tomli_w
 
+from credibility import CredibilityError, load_plan
 from quad_model.toml_file import read_toml_file
 from quad_model.vehicle import VEHICLES_DIR, VehicleFileError, vehicle_from_dict
 from rig.errors import RigError
 from rig.scenario import FAULT_KINDS, SCENARIOS_DIR, SENSOR_LAYERS, scenario_from_dict
 
 CAMPAIGNS_DIR = Path(__file__).parent / "campaigns"
+PLANS_DIR = Path(__file__).parent.parent / "credibility" / "plans"
 RESULTS_DB = "results.sqlite"
 #: Case outcomes: ``ok`` and ``failed`` ran to the end (criteria met or not), ``crashed``
 #: is a run that ended in an error, ``hung`` one killed by the per-case timeout.
 STATUSES = ("ok", "failed", "crashed", "hung")
 #: What each case reports (rig.campaign_case computes them from the run's logs).
-METRICS = ("max_tilt_deg", "altitude_loss_m", "time_to_failsafe_s", "impact_speed_mps", "crashed")
+METRICS = (
+    "max_tilt_deg",
+    "altitude_loss_m",
+    "time_to_failsafe_s",
+    "impact_speed_mps",
+    "crashed",
+    "eta_all",
+    "eta_min",
+)
+#: The metrics only a campaign with a ``[credibility]`` table measures.
+CREDIBILITY_METRICS = ("eta_all", "eta_min")
+#: Which of a case's logs can fill the credibility plan's role.
+CASE_LOGS = ("rig", "autopilot")
 #: Grace after SIGINT for a timed-out case to close its logs and stop its autopilot.
 STOP_GRACE_S = 10.0
 
@@ -88,7 +102,9 @@ _TOP_KEYS = {
     "faults",
     "criteria",
     "crash",
+    "credibility",
 }
+_CREDIBILITY_KEYS = ("plan", "role", "log")
 
 
 class CampaignError(RigError):
@@ -127,6 +143,18 @@ class CrashLimits:
 
 
 @dataclass(frozen=True)
+class CredibilityScoring:
+    """Score every case with a credibility plan: the case's ``log`` (``rig.ulg`` or
+    ``autopilot.ulg``) fills the plan's ``role``; the other roles keep the plan's paths.
+    ``plan_sha256`` is the plan file's hash, kept with the results for provenance."""
+
+    plan_path: str
+    plan_sha256: str
+    role: str = "sim"
+    log: str = "autopilot"
+
+
+@dataclass(frozen=True)
 class Campaign:
     name: str
     source: str
@@ -142,6 +170,7 @@ class Campaign:
     faults: Mapping[str, Mapping[str, Any]]
     criteria: tuple[Criterion, ...]
     crash: CrashLimits
+    credibility: CredibilityScoring | None = None
 
 
 @dataclass(frozen=True)
@@ -163,6 +192,7 @@ class CaseSpec:
     instances: int
     crash: CrashLimits
     criteria: tuple[Criterion, ...]
+    credibility: CredibilityScoring | None = None
 
 
 @dataclass(frozen=True)
@@ -253,9 +283,60 @@ def campaign_from_dict(document: Mapping[str, Any], source: str = "<dict>") -> C
         faults=faults,
         criteria=_criteria(document.get("criteria", {}), fail),
         crash=crash,
+        credibility=_credibility(document.get("credibility"), source, fail),
     )
+    for criterion in campaign.criteria:
+        if criterion.metric in CREDIBILITY_METRICS and campaign.credibility is None:
+            raise fail(
+                f"criteria.{criterion.metric}",
+                document["criteria"][criterion.metric],
+                "needs a [credibility] table",
+            )
     expand(campaign, Path("."))  # every case must make a valid scenario and vehicle
     return campaign
+
+
+def _credibility(
+    table: Any, source: str, fail: Callable[..., CampaignError]
+) -> CredibilityScoring | None:
+    """``[credibility]``: the plan is loaded and checked here, once, so a bad plan or role
+    stops the campaign before any case flies."""
+    if table is None:
+        return None
+    table = _table(table, "credibility", fail)
+    for key, value in table.items():
+        _known(key, _CREDIBILITY_KEYS, "credibility", value, fail)
+    name = table.get("plan")
+    if not isinstance(name, str) or not name:
+        raise fail("credibility.plan", name, "expected a plan file or a bundled plan name")
+    path = _plan_path(name, Path(source).parent)
+    if path is None:
+        bundled = ", ".join(sorted(p.stem for p in PLANS_DIR.glob("*.toml")))
+        raise fail("credibility.plan", name, f"no such plan file (bundled: {bundled})")
+    try:
+        plan = load_plan(path)
+    except CredibilityError as error:
+        raise fail("credibility.plan", name, str(error)) from None
+    role = table.get("role", "sim")
+    if role not in plan.logs:
+        raise fail("credibility.role", role, f"not a log role of the plan ({', '.join(plan.logs)})")
+    log = table.get("log", "autopilot")
+    if log not in CASE_LOGS:
+        raise fail("credibility.log", log, f"expected one of {', '.join(CASE_LOGS)}")
+    return CredibilityScoring(
+        plan_path=str(path),
+        plan_sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
+        role=role,
+        log=log,
+    )
+
+
+def _plan_path(name: str, campaign_dir: Path) -> Path | None:
+    """A plan file relative to the campaign file, else a bundled plan by name."""
+    for candidate in (campaign_dir / name, PLANS_DIR / name, PLANS_DIR / f"{name}.toml"):
+        if candidate.is_file():
+            return candidate.resolve()
+    return None
 
 
 def _table(value: Any, key: str, fail: Callable[..., CampaignError]) -> Mapping[str, Any]:
@@ -425,6 +506,7 @@ def expand(campaign: Campaign, out_dir: Path) -> list[CaseSpec]:
                 instances=campaign.instances,
                 crash=campaign.crash,
                 criteria=campaign.criteria,
+                credibility=campaign.credibility,
             )
         )
     return cases
@@ -521,7 +603,9 @@ def run_case(spec: CaseSpec) -> CaseResult:
         status, reason = "crashed", outcome["error"]
     else:
         violations = [v for c in spec.criteria if (v := c.violation(metrics.get(c.metric)))]
-        status, reason = ("failed", "; ".join(violations)) if violations else ("ok", "")
+        # Notes (e.g. why a credibility index is missing) come with the reason either way.
+        status = "failed" if violations else "ok"
+        reason = "; ".join([*violations, *outcome.get("notes", [])])
     logs = {
         name: str(run_dir / f"{name}.ulg")
         for name in ("rig", "autopilot")
@@ -578,6 +662,8 @@ def run_campaign(
     out_dir.mkdir(parents=True, exist_ok=True)
     cases = expand(campaign, out_dir)
     with ResultsDb(out_dir / RESULTS_DB) as db:
+        if campaign.credibility is not None:
+            db.record_plan(campaign.credibility)
         done = db.finished_ids()
         futures: list[Future[CaseResult]] = [
             executor.submit(run_case, case) for case in cases if case.case_id not in done
@@ -604,6 +690,9 @@ class ResultsDb:
         status TEXT NOT NULL, reason TEXT NOT NULL, metrics_json TEXT NOT NULL,
         wall_s REAL NOT NULL, run_dir TEXT NOT NULL, rig_log TEXT, autopilot_log TEXT,
         finished_utc TEXT NOT NULL)"""
+    #: What holds for the whole campaign (the credibility plan's path and SHA-256).
+    _PROVENANCE_SCHEMA = """CREATE TABLE IF NOT EXISTS provenance (
+        key TEXT PRIMARY KEY, value TEXT NOT NULL)"""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -612,6 +701,7 @@ class ResultsDb:
             self.connection.execute("PRAGMA journal_mode=WAL")
             with self.connection:
                 self.connection.execute(self._SCHEMA)
+                self.connection.execute(self._PROVENANCE_SCHEMA)
         except sqlite3.DatabaseError as error:
             raise CampaignError(f"{path}: not a campaign results database ({error})") from None
 
@@ -623,6 +713,30 @@ class ResultsDb:
 
     def finished_ids(self) -> set[str]:
         return {row[0] for row in self.connection.execute("SELECT case_id FROM cases")}
+
+    def provenance(self) -> dict[str, str]:
+        return dict(self.connection.execute("SELECT key, value FROM provenance"))
+
+    def record_plan(self, scoring: CredibilityScoring) -> None:
+        """Keep the plan's hash once; scores from another version of the plan in the same
+        results would not be comparable, so that is refused."""
+        recorded = self.provenance().get("credibility_plan_sha256")
+        if recorded not in (None, scoring.plan_sha256) and self.finished_ids():
+            raise CampaignError(
+                f"{self.path}: its cases were scored with credibility plan sha256 "
+                f"{recorded}, but {scoring.plan_path} is now {scoring.plan_sha256}; "
+                "use a new results folder"
+            )
+        with self.connection:
+            self.connection.executemany(
+                "INSERT OR REPLACE INTO provenance VALUES (?, ?)",
+                [
+                    ("credibility_plan", scoring.plan_path),
+                    ("credibility_plan_sha256", scoring.plan_sha256),
+                    ("credibility_role", scoring.role),
+                    ("credibility_log", scoring.log),
+                ],
+            )
 
     def record(self, result: CaseResult) -> None:
         with self.connection:  # one transaction: the row is all there or not at all
@@ -657,11 +771,21 @@ class ResultsDb:
 
 
 def read_results(out_dir: Path) -> list[CaseResult]:
+    with _open_results(out_dir) as db:
+        return db.results()
+
+
+def read_provenance(out_dir: Path) -> dict[str, str]:
+    """What the campaign recorded once for all its cases (empty without credibility)."""
+    with _open_results(out_dir) as db:
+        return db.provenance()
+
+
+def _open_results(out_dir: Path) -> ResultsDb:
     path = out_dir / RESULTS_DB
     if not path.is_file():
         raise CampaignError(f"{path}: no campaign results here")
-    with ResultsDb(path) as db:
-        return db.results()
+    return ResultsDb(path)
 
 
 @contextlib.contextmanager

@@ -2,9 +2,10 @@
 
 Reads ``case.json`` and ``scenario.toml`` (written by :func:`rig.campaign.run_case`),
 flies it on a free SITL instance, computes the metrics from the run's logs and writes
-``outcome.json`` (``{"error": ..., "metrics": {...}}``) atomically. A process of its own
-per case keeps ports, sockets, the autopilot and any crash inside the case; SIGINT (the
-campaign's timeout or Ctrl-C) ends the run cleanly with its logs readable.
+``outcome.json`` (``{"error": ..., "metrics": {...}, "notes": [...]}``) atomically. A
+process of its own per case keeps ports, sockets, the autopilot and any crash inside the
+case; SIGINT (the campaign's timeout or Ctrl-C) ends the run cleanly with its logs
+readable.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 import pyulog
 
+from credibility import CredibilityError, assess, load_plan
 from rig.errors import RigError
 from rig.link import LinkTimeouts
 from rig.loop import RunOptions, run_scenario
@@ -46,7 +48,13 @@ def main(argv: list[str] | None = None) -> int:
         metrics = case_metrics(
             result.rig_log, result.autopilot_log, case["onset_s"], **case["crash"]
         )
-        outcome: dict[str, Any] = {"error": None, "metrics": metrics}
+        notes = []
+        if case["credibility"] is not None:
+            logs = {"rig": result.rig_log, "autopilot": result.autopilot_log}
+            scores, note = credibility_metrics(logs, **case["credibility"])
+            metrics.update(scores)
+            notes += [note] if note else []
+        outcome: dict[str, Any] = {"error": None, "metrics": metrics, "notes": notes}
     except RigError as error:
         outcome = {"error": str(error), "metrics": {}}
     except KeyboardInterrupt:
@@ -110,6 +118,27 @@ def case_metrics(
         "impact_speed_mps": round(impact, 6),
         "crashed": bool(tilts.max() > tilt_deg or impact > impact_speed_mps),
     }
+
+
+def credibility_metrics(
+    logs: dict[str, Path | None], plan_path: str, plan_sha256: str, role: str, log: str
+) -> tuple[dict[str, float | None], str | None]:
+    """``eta_all`` and ``eta_min`` of the plan with the case's ``log`` in ``role``, and why
+    they are missing (None if they are not): a plan that cannot score this run (a segment
+    past its end, a topic it lacks) is the case's finding, not a crash of the case."""
+    del plan_sha256  # checked and recorded once by the campaign
+    case_log = logs[log]
+    try:
+        if case_log is None:
+            raise CredibilityError(f"the run wrote no {log}.ulg")
+        assessment = assess(load_plan(Path(plan_path), {role: case_log}))
+    except CredibilityError as error:
+        missing = dict.fromkeys(("eta_all", "eta_min"))
+        return missing, f"credibility not assessed: {error}"
+    return {
+        "eta_all": round(float(assessment.eta_all), 6),
+        "eta_min": round(float(assessment.eta_min), 6),
+    }, None
 
 
 def tilt_from_level_deg(w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:

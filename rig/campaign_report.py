@@ -12,6 +12,7 @@ import html
 import io
 import json
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,14 +22,20 @@ matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt
 import numpy as np
 
-from rig.campaign import METRICS, CaseResult, read_results
+from rig.campaign import CREDIBILITY_METRICS, METRICS, CaseResult, read_provenance, read_results
 
 #: How many of the slowest cases the report lists.
 SLOWEST = 5
 
 
-def campaign_summary(results: list[CaseResult]) -> dict[str, Any]:
-    """Everything the report shows, as plain data (this is ``report.json``)."""
+def campaign_summary(
+    results: list[CaseResult], provenance: Mapping[str, str] | None = None
+) -> dict[str, Any]:
+    """Everything the report shows, as plain data (this is ``report.json``); the η
+    columns only where the campaign scored its cases with a credibility plan."""
+    metrics = [
+        m for m in METRICS if m not in CREDIBILITY_METRICS or any(m in r.metrics for r in results)
+    ]
     axes: dict[str, dict[str, list[CaseResult]]] = defaultdict(lambda: defaultdict(list))
     for result in results:
         for axis, value in result.labels:
@@ -40,8 +47,10 @@ def campaign_summary(results: list[CaseResult]) -> dict[str, Any]:
     return {
         "cases": len(results),
         "statuses": statuses,
+        "provenance": dict(provenance or {}),
+        "metrics": metrics,
         "axes": {
-            axis: [_group_row(value, group) for value, group in values.items()]
+            axis: [_group_row(value, group, metrics) for value, group in values.items()]
             for axis, values in axes.items()
         },
         "envelope": failure_envelope(results),
@@ -68,16 +77,21 @@ def survived(result: CaseResult) -> bool:
     return result.status in ("ok", "failed") and not result.metrics.get("crashed", True)
 
 
-def _group_row(value: str, group: list[CaseResult]) -> dict[str, Any]:
+def _group_row(value: str, group: list[CaseResult], metrics: list[str]) -> dict[str, Any]:
     row: dict[str, Any] = {
         "value": value,
         "cases": len(group),
         "pass_rate": sum(r.status == "ok" for r in group) / len(group),
     }
-    for metric in METRICS:
+    for metric in metrics:
         numbers = [float(r.metrics[metric]) for r in group if r.metrics.get(metric) is not None]
         row[metric] = (
-            {"mean": float(np.mean(numbers)), "max": float(np.max(numbers)), "n": len(numbers)}
+            {
+                "mean": float(np.mean(numbers)),
+                "min": float(np.min(numbers)),
+                "max": float(np.max(numbers)),
+                "n": len(numbers),
+            }
             if numbers
             else None
         )
@@ -96,6 +110,11 @@ def _case_row(result: CaseResult) -> dict[str, Any]:
         "rig_log": result.rig_log,
         "autopilot_log": result.autopilot_log,
     }
+
+
+def _worst(metric: str) -> str:
+    """A credibility index is worst at its minimum, every other metric at its maximum."""
+    return "min" if metric in CREDIBILITY_METRICS else "max"
 
 
 def envelope_png(envelope: list[dict[str, Any]]) -> bytes:
@@ -123,7 +142,7 @@ def envelope_png(envelope: list[dict[str, Any]]) -> bytes:
 
 def write_report(out_dir: Path) -> Path:
     """Write ``report.json`` and ``report.html`` from the results; returns the HTML path."""
-    summary = campaign_summary(read_results(out_dir))
+    summary = campaign_summary(read_results(out_dir), read_provenance(out_dir))
     (out_dir / "report.json").write_text(json.dumps(summary, indent=1))
     path = out_dir / "report.html"
     path.write_text(_html(summary, envelope_png(summary["envelope"]) if summary["cases"] else b""))
@@ -139,25 +158,37 @@ def _html(summary: dict[str, Any], png: bytes) -> str:
         )
         return f"<table><tr>{head}</tr>{body}</table>"
 
-    def stat(cell: dict[str, float] | None) -> str:
-        return "-" if cell is None else f"{cell['mean']:.3g} / {cell['max']:.3g}"
+    def stat(metric: str, cell: dict[str, float] | None) -> str:
+        if cell is None:
+            return "-"
+        return f"{cell['mean']:.3g} / {cell[_worst(metric)]:.3g}"
+
+    metrics = summary["metrics"]
 
     parts = [
         f"<h1>Campaign report</h1><p>{summary['cases']} cases: "
         + ", ".join(f"{n} {s}" for s, n in summary["statuses"].items())
         + "</p>"
     ]
+    if "credibility_plan" in summary["provenance"]:
+        provenance = summary["provenance"]
+        parts.append(
+            f"<p>Credibility: plan {html.escape(provenance['credibility_plan'])} "
+            f"(sha256 {provenance['credibility_plan_sha256']}), the case's "
+            f"{html.escape(provenance['credibility_log'])}.ulg as role "
+            f"{html.escape(provenance['credibility_role'])!r}</p>"
+        )
     for axis, rows in summary["axes"].items():
         parts.append(f"<h2>Axis {html.escape(axis)}</h2>")
         parts.append(
             table(
-                ["value", "cases", "pass rate", *(f"{m} mean / max" for m in METRICS)],
+                ["value", "cases", "pass rate", *(f"{m} mean / {_worst(m)}" for m in metrics)],
                 [
                     [
                         r["value"],
                         r["cases"],
                         f"{r['pass_rate']:.0%}",
-                        *(stat(r[m]) for m in METRICS),
+                        *(stat(m, r[m]) for m in metrics),
                     ]
                     for r in rows
                 ],

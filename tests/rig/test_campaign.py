@@ -1,12 +1,13 @@
 """Campaign files, case expansion, pass criteria and metrics (no runs: fast)."""
 
+import hashlib
 import math
 
 import numpy as np
 import pytest
 
 from rig.campaign import CampaignError, Criterion, campaign_from_dict, expand
-from rig.campaign_case import tilt_from_level_deg
+from rig.campaign_case import credibility_metrics, tilt_from_level_deg
 from rig.errors import ScenarioError
 
 
@@ -116,3 +117,97 @@ def test_tilt_from_level_matches_closed_form_rotations():
     np.testing.assert_allclose(pitch_roll, np.degrees(angles), atol=1e-6)
     yaw = tilt_from_level_deg(np.cos(angles / 2), 0 * angles, 0 * angles, np.sin(angles / 2))
     np.testing.assert_allclose(yaw, 0.0, atol=1e-6)
+
+
+# -- [credibility] -----------------------------------------------------------------------
+
+
+def small_plan(tmp_path, real_log, segment_s=(105.0, 106.9)):
+    """A one-test plan on a real log: the gyro σ with the motors stopped (quad4001)."""
+    plan = tmp_path / "plan.toml"
+    plan.write_text(
+        f'[logs]\nreal = "{real_log}"\nsim = "{real_log}"\n'
+        '[[tests]]\nname = "gyro_sigma"\nkind = "performance"\nparameter = "std"\n'
+        f'signal = "sensor_combined.gyro_rad[0]"\nsegment_s = {list(segment_s)}\n'
+    )
+    return plan
+
+
+def test_credibility_plan_is_found_beside_the_campaign_or_bundled(tmp_path, quad4001_log):
+    plan = small_plan(tmp_path, quad4001_log)
+    campaign = campaign_from_dict(
+        document(credibility={"plan": "plan.toml", "role": "real", "log": "rig"}),
+        str(tmp_path / "c.toml"),
+    )
+    scoring = campaign.credibility
+    assert scoring.plan_path == str(plan.resolve())
+    assert scoring.plan_sha256 == hashlib.sha256(plan.read_bytes()).hexdigest()
+    assert (scoring.role, scoring.log) == ("real", "rig")
+    assert all(case.credibility == scoring for case in expand(campaign, tmp_path))
+    bundled = campaign_from_dict(
+        document(credibility={"plan": "quad4001_repeatability"}), str(tmp_path / "c.toml")
+    ).credibility
+    assert bundled.plan_path.endswith("credibility/plans/quad4001_repeatability.toml")
+    assert (bundled.role, bundled.log) == ("sim", "autopilot")  # the defaults
+    assert campaign_from_dict(document(), "c.toml").credibility is None
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ({"plan": "nope.toml"}, "key 'credibility.plan' = 'nope.toml': no such plan file"),
+        ({"plan": 3}, "key 'credibility.plan' = 3: expected a plan file or a bundled plan name"),
+        ({"plan": "plan.toml", "role": "gazebo"},
+         "key 'credibility.role' = 'gazebo': not a log role of the plan (real, sim)"),
+        ({"plan": "plan.toml", "log": "px4"},
+         "key 'credibility.log' = 'px4': expected one of rig, autopilot"),
+        ({"plan": "plan.toml", "weight": 1}, "key 'credibility.weight' = 1: unknown key (known: "),
+        ({"plan": "broken.toml"}, "key 'credibility.plan' = 'broken.toml': "),
+    ],
+)  # fmt: skip
+def test_bad_credibility_tables_fail_at_load_with_one_line(tmp_path, quad4001_log, table, message):
+    small_plan(tmp_path, quad4001_log)
+    (tmp_path / "broken.toml").write_text("[logs]\nreal = 'x.ulg'\n")  # no [[tests]]
+    with pytest.raises(CampaignError) as error:
+        campaign_from_dict(document(credibility=table), str(tmp_path / "c.toml"))
+    assert message in str(error.value)
+    assert "\n" not in str(error.value)
+
+
+def test_eta_criteria_need_a_credibility_table(tmp_path, quad4001_log):
+    criteria = {"eta_min": {"min": 0.6}}
+    with pytest.raises(CampaignError, match=r"'criteria\.eta_min' = \{'min': 0\.6\}: needs a \["):
+        campaign_from_dict(document(criteria=criteria), "c.toml")
+    small_plan(tmp_path, quad4001_log)
+    campaign = campaign_from_dict(
+        document(criteria=criteria, credibility={"plan": "plan.toml"}), str(tmp_path / "c.toml")
+    )
+    assert campaign.criteria == (Criterion("eta_min", minimum=0.6),)
+    assert (
+        Criterion("eta_min", minimum=0.6).violation(None)
+        == "eta_min not measured (none in the run)"
+    )
+
+
+def test_identical_logs_score_one_and_a_segment_past_the_log_is_a_reason(tmp_path, quad4001_log):
+    """η = 1 for zero error (the log in both roles); a plan that cannot score the case's
+    log leaves the indices missing with the plan's own one-line reason."""
+    plan = str(small_plan(tmp_path, quad4001_log))
+    scores, note = credibility_metrics(
+        {"rig": quad4001_log, "autopilot": None}, plan, "-", role="sim", log="rig"
+    )
+    assert scores == {"eta_all": 1.0, "eta_min": 1.0}
+    assert note is None
+    scores, note = credibility_metrics(
+        {"rig": quad4001_log, "autopilot": None}, plan, "-", role="sim", log="autopilot"
+    )
+    assert scores == {"eta_all": None, "eta_min": None}
+    assert note == "credibility not assessed: the run wrote no autopilot.ulg"
+    late = str(small_plan(tmp_path, quad4001_log, segment_s=(5000.0, 5001.0)))
+    scores, note = credibility_metrics(
+        {"rig": quad4001_log, "autopilot": None}, late, "-", role="sim", log="rig"
+    )
+    assert scores == {"eta_all": None, "eta_min": None}
+    assert note.startswith("credibility not assessed: ")
+    assert "5000" in note
+    assert "\n" not in note
