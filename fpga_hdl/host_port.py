@@ -113,6 +113,26 @@ class HostPortMap:
             )
         return word.address, value & ((1 << WORD_BITS) - 1)
 
+    def encode_frame(
+        self,
+        samples: Mapping[str, Mapping[str, int]],
+        *,
+        now_us: int | None = None,
+        faults: Mapping[str, tuple[bool, int]] | None = None,
+    ) -> list[tuple[int, int]]:
+        """The (address, data) writes that stage one frame: sample fields, the time
+        (wrapped to 32 bits) and each chip's fault word (mute bit 8, flip mask 7..0)."""
+        words = [
+            self.encode(channel, field, value)
+            for channel, fields in samples.items()
+            for field, value in fields.items()
+        ]
+        if now_us is not None:
+            words.append(self.encode("time", "now_us", now_us % (1 << 32)))
+        for chip, (mute, flip) in (faults or {}).items():
+            words.append(self.encode(chip, "fault", (int(mute) << 8) | flip))
+        return words
+
 
 def host_port_map(
     samples: Mapping[str, data.StructLayout],

@@ -62,15 +62,7 @@ class CocotbHost:
         faults: Mapping[str, tuple[bool, int]] | None = None,
     ) -> None:
         """Write sample fields (and time, faults) into staging: invisible until commit."""
-        words = [
-            self.map.encode(channel, field, value)
-            for channel, fields in samples.items()
-            for field, value in fields.items()
-        ]
-        if now_us is not None:
-            words.append(self.map.encode("time", "now_us", now_us % (1 << 32)))
-        for chip, (mute, flip) in (faults or {}).items():
-            words.append(self.map.encode(chip, "fault", (int(mute) << 8) | flip))
+        words = self.map.encode_frame(samples, now_us=now_us, faults=faults)
         dut = self.dut
         dut.write_en.value = 1
         for address, data in words:

@@ -172,15 +172,7 @@ class HarnessHost:
         faults: Mapping[str, tuple[bool, int]] | None = None,
     ) -> None:
         """Stage the fields (and time, faults), commit, and return once the chips took them."""
-        words = [
-            self.map.encode(channel, field, value)
-            for channel, fields in samples.items()
-            for field, value in fields.items()
-        ]
-        if now_us is not None:
-            words.append(self.map.encode("time", "now_us", now_us % (1 << 32)))
-        for chip, (mute, flip) in (faults or {}).items():
-            words.append(self.map.encode(chip, "fault", (int(mute) << 8) | flip))
+        words = self.map.encode_frame(samples, now_us=now_us, faults=faults)
         self.dut.host_words.value = _pack(
             [address | data << 8 for address, data in words], 8 + WORD_BITS
         )
