@@ -51,7 +51,10 @@ def main(argv: list[str] | None = None) -> int:
         notes = []
         if case["credibility"] is not None:
             logs = {"rig": result.rig_log, "autopilot": result.autopilot_log}
-            scores, note = credibility_metrics(logs, **case["credibility"])
+            scoring = case["credibility"]  # its plan_sha256 is kept once by the campaign
+            scores, note = credibility_metrics(
+                logs, scoring["plan_path"], scoring["role"], scoring["log"]
+            )
             metrics.update(scores)
             notes += [note] if note else []
         outcome: dict[str, Any] = {"error": None, "metrics": metrics, "notes": notes}
@@ -121,12 +124,11 @@ def case_metrics(
 
 
 def credibility_metrics(
-    logs: dict[str, Path | None], plan_path: str, plan_sha256: str, role: str, log: str
+    logs: dict[str, Path | None], plan_path: str, role: str, log: str
 ) -> tuple[dict[str, float | None], str | None]:
     """``eta_all`` and ``eta_min`` of the plan with the case's ``log`` in ``role``, and why
     they are missing (None if they are not): a plan that cannot score this run (a segment
     past its end, a topic it lacks) is the case's finding, not a crash of the case."""
-    del plan_sha256  # checked and recorded once by the campaign
     case_log = logs[log]
     try:
         if case_log is None:

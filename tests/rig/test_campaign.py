@@ -194,18 +194,18 @@ def test_identical_logs_score_one_and_a_segment_past_the_log_is_a_reason(tmp_pat
     log leaves the indices missing with the plan's own one-line reason."""
     plan = str(small_plan(tmp_path, quad4001_log))
     scores, note = credibility_metrics(
-        {"rig": quad4001_log, "autopilot": None}, plan, "-", role="sim", log="rig"
+        {"rig": quad4001_log, "autopilot": None}, plan, role="sim", log="rig"
     )
     assert scores == {"eta_all": 1.0, "eta_min": 1.0}
     assert note is None
     scores, note = credibility_metrics(
-        {"rig": quad4001_log, "autopilot": None}, plan, "-", role="sim", log="autopilot"
+        {"rig": quad4001_log, "autopilot": None}, plan, role="sim", log="autopilot"
     )
     assert scores == {"eta_all": None, "eta_min": None}
     assert note == "credibility not assessed: the run wrote no autopilot.ulg"
     late = str(small_plan(tmp_path, quad4001_log, segment_s=(5000.0, 5001.0)))
     scores, note = credibility_metrics(
-        {"rig": quad4001_log, "autopilot": None}, late, "-", role="sim", log="rig"
+        {"rig": quad4001_log, "autopilot": None}, late, role="sim", log="rig"
     )
     assert scores == {"eta_all": None, "eta_min": None}
     assert note.startswith("credibility not assessed: ")
