@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import sys
 from pathlib import Path
 from typing import Any
@@ -24,7 +23,7 @@ from credibility import CredibilityError, assess, load_plan
 from rig.errors import RigError
 from rig.link import LinkTimeouts
 from rig.loop import RunOptions, run_scenario
-from rig.px4_sim_api import Ports
+from rig.px4_sim_api import free_instance
 from rig.scenario import load_scenario
 
 #: Altitude (m) under which a downward speed counts as the ground impact speed; at the
@@ -36,7 +35,10 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = Path((sys.argv[1:] if argv is None else argv)[0])
     case = json.loads((run_dir / "case.json").read_text())
     try:
-        instance = free_instance(case["first_instance"], case["instances"], case["index"])
+        try:
+            instance = free_instance(case["first_instance"], case["instances"], case["index"])
+        except OSError as error:
+            raise RigError(str(error)) from None
         options = RunOptions(
             instance=instance,
             out_dir=run_dir,
@@ -66,26 +68,6 @@ def main(argv: list[str] | None = None) -> int:
     written.write_text(json.dumps(outcome, sort_keys=True))
     os.replace(written, run_dir / "outcome.json")  # all or nothing
     return 0
-
-
-def free_instance(first: int, count: int, index: int) -> int:
-    """The first instance from ``first + index % count`` on whose ports are free, so
-    concurrent cases (consecutive indices) start on different instances and a port held
-    by anyone else is skipped."""
-    for step in range(count):
-        instance = first + (index + step) % count
-        ports = Ports(instance)
-        tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            tcp.bind(("127.0.0.1", ports.simulator_tcp))
-            udp.bind(("127.0.0.1", ports.api_remote_udp))
-        except OSError:
-            continue
-        finally:
-            tcp.close()
-            udp.close()
-        return instance
-    raise RigError(f"no free SITL instance in {first}..{first + count - 1}")
 
 
 def case_metrics(

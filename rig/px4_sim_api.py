@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import enum
 import os
+import socket
 from dataclasses import dataclass
 
 # pymavlink picks MAVLink 1 or 2 at import time from this variable; PX4 needs version 2.
@@ -17,7 +18,7 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import common as mavlink  # after MAVLINK20 is set
 
-__all__ = ["MOTOR_ORDER", "ActuatorMode", "HilSensorFields", "Ports", "mavlink"]
+__all__ = ["MOTOR_ORDER", "ActuatorMode", "HilSensorFields", "Ports", "free_instance", "mavlink"]
 
 
 class HilSensorFields(enum.IntFlag):
@@ -88,3 +89,24 @@ class Ports:
     @property
     def system_id(self) -> int:
         return self.instance + 1
+
+
+def free_instance(first: int, count: int, index: int = 0) -> int:
+    """The first instance from ``first + index % count`` on (wrapping within the range)
+    whose simulator TCP and API UDP ports are free right now, so concurrent runs given
+    consecutive indices start on different instances and a port held by anyone else is
+    skipped. Raises ``OSError`` when every instance in the range is busy."""
+    for step in range(count):
+        instance = first + (index + step) % count
+        ports = Ports(instance)
+        tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            tcp.bind(("127.0.0.1", ports.simulator_tcp))
+            udp.bind(("127.0.0.1", ports.api_remote_udp))
+        except OSError:
+            continue
+        finally:
+            tcp.close()
+            udp.close()
+        return instance
+    raise OSError(f"no free SITL instance in {first}..{first + count - 1}")

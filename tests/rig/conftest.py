@@ -1,6 +1,5 @@
 """Fixtures of the rig tests: a free SITL instance and the test-double autopilot process."""
 
-import socket
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
@@ -11,6 +10,7 @@ import pytest
 from rig.errors import AutopilotNotConnected
 from rig.link import LinkTimeouts, SimulatorLink
 from rig.px4_sim_api import Ports
+from rig.px4_sim_api import free_instance as find_free_instance
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 #: Short bounds so a broken test fails in seconds, not minutes.
@@ -55,24 +55,7 @@ def start_double() -> Iterator[Callable[..., subprocess.Popen]]:
         process.wait()
 
 
-def _free_instance() -> int:
-    """An instance whose simulator TCP and API UDP ports are free right now."""
-    for instance in range(60, 100):
-        ports = Ports(instance)
-        tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            tcp.bind(("127.0.0.1", ports.simulator_tcp))
-            udp.bind(("127.0.0.1", ports.api_remote_udp))
-        except OSError:
-            continue
-        finally:
-            tcp.close()
-            udp.close()
-        return instance
-    raise RuntimeError("no free rig instance in 60..99")
-
-
 @pytest.fixture
 def free_instance() -> Callable[[], int]:
     """Call it for a rig instance whose ports are free (other suites use low instances)."""
-    return _free_instance
+    return lambda: find_free_instance(60, 40)  # 60..99; campaigns default to 20..59

@@ -1,8 +1,10 @@
 """The shared PX4 simulator-API facts match PX4's numbers (PX4_SIM_CONTRACT.md)."""
 
+import socket
+
 import pytest
 
-from rig.px4_sim_api import HilSensorFields, Ports, mavlink
+from rig.px4_sim_api import HilSensorFields, Ports, free_instance, mavlink
 
 
 def test_fields_updated_masks_are_px4s():
@@ -41,3 +43,12 @@ def test_dialect_is_mavlink2_with_hil_sensor_id_extension():
     (decoded,) = mavlink.MAVLink(None).parse_buffer(msg.pack(link))
     assert decoded.id == 2
     assert decoded.zacc == pytest.approx(-9.81)
+
+
+def test_free_instance_skips_an_instance_whose_port_is_taken():
+    first = free_instance(70, 10)
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", Ports(first).simulator_tcp))
+        assert free_instance(first, 2) == first + 1
+        with pytest.raises(OSError, match=rf"no free SITL instance in {first}\.\.{first}"):
+            free_instance(first, 1)
