@@ -36,7 +36,7 @@ from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["CS_SYNC_STAGES", "SpiTarget", "add_spi_domain", "check_sys_clk_for_spi"]
+__all__ = ["CS_SYNC_STAGES", "SpiTarget", "add_spi_engine", "check_sys_clk_for_spi"]
 
 #: Flip-flops between CS and the ``sync`` domain's ``busy`` (see :func:`check_sys_clk_for_spi`).
 CS_SYNC_STAGES = 2
@@ -146,8 +146,20 @@ class SpiTarget(wiring.Component):
         return m
 
 
-def add_spi_domain(m: Module, sclk: Signal) -> None:
-    """Define the local ``spi`` domain (SCLK rising edge, chip reset) a chip core needs."""
+def add_spi_engine(m: Module, chip: wiring.Component) -> SpiTarget:
+    """Give a chip core its SPI engine: the local ``spi`` domain (SCLK rising edge, chip
+    reset) and a :class:`SpiTarget` wired to the chip's bus pins and fault inputs."""
     spi = ClockDomain("spi", async_reset=True, local=True)
     m.domains += spi
-    m.d.comb += [spi.clk.eq(sclk), spi.rst.eq(ResetSignal("sync"))]
+    m.d.comb += [spi.clk.eq(chip.sclk), spi.rst.eq(ResetSignal("sync"))]
+    m.submodules.engine = engine = SpiTarget()
+    m.d.comb += [
+        engine.sclk.eq(chip.sclk),
+        engine.cs_n.eq(chip.cs_n),
+        engine.mosi.eq(chip.mosi),
+        chip.miso.eq(engine.miso),
+        chip.miso_oe.eq(engine.miso_oe),
+        engine.fault_mute.eq(chip.fault_mute),
+        engine.fault_flip.eq(chip.fault_flip),
+    ]
+    return engine

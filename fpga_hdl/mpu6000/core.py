@@ -21,7 +21,7 @@ from amaranth.lib.wiring import In, Out
 
 from fpga_hdl.host_port import CoherentLatch
 from fpga_hdl.mpu6000 import regs
-from fpga_hdl.spi_target import SpiTarget, add_spi_domain, check_sys_clk_for_spi
+from fpga_hdl.spi_target import add_spi_engine, check_sys_clk_for_spi
 
 
 def _saturate_int16(value):
@@ -76,17 +76,7 @@ class Mpu6000(wiring.Component):
 
     def elaborate(self, platform) -> Module:
         m = Module()
-        add_spi_domain(m, self.sclk)
-        m.submodules.engine = engine = SpiTarget()
-        m.d.comb += [
-            engine.sclk.eq(self.sclk),
-            engine.cs_n.eq(self.cs_n),
-            engine.mosi.eq(self.mosi),
-            self.miso.eq(engine.miso),
-            self.miso_oe.eq(engine.miso_oe),
-            engine.fault_mute.eq(self.fault_mute),
-            engine.fault_flip.eq(self.fault_flip),
-        ]
+        engine = add_spi_engine(m, self)
 
         config = {
             r.address: Signal(8, init=r.reset_value, name=f"reg_{regs.Reg(r.address).name}")

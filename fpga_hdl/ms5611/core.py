@@ -18,7 +18,7 @@ from amaranth.lib.wiring import In, Out
 
 from fpga_hdl.host_port import CoherentLatch
 from fpga_hdl.ms5611 import regs
-from fpga_hdl.spi_target import SpiTarget, add_spi_domain, check_sys_clk_for_spi
+from fpga_hdl.spi_target import add_spi_engine, check_sys_clk_for_spi
 
 
 class Ms5611(wiring.Component):
@@ -76,17 +76,7 @@ class Ms5611(wiring.Component):
 
     def elaborate(self, platform) -> Module:
         m = Module()
-        add_spi_domain(m, self.sclk)
-        m.submodules.engine = engine = SpiTarget()
-        m.d.comb += [
-            engine.sclk.eq(self.sclk),
-            engine.cs_n.eq(self.cs_n),
-            engine.mosi.eq(self.mosi),
-            self.miso.eq(engine.miso),
-            self.miso_oe.eq(engine.miso_oe),
-            engine.fault_mute.eq(self.fault_mute),
-            engine.fault_flip.eq(self.fault_flip),
-        ]
+        engine = add_spi_engine(m, self)
         m.submodules.latch = latch = CoherentLatch(regs.SAMPLE_LAYOUT)
         m.d.comb += [
             latch.offered.eq(self.sample),
