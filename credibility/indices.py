@@ -179,3 +179,29 @@ def cifer_cost(
     w_gamma = cifer_coherence_weight(gamma2)
     terms = w_gamma * (CIFER_GAIN_WEIGHT * dmag**2 + CIFER_PHASE_WEIGHT * dpha**2)
     return float(20.0 / dmag.size * terms.sum())
+
+
+def theil_decomposition(y_e: ArrayLike, y_s: ArrayLike) -> tuple[float, float, float] | None:
+    """Theil's proportions (U_M, U_S, U_C) of the mean squared error, summing to 1.
+
+    Theil (1966, *Applied Economic Forecasting*, ch. 2) splits
+    MSE = (ȳ_s − ȳ_e)² + (σ_s − σ_e)² + 2 (1 − r) σ_s σ_e (population σ, correlation r):
+    U_M, the bias share, says the error is an offset; U_S, the variance share, an amplitude
+    or scale error; U_C, the covariance share, unsystematic (noise, a lag, a different
+    shape). ``None`` when the curves are identical: there is no error to split.
+    """
+    e = np.asarray(y_e, dtype=float)
+    s = np.asarray(y_s, dtype=float)
+    mse = float(np.mean((s - e) ** 2))
+    if mse == 0.0:
+        return None
+    sigma_e, sigma_s = float(e.std()), float(s.std())
+    bias = (float(s.mean()) - float(e.mean())) ** 2
+    variance = (sigma_s - sigma_e) ** 2
+    # σ_s σ_e r is the covariance; with a constant curve it is 0 and so is this share.
+    covariance = 2.0 * (sigma_s * sigma_e - float(np.mean((s - s.mean()) * (e - e.mean()))))
+    # The three terms sum to the MSE in exact arithmetic; dividing by their sum keeps the
+    # shares summing to 1 when rounding leaves a tiny negative covariance term.
+    covariance = max(covariance, 0.0)
+    total = bias + variance + covariance
+    return bias / total, variance / total, covariance / total

@@ -5,6 +5,7 @@ base64 PNG, so the report opens offline and can be mailed as one file.
 """
 
 import base64
+import dataclasses
 import hashlib
 import html
 import io
@@ -16,7 +17,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from credibility import indices
+from credibility import indices, weakest
 from credibility.assess import (
     Assessment,
     FrequencyResult,
@@ -195,7 +196,38 @@ def to_dict(assessment: Assessment) -> dict[str, Any]:
             "exit_code": exit_code(assessment),
         },
         "tests": [_test_dict(r, plan.pass_mark) for r in assessment.results],
+        "weakest": [_weakness_dict(w) for w in weakest.rank(assessment)],
     }
+
+
+def _weakness_dict(weakness: weakest.Weakness) -> dict[str, Any]:
+    return {
+        "test": weakness.test,
+        "kind": weakness.kind,
+        "eta": weakness.eta,
+        "below_pass_mark": weakness.below_pass_mark,
+        "findings": [
+            {
+                "role": finding.role,
+                "eta": finding.eta,
+                "why": finding.why,
+                "diagnosis": dataclasses.asdict(finding.diagnosis) | _derived(finding.diagnosis),
+            }
+            for finding in weakness.findings
+        ],
+    }
+
+
+def _derived(diagnosis: weakest.Diagnosis) -> dict[str, Any]:
+    """The diagnosis's computed properties, so the JSON reader need not recompute them."""
+    if isinstance(diagnosis, weakest.TimeDiagnosis):
+        return {"dominant": diagnosis.dominant}
+    if isinstance(diagnosis, weakest.PerformanceDiagnosis):
+        return {
+            "relative_error_pct": diagnosis.relative_error_pct,
+            "threshold_pct": diagnosis.threshold_pct,
+        }
+    return {}
 
 
 # --- plots ---------------------------------------------------------------------------------
@@ -276,6 +308,7 @@ th{background:#eee} td:first-child,th:first-child{text-align:left}
 .pass{color:#070;font-weight:bold} .fail{color:#b00;font-weight:bold}
 pre{background:#f6f6f6;padding:0.6em;overflow-x:auto;font-size:0.85em}
 .warn{color:#a60}
+ul.why{text-align:left;margin:0;padding-left:1.2em}
 """
 
 
@@ -416,6 +449,34 @@ def _frequency_section(result: FrequencyResult, pass_mark: float) -> str:
     )
 
 
+def _weakest_section(assessment: Assessment) -> str:
+    """Every test, lowest η first, with the reason its numbers give for each sim."""
+    rows = []
+    for rank, weakness in enumerate(weakest.rank(assessment), start=1):
+        reasons = "".join(
+            f"<li><b>{_e(f.role)}</b> (η {_pct(f.eta)}): {_e(f.why)}</li>"
+            for f in weakness.findings
+        )
+        rows.append(
+            [
+                str(rank),
+                _e(weakness.test),
+                _e(weakness.kind),
+                _pct(weakness.eta),
+                _verdict(not weakness.below_pass_mark, "pass", "below pass mark"),
+                f'<ul class="why">{reasons}</ul>',
+            ]
+        )
+    return (
+        "<h2>Where the model is weakest</h2><p>Tests ranked by the assessed sim's index, "
+        "lowest first. Time tests: Theil's proportions of e_t² (U_M offset, U_S amplitude, U_C "
+        "unsystematic; Theil 1966) and the residual lag between the scored curves. Frequency "
+        "tests: where the W_γ-weighted magnitude and phase errors peak (half-maximum band), "
+        "the excluded frequencies and CIFER J. Performance tests: the sim's value against the "
+        "real one and ε_p.</p>" + _table(["rank", "test", "kind", "η", "at pass mark", "why"], rows)
+    )
+
+
 def render_html(assessment: Assessment) -> str:
     """The whole report as one HTML string."""
     plan = assessment.plan
@@ -458,6 +519,7 @@ def render_html(assessment: Assessment) -> str:
 {_table(["index", "value", "weight α"], summary_rows)}
 <p>Weights: {_e(plan.weights_source)}. Method: Dai, Ke, Quan, Cai, section 3 (equation labels in
 the package docstrings).</p>
+{_weakest_section(assessment)}
 <h2>Tests</h2>
 {"".join(sections)}
 <h2>Provenance</h2>
