@@ -156,6 +156,8 @@ class PerformanceDiagnosis:
         ratio = abs(self.p_s - self.p_e) / self.threshold
         if self.relative_error_pct is None:
             return f"{values}; e_p/ε_p = {ratio:.2f} (ε_p = {self.threshold:.4g}{unit})"
+        if self.relative_error_pct == 0.0:
+            return f"{values}: equal (ε_p = {self.threshold_pct:.1f} %)"
         side = "above" if self.relative_error_pct > 0 else "below"
         return (
             f"{values}: {abs(self.relative_error_pct):.1f} % {side} against ε_p = "
