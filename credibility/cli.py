@@ -4,6 +4,7 @@ Exit codes: 0 when η_min ≥ ε_min, 1 when not, 2 for bad input or usage (one 
 """
 
 import argparse
+import contextlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,8 +15,9 @@ from rich.table import Table
 
 from credibility.assess import assess, steps
 from credibility.errors import CredibilityError
+from credibility.indices import KINDS
 from credibility.paper import paper_comparison
-from credibility.plan import load_plan
+from credibility.plan import load_plan, with_weights
 from credibility.report import exit_code, write_report
 
 BAD_INPUT = 2
@@ -35,6 +37,35 @@ def _log_override(text: str) -> tuple[str, Path]:
     return role, Path(path)
 
 
+def _weight_list(text: str) -> dict[str, float]:
+    parts = text.split(",")
+    try:
+        values = [float(part) for part in parts]
+    except ValueError:
+        values = []
+    if len(values) != len(KINDS):
+        raise argparse.ArgumentTypeError(
+            f"expects {len(KINDS)} numbers ({','.join(KINDS)}), got {text!r}"
+        )
+    return dict(zip(KINDS, values, strict=True))
+
+
+def _weight_item(text: str) -> tuple[str, float]:
+    kind, sep, value = text.partition("=")
+    if sep and kind:
+        with contextlib.suppress(ValueError):
+            return kind, float(value)
+    raise argparse.ArgumentTypeError(f"expects KIND=NUMBER, got {text!r}")
+
+
+def _weights_source(args: argparse.Namespace) -> str:
+    """The weight options as the user gave them, for the report's note."""
+    given = [f"--weight {kind}={value:g}" for kind, value in args.weight]
+    if args.weights:
+        given.insert(0, "--weights " + ",".join(f"{v:g}" for v in args.weights.values()))
+    return "command line " + " ".join(given)
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="credibility", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
@@ -48,6 +79,21 @@ def _parser() -> argparse.ArgumentParser:
         metavar="ROLE=PATH",
         help="replace the log of a role named in the plan (repeatable)",
     )
+    report.add_argument(
+        "--weights",
+        type=_weight_list,
+        metavar="P,T,F",
+        help="η_all weights for performance, time, frequency, replacing the plan's "
+        "[weights]; relative, normalized to sum 1",
+    )
+    report.add_argument(
+        "--weight",
+        action="append",
+        type=_weight_item,
+        default=[],
+        metavar="KIND=NUMBER",
+        help="replace one kind's η_all weight (repeatable, after --weights); then normalized",
+    )
     report.add_argument("--out", type=Path, default=Path("."), help="output directory")
     commands.add_parser("paper", help="recompute the paper's tables beside its printed numbers")
     return parser
@@ -57,6 +103,11 @@ def _report(args: argparse.Namespace, console: Console) -> int:
     plan = load_plan(args.plan, dict(args.log))
     for role, path in sorted(dict(args.log).items()):
         console.print(f"log {role} = {path}")
+    overrides = (args.weights or {}) | dict(args.weight)
+    if overrides:
+        plan = with_weights(plan, overrides, _weights_source(args))
+        shares = ", ".join(f"{kind} {alpha:.3g}" for kind, alpha in plan.weights.items())
+        console.print(f"weights: {shares} ({plan.weights_source})")
     columns = (TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
     # Progress only on a terminal: a pipeline's stderr gets the result lines alone.
     live = console.is_terminal

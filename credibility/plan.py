@@ -6,9 +6,10 @@ replaces a role's path. Relative paths are relative to the plan file. Every key 
 a misspelt key is an error, not a silently ignored setting.
 """
 
+import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -285,6 +286,41 @@ def load_plan(path: Path, log_overrides: Mapping[str, Path] | None = None) -> Pl
         logs=logs,
         tests=tests,
     )
+
+
+def with_weights(plan: Plan, weights: Mapping[str, float], source: str) -> Plan:
+    """``plan`` with the α of eq. (overall) replaced, e.g. from the command line.
+
+    Unlike the plan file, which must sum to 1, these are relative: each ≥ 0, their sum > 0,
+    normalized to 1 (the report's note says so). A kind with tests may get 0, which leaves
+    it out of η_all on purpose; it still counts in η_min. ``source`` names the origin in
+    errors and in the report (``--weights 0.3,0.3,0.4``).
+    """
+    for kind, alpha in weights.items():
+        if kind not in indices.KINDS:
+            raise CredibilityError(
+                f"{source}: unknown kind {kind!r}; expected one of {indices.KINDS}"
+            )
+        if not math.isfinite(alpha) or alpha < 0.0:
+            raise CredibilityError(f"{source}: {kind} = {alpha!r} must be a finite number ≥ 0")
+    kinds = {test.kind for test in plan.tests}
+    merged = {kind: weights.get(kind, plan.weights.get(kind, 0.0)) for kind in indices.KINDS}
+    for kind, alpha in merged.items():
+        if alpha > 0.0 and kind not in kinds:
+            raise CredibilityError(f"{source}: {kind} = {alpha:g} but the plan has no {kind} tests")
+    total = sum(merged.values())
+    if total <= 0.0:
+        raise CredibilityError(f"{source}: the weights sum to 0; at least one must be > 0")
+    notes = [source]
+    if abs(total - 1.0) > 1e-9:
+        notes.append(f"normalized from sum {total:g}")
+    notes += [
+        f"{kind} tests weighted 0, left out of η_all (still in η_min)"
+        for kind in indices.KINDS
+        if kind in kinds and merged[kind] == 0.0
+    ]
+    normalized = {kind: alpha / total for kind, alpha in merged.items() if kind in kinds}
+    return replace(plan, weights=normalized, weights_source="; ".join(notes))
 
 
 def _weights(root: _Table, path: Path, kinds: set[str]) -> tuple[dict[str, float], str]:
