@@ -39,7 +39,11 @@ class Comparison:
 
 @dataclass(frozen=True)
 class Alignment:
-    """How the sim segment is matched to the real one in time (the lag is reported)."""
+    """How the sim segment is matched to the real one in time (the lag is reported).
+
+    ``max_lag_s`` bounds the search; with ``method = "none"`` it bounds only the residual-lag
+    search of the "where the model is weakest" page, which never moves the scored curve.
+    """
 
     method: str = "none"
     signal: SignalSpec | None = None
