@@ -134,6 +134,13 @@ def estimate_response(
             )
         noverlap = round(overlap * nperseg)
         f, gxx, gyy, gxy, n_d = welch_spectra(x, y, sample_rate_hz, nperseg, noverlap)
+        if n_d < 2:
+            # One segment gives γ² = 1 at every frequency whatever the data (and ε_r = 0),
+            # so that window would pass the coherence gate and outweigh every other one.
+            raise CredibilityError(
+                f"window {window_s:g} s fits only once in the {record_s:g} s record; a "
+                "coherence needs at least 2 averaged segments (use a shorter window)"
+            )
         averages.append(n_d)
         sxy = np.interp(freqs_hz, f, gxy.real) + 1j * np.interp(freqs_hz, f, gxy.imag)
         sxx = np.interp(freqs_hz, f, gxx)

@@ -98,3 +98,13 @@ def test_welch_spectra_equal_scipy(nperseg, noverlap):
     np.testing.assert_allclose(gxy, sps.csd(x, y, **kwargs)[1], rtol=1e-9)
     np.testing.assert_allclose(f, sps.welch(x, **kwargs)[0])
     assert n_d == 1 + (5000 - nperseg) // (nperseg - noverlap)
+
+
+def test_a_window_that_fits_once_is_refused():
+    """One segment makes γ² ≡ 1 whatever the data: pure noise in, unrelated noise out."""
+    rng = np.random.default_rng(3)
+    x, y = rng.standard_normal(1000), rng.standard_normal(1000)  # 10 s at RATE_HZ
+    freqs = spectral.log_grid((0.5, 5.0), 10)
+    with pytest.raises(CredibilityError, match=r"window 8 s fits only once in the 10 s record"):
+        spectral.estimate_response(x, y, RATE_HZ, freqs, (2.0, 8.0))
+    assert spectral.estimate_response(x, y, RATE_HZ, freqs, (2.0, 5.0)).coherence.max() < 0.6
