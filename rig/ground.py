@@ -50,11 +50,19 @@ _POSITION_ONLY = (
     | mavlink.POSITION_TARGET_TYPEMASK_AY_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_AZ_IGNORE
     | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 )  # fmt: skip
+_VELOCITY_ONLY = (
+    mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_AY_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+)  # fmt: skip
 _ATTITUDE_ONLY = (
     mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
     | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
     | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
 )
+#: PX4 flies the body rates of a SET_ATTITUDE_TARGET whose attitude is ignored.
+_RATES_ONLY = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 
 
 @dataclass(frozen=True)
@@ -243,13 +251,41 @@ class GroundLink:
             north, east, down, 0, 0, 0, 0, 0, 0, math.radians(yaw_deg or 0.0), 0,
         )  # fmt: skip
 
+    def velocity_setpoint(
+        self, velocity_ned_mps: Sequence[float], yaw_rad: float | None, time_s: float
+    ) -> mavlink.MAVLink_message:
+        """Velocity (and yaw unless None) in LOCAL_NED; the position is not controlled."""
+        mask = _VELOCITY_ONLY | (mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE if yaw_rad is None
+                                 else 0)  # fmt: skip
+        vn, ve, vd = (float(v) for v in velocity_ned_mps)
+        return self.mav.set_position_target_local_ned_encode(
+            round(time_s * 1000), self.ports.system_id, 1, mavlink.MAV_FRAME_LOCAL_NED, mask,
+            0, 0, 0, vn, ve, vd, 0, 0, 0, yaw_rad or 0.0, 0,
+        )  # fmt: skip
+
     def attitude_setpoint(
         self, roll_rad: float, pitch_rad: float, yaw_rad: float, thrust: float, time_s: float
     ) -> mavlink.MAVLink_message:
-        q = quat_from_euler(roll_rad, pitch_rad, yaw_rad)
+        return self.quaternion_setpoint(quat_from_euler(roll_rad, pitch_rad, yaw_rad), thrust,
+                                        time_s)  # fmt: skip
+
+    def quaternion_setpoint(
+        self, q: Sequence[float], thrust: float, time_s: float
+    ) -> mavlink.MAVLink_message:
+        """Attitude (body to NED, w x y z) and collective thrust 0..1."""
         return self.mav.set_attitude_target_encode(
             round(time_s * 1000), self.ports.system_id, 1, _ATTITUDE_ONLY,
             [float(c) for c in q], 0.0, 0.0, 0.0, float(thrust),
+        )  # fmt: skip
+
+    def rates_setpoint(
+        self, rates_frd_radps: Sequence[float], thrust: float, time_s: float
+    ) -> mavlink.MAVLink_message:
+        """Body rates (FRD) and collective thrust 0..1; the attitude is ignored."""
+        roll, pitch, yaw = (float(r) for r in rates_frd_radps)
+        return self.mav.set_attitude_target_encode(
+            round(time_s * 1000), self.ports.system_id, 1, _RATES_ONLY,
+            [1.0, 0.0, 0.0, 0.0], roll, pitch, yaw, float(thrust),
         )  # fmt: skip
 
     def motor_test(self, motor: int, throttle: float, duration_s: float) -> Conversation:

@@ -108,6 +108,7 @@ class SimulatorLink:
         self.peer_exit = peer_exit or (lambda: None)
         self._latest: ActuatorControls | None = None
         self._sent_us = 0  # time_usec of the newest frame sent
+        self._first_sent_us: int | None = None  # the clock need not start at 0 (a replay)
         self._awaited_us: int | None = None  # the frame whose answer is being waited for
         self._conn: socket.socket | None = None
         self._server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -179,6 +180,8 @@ class SimulatorLink:
         """Send the sensor frame stamped ``time_us`` (its HIL_SENSOR and what goes with it)."""
         self.send(*messages)
         self._sent_us = time_us
+        if self._first_sent_us is None:
+            self._first_sent_us = time_us
         self.stats.frames_sent += 1
 
     def answer(self, time_us: int) -> ActuatorControls | None:
@@ -193,7 +196,7 @@ class SimulatorLink:
             if self._latest is not None:
                 self.lockstep = True
                 self._wait_for_answer(time_us)
-            elif time_us > self.timeouts.first_answer_sim_s * 1e6:
+            elif time_us - (self._first_sent_us or 0) > self.timeouts.first_answer_sim_s * 1e6:
                 raise AutopilotStalled(
                     f"the autopilot connected but sent no HIL_ACTUATOR_CONTROLS in "
                     f"{self.timeouts.first_answer_sim_s:g} s of simulated time "

@@ -20,6 +20,12 @@ between sending the frame and awaiting the answer, while the autopilot computes 
 core when one is free). Lockstep is unchanged: PX4 never sees a frame before it answered
 the previous one, and every number is the same as in strict order (a golden test).
 
+Two clocks: the rig's own parts (model, chips, PWM, faults, scenario commands) count run
+time from 0; everything that leaves the rig (every message to the autopilot, every log
+timestamp) is stamped on the autopilot's boot clock, ``Scenario.clock_start_s`` later. A
+replay starts that clock at the real log's first timestamp, so both logs share one time
+axis, while the RTL never simulates the hundreds of seconds before it.
+
 Everything lands in ``rig.ulg``. Any failure (a stalled or dead autopilot, a refused
 command, Ctrl-C) ends the run cleanly: the reason is logged, the log is closed readable,
 and the error propagates as one line.
@@ -87,6 +93,8 @@ class RunOptions:
     autopilot_params: tuple[str, ...] = ()
     #: Command that starts the autopilot instead of ``python -m rig.autopilot`` (tests).
     autopilot_argv: tuple[str, ...] | None = None
+    #: ``(level, text)`` events for the start of ``rig.ulg`` (e.g. what a replay skipped).
+    notes: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         if self.autopilot not in AUTOPILOTS:
@@ -193,7 +201,10 @@ class _Loop:
         self.sensor_layer_name = options.sensor_layer or scenario.sensor_layer
         self.rates = scenario.rates
         self.frame_us = self.rates.frame_us
-        self.time_us = 0
+        #: The autopilot's clock at frame 0 (µs); ``time_us`` is that clock, ``run_us`` the run's.
+        self.clock_start_us = round(scenario.clock_start_s * 1e6)
+        self.run_us = 0
+        self.time_us = self.clock_start_us
         self.frames = 0
         self.armed = False
         self.last_event = ""
@@ -232,6 +243,8 @@ class _Loop:
             home_alt_m=home.alt_amsl_m,
         )
         self._closers.append(self.log.close)
+        for level, text in options.notes:
+            self.log.event(self.time_us, text, level)
 
         model_rng, sensor_rng, fault_rng = np.random.default_rng(scenario.seed).spawn(3)
         self.model = QuadModel(
@@ -265,20 +278,21 @@ class _Loop:
         self._closers.append(ground.close)
         self.ground = ground
         reference = self.options.autopilot == "reference"
-        script = CommandScript(self.scenario.commands, ground, barrier=reference)
+        script = CommandScript(self.scenario.commands, ground, barrier=reference,
+                               clock_start_s=self.scenario.clock_start_s)  # fmt: skip
         if reference:
             self._start_reference_autopilot()
             link.accept("the reference autopilot (python -m rig.autopilot)")
         else:
-            self.log.event(0, f"waiting for PX4 SITL on {link.endpoint}")
+            self.log.event(self.time_us, f"waiting for PX4 SITL on {link.endpoint}")
             link.accept(
                 f"PX4 SITL instance {self.ports.instance} (e.g. `PX4_SIM_MODEL=none_iris "
                 f"$PX4_DIR/build/px4_sitl_default/bin/px4 -i {self.ports.instance}`)"
             )
-        self.log.event(0, f"autopilot connected on {link.endpoint}")
+        self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")
         frames_total = round(self.duration_s * 1e6) // self.frame_us
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
-        state_next_us = 0
+        state_next_us = self.clock_start_us
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
         poll_every = max(1, self.rates.imu_hz // 100)
         pending: list[Action] = []
@@ -286,8 +300,9 @@ class _Loop:
         truth, readings = self._advance(1)
         for frame in range(1, frames_total + 1):
             started = clock()
-            self.time_us = frame * self.frame_us
-            time_s = self.time_us / 1e6
+            self.run_us = frame * self.frame_us
+            self.time_us = self.clock_start_us + self.run_us
+            time_s = self.run_us / 1e6
             chip_frame, out = self._read_chips(readings)
             read = clock()
             messages = self._sensor_messages(readings, out)
@@ -349,9 +364,9 @@ class _Loop:
     def _read_chips(self, readings: SensorReadings) -> tuple[ChipFrame, ChipReadout]:
         """Load the samples into the chips, read them as PX4's drivers do, capture the PWM."""
         imu, mag, baro = readings.imu, readings.mag, readings.baro
-        pulses = self.pwm.pulses(self.time_us + 1, self.faults.pwm_dropped())
+        pulses = self.pwm.pulses(self.run_us + 1, self.faults.pwm_dropped())
         chip_frame = ChipFrame(
-            now_us=self.time_us,
+            now_us=self.run_us,
             imu=Mpu6000Sample.from_si(imu.accel_mps2, imu.gyro_radps, imu.temperature_degc),
             mag=None if mag is None else sample_from_field_gauss(mag.field_gauss),
             baro_d1_d2=None
@@ -468,8 +483,8 @@ class _Loop:
 
     # -- reporting -------------------------------------------------------------------------
 
-    def _fault_event(self, time_us: int, text: str) -> None:
-        self.log.event(time_us, text, "warn")
+    def _fault_event(self, run_us: int, text: str) -> None:
+        self.log.event(self.clock_start_us + run_us, text, "warn")
         self.last_event = text
 
     def _event(self, text: str, level: str = "info") -> None:
@@ -480,9 +495,9 @@ class _Loop:
         wall = time.monotonic() - self._wall_start
         self.progress(
             Progress(
-                time_s=self.time_us / 1e6,
+                time_s=self.run_us / 1e6,
                 duration_s=self.duration_s,
-                real_time_factor=self.time_us / 1e6 / wall if wall > 0 else math.inf,
+                real_time_factor=self.run_us / 1e6 / wall if wall > 0 else math.inf,
                 altitude_m=-float(truth.position_ned_m[2]),
                 armed=self.armed,
                 last_event=self.last_event,
@@ -500,7 +515,7 @@ class _Loop:
             run_dir=self.run_dir,
             rig_log=self.log.path,
             autopilot_log=autopilot_log if autopilot_log.is_file() else None,
-            simulated_s=self.time_us / 1e6,
+            simulated_s=self.run_us / 1e6,
             wall_s=wall_end - self._wall_start,
             frames=self.frames,
             link=self.link.stats,

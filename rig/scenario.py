@@ -7,7 +7,9 @@ Every value is checked on load; a bad file fails with one line naming the file, 
 and the value (:class:`rig.errors.ScenarioError`). The bundled scenarios live in
 ``rig/scenarios/``; ``load_scenario("hover")`` finds them by name.
 
-Times are simulated seconds from the start of the run. Units are in the key names.
+Times are simulated seconds from the start of the run. Units are in the key names. The
+autopilot's clock (every message and log timestamp) reads ``clock_start_s`` at the start of
+the run: 0 for a scenario file; :mod:`rig.replay` starts it at the real log's boot time.
 """
 
 from __future__ import annotations
@@ -140,6 +142,8 @@ class Scenario:
     rates: Rates
     commands: tuple[Command, ...]
     faults: tuple[FaultSpec, ...]
+    #: The autopilot's clock at the start of the run (s); set by code, not by the file.
+    clock_start_s: float = 0.0
 
 
 _TOP_KEYS = {

@@ -3,8 +3,9 @@
 Turns each :class:`rig.scenario.Command` into a ground-station conversation
 (:mod:`rig.ground`) at its time, and keeps the offboard setpoint streams alive the way
 MAVSDK does (PX4 leaves offboard when setpoints stop): a ``goto`` re-sends its position
-setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at ``rate_hz``. Any
-mode command (takeoff, land, mission, another stream) ends the running stream.
+setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at ``rate_hz``, a
+``track`` sends a :class:`SetpointTrack`'s recorded setpoints at their times and holds the
+last one (re-sent every 0.1 s) between them. Any command ends the running stream.
 
 With ``barrier=True`` (the reference autopilot) every setpoint travels inside an
 acknowledged conversation, so it acts at a known frame; with PX4 the stream is sent
@@ -33,6 +34,33 @@ class Action:
     logged: bool = True
 
 
+#: What one sample of a :class:`SetpointTrack` holds, per kind.
+TRACK_KINDS = {
+    "velocity": "vn, ve, vd (m/s, NED) and yaw (rad; NaN: not controlled)",
+    "attitude": "q w, x, y, z (body to NED) and collective thrust 0..1",
+    "rates": "roll, pitch, yaw rate (rad/s, FRD) and collective thrust 0..1",
+}
+
+
+@dataclass(frozen=True)
+class SetpointTrack:
+    """Offboard setpoints recorded at known times (e.g. a real flight's), in run seconds.
+
+    A ``track`` command streams it from its own time on: each sample goes out at the first
+    frame at or after its time, and the latest one is held (zero-order hold) in between.
+    """
+
+    kind: str
+    times_s: tuple[float, ...]
+    values: tuple[tuple[float, ...], ...]
+
+    def __post_init__(self) -> None:
+        if self.kind not in TRACK_KINDS:
+            raise ValueError(f"track kind {self.kind!r} is not one of {', '.join(TRACK_KINDS)}")
+        if not self.times_s or len(self.times_s) != len(self.values):
+            raise ValueError("a track needs one value per time, and at least one")
+
+
 @dataclass
 class _Stream:
     command: Command
@@ -40,14 +68,27 @@ class _Stream:
     next_s: float
     period_s: float
     announced: bool = False
+    sample: int = 0  # a track's latest sample due
 
 
 class CommandScript:
-    """Walks the scenario's commands in time order and yields the actions due."""
+    """Walks the scenario's commands in time order and yields the actions due.
 
-    def __init__(self, commands: tuple[Command, ...], ground: GroundLink, *, barrier: bool) -> None:
+    Times are run seconds; setpoints are stamped ``clock_start_s`` later (the autopilot's
+    boot clock, which a replay starts at the real log's first timestamp).
+    """
+
+    def __init__(
+        self,
+        commands: tuple[Command, ...],
+        ground: GroundLink,
+        *,
+        barrier: bool,
+        clock_start_s: float = 0.0,
+    ) -> None:
         self.ground = ground
         self.barrier = barrier
+        self.clock_start_s = clock_start_s
         self._commands = list(commands)
         self._next = 0
         self._stream: _Stream | None = None
@@ -66,7 +107,7 @@ class CommandScript:
     def _start(self, command: Command, time_s: float) -> Iterator[Action]:
         g, p, name = self.ground, command.params, f"{command.action} at t={command.at_s:g} s"
         self._stream = None  # every command takes over from a running setpoint stream
-        if command.action in ("goto", "pitch_sweep"):
+        if command.action in ("goto", "pitch_sweep", "track"):
             rate_hz = p.get("rate_hz", 50.0) if command.action == "pitch_sweep" else None
             period = 1.0 / rate_hz if rate_hz else OFFBOARD_KEEPALIVE_S
             self._stream = _Stream(command, time_s, time_s, period)
@@ -85,8 +126,11 @@ class CommandScript:
     def _stream_action(self, stream: _Stream, time_s: float) -> Action | None:
         command, p = stream.command, stream.command.params
         stream.next_s += stream.period_s
+        stamp_s = self.clock_start_s + time_s
         if command.action == "goto":
-            setpoint = self.ground.position_setpoint(p["position_ned_m"], p.get("yaw_deg"), time_s)
+            setpoint = self.ground.position_setpoint(p["position_ned_m"], p.get("yaw_deg"), stamp_s)
+        elif command.action == "track":
+            setpoint = self._track_setpoint(stream, p["track"], time_s, stamp_s)
         else:
             elapsed = time_s - stream.started_s
             if elapsed > p["duration_s"]:
@@ -96,10 +140,28 @@ class CommandScript:
                 elapsed, p["duration_s"], math.radians(p["amplitude_deg"]),
                 p["f_min_radps"], p["f_max_radps"],
             )  # fmt: skip
-            setpoint = self.ground.attitude_setpoint(0.0, pitch, 0.0, p["thrust"], time_s)
+            setpoint = self.ground.attitude_setpoint(0.0, pitch, 0.0, p["thrust"], stamp_s)
         name = f"{command.action} at t={command.at_s:g} s"
         first = not stream.announced
         stream.announced = True
         if self.barrier or first:
             return Action(name, self.ground.offboard([setpoint], name), logged=first)
         return Action(name, unacknowledged=(setpoint,), logged=False)
+
+    def _track_setpoint(
+        self, stream: _Stream, track: SetpointTrack, time_s: float, stamp_s: float
+    ) -> mavlink.MAVLink_message:
+        """The track's latest sample at ``time_s`` as a message; schedules the next send: the
+        next sample's time, or the keep-alive if that comes first."""
+        times = track.times_s
+        while stream.sample + 1 < len(times) and times[stream.sample + 1] <= time_s + 1e-9:
+            stream.sample += 1
+        following = times[stream.sample + 1] if stream.sample + 1 < len(times) else math.inf
+        stream.next_s = min(following, time_s + OFFBOARD_KEEPALIVE_S)
+        value, ground = track.values[stream.sample], self.ground
+        if track.kind == "velocity":
+            yaw = value[3] if math.isfinite(value[3]) else None
+            return ground.velocity_setpoint(value[:3], yaw, stamp_s)
+        if track.kind == "attitude":
+            return ground.quaternion_setpoint(value[:4], value[4], stamp_s)
+        return ground.rates_setpoint(value[:3], value[3], stamp_s)

@@ -37,6 +37,7 @@ from rig.autopilot.estimator import (
     PositionEstimator,
     pressure_altitude_m,
 )
+from rig.autopilot.flight_log import ImuAverage
 from rig.autopilot.land_detector import LandDetector
 from rig.autopilot.navigator import MissionItem, Navigator, NavState, Setpoint
 from rig.autopilot.params import Parameters
@@ -76,6 +77,19 @@ class CommandResult:
 
     result: int
     reason: str = ""
+
+
+@dataclass(frozen=True)
+class BodySetpoint:
+    """An offboard SET_ATTITUDE_TARGET: an attitude or body rates, and collective thrust 0..1.
+
+    Exactly one of ``q`` and ``rates_radps`` is set: PX4 flies the attitude when it is given,
+    else the body rates (rate loop only).
+    """
+
+    q: NDArray[np.float64] | None
+    rates_radps: NDArray[np.float64] | None
+    thrust: float
 
 
 _ACCEPTED = CommandResult(mavlink.MAV_RESULT_ACCEPTED)
@@ -149,7 +163,8 @@ class FlightController:
         self._gps_velocity: tuple[NDArray[np.float64], int] | None = None
         self._gps_accel_ned = np.zeros(3)
         self._last_mag_gauss: NDArray[np.float64] | None = None
-        self._offboard_attitude: tuple[NDArray[np.float64], float] | None = None
+        self._offboard_body: BodySetpoint | None = None
+        self._imu_average: ImuAverage | None = None
         self._motor_test: tuple[int, float, int] | None = None  # motor, throttle, end time
 
     # ------------------------------------------------------------------ frame
@@ -161,6 +176,7 @@ class FlightController:
             self._configure()
         self._sample_monitors(sensors, time_us)
         if sensors.accel_mps2 is not None and sensors.gyro_radps is not None:
+            self._log_imu_average(sensors, time_us)
             self._estimate(sensors, dt_s, time_us)
         self._commander(time_us)
         if self.armed and self._imu_frames:
@@ -278,12 +294,20 @@ class FlightController:
         nav.offboard_position = np.asarray(position_ned_m, dtype=float)
         nav.offboard_velocity = np.asarray(velocity_ned_mps, dtype=float)
         nav.offboard_yaw_rad, nav.offboard_yawspeed_radps = yaw_rad, yawspeed_radps
-        self._offboard_attitude = None
+        self._offboard_body = None
         self._offboard_sp_time_us = self.time_us
 
     def set_offboard_attitude(self, q: NDArray[np.float64], thrust: float) -> None:
         """SET_ATTITUDE_TARGET: attitude and collective thrust 0..1, position control off."""
-        self._offboard_attitude = (np.asarray(q, dtype=float), min(max(thrust, 0.0), 1.0))
+        thrust = min(max(thrust, 0.0), 1.0)
+        self._offboard_body = BodySetpoint(np.asarray(q, dtype=float), None, thrust)
+        self._offboard_sp_time_us = self.time_us
+
+    def set_offboard_rates(self, rates_radps: NDArray[np.float64], thrust: float) -> None:
+        """SET_ATTITUDE_TARGET with the attitude ignored: body rates (FRD) and collective
+        thrust 0..1 straight to the rate loop, as PX4 publishes vehicle_rates_setpoint."""
+        thrust = min(max(thrust, 0.0), 1.0)
+        self._offboard_body = BodySetpoint(None, np.asarray(rates_radps, dtype=float), thrust)
         self._offboard_sp_time_us = self.time_us
 
     def motor_test(self, motor: int, throttle: float, duration_s: float) -> CommandResult:
@@ -366,6 +390,8 @@ class FlightController:
             self.attitude.set_declination(math.radians(p["ATT_MAG_DECL"]))
         if self._rates_filter is not None:
             self._rates_filter = AngularVelocityFilter(p, self._rates_filter.sample_rate_hz)
+        if self._imu_average is None or self._imu_average.rate_hz != p["IMU_INTEG_RATE"]:
+            self._imu_average = ImuAverage(p["IMU_INTEG_RATE"])
         self._params_version = p.version
 
     def _sample_monitors(self, sensors: SensorFrame, time_us: int) -> None:
@@ -511,8 +537,8 @@ class FlightController:
         if self.nav_state == NavState.AUTO_MISSION:
             return self.navigator.mission_finished
         if self.nav_state == NavState.OFFBOARD:
-            if self._offboard_attitude is not None:
-                return self._offboard_attitude[1] <= self.params["MPC_THR_MIN"]
+            if self._offboard_body is not None:
+                return self._offboard_body.thrust <= self.params["MPC_THR_MIN"]
             nav = self.navigator
             z = self.position.position_ned_m[2]
             return not (nav.offboard_position[2] < z - 0.3 or nav.offboard_velocity[2] < -0.1)
@@ -528,8 +554,17 @@ class FlightController:
             self.motors = np.zeros(4)
             self.rate_control.reset_integral()
             return
-        yaw_feed_forward = self.setpoint.yawspeed_radps if self.setpoint else 0.0
-        self.rates_sp = self.attitude_control.update(q, self.q_sp, yaw_feed_forward)
+        # PX4's attitude and rate controllers take an offboard setpoint on their next cycle,
+        # not on the 50 Hz position loop's
+        body = self._offboard_body if self.nav_state == NavState.OFFBOARD else None
+        if body is not None:
+            self.collective_thrust = body.thrust
+            self.q_sp = body.q if body.q is not None else self.q_sp
+        if body is not None and body.rates_radps is not None:
+            self.rates_sp = body.rates_radps  # the rate loop only
+        else:
+            yaw_feed_forward = self.setpoint.yawspeed_radps if self.setpoint else 0.0
+            self.rates_sp = self.attitude_control.update(q, self.q_sp, yaw_feed_forward)
         rates = self._rates_filter
         self.torque_sp = self.rate_control.update(
             rates.rates_radps, self.rates_sp, rates.angular_accel_radps2, dt_s, self.landed
@@ -562,11 +597,10 @@ class FlightController:
             setpoint = nav.land(position, dt_s)
         elif self.nav_state == NavState.DESCEND:
             setpoint = nav.descend()
-        elif self.nav_state == NavState.OFFBOARD and self._offboard_attitude is not None:
+        elif self.nav_state == NavState.OFFBOARD and self._offboard_body is not None:
             self.setpoint = None
             self.position_control.reset_integral()
-            self.q_sp, self.collective_thrust = self._offboard_attitude
-            return
+            return  # _control applies the body setpoint every frame
         elif self.nav_state == NavState.OFFBOARD:
             setpoint = nav.offboard()
         else:
@@ -641,6 +675,19 @@ class FlightController:
         self.mission_events.append(("current", seq))
 
     # ------------------------------------------------------------------ log
+    def _log_imu_average(self, sensors: SensorFrame, time_us: int) -> None:
+        """``sensor_combined`` as PX4 logs it: the raw IMU averaged per IMU_INTEG_RATE."""
+        interval = self._imu_average.add(time_us, sensors.gyro_radps, sensors.accel_mps2)
+        if interval is None or self.log is None:
+            return
+        self.log.write(
+            "sensor_combined", time_us, gyro_rad=interval.gyro_radps,
+            gyro_integral_dt=interval.integral_dt_us, accelerometer_timestamp_relative=0,
+            accelerometer_m_s2=interval.accel_mps2,
+            accelerometer_integral_dt=interval.integral_dt_us, accelerometer_clipping=0,
+            gyro_clipping=0,
+        )  # fmt: skip
+
     def _write_log(self, time_us: int) -> None:
         log = self.log
         if log is None or not self._imu_frames:

@@ -49,6 +49,11 @@ _SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO, mavlink.MAV_SYS_STATUS_SENSOR
             mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG, mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
             mavlink.MAV_SYS_STATUS_SENSOR_GPS)  # fmt: skip
 _MONITOR_KEYS = ("gyro", "accel", "mag", "baro", "gps")
+_RATES_IGNORED = (
+    mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+    | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+    | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+)
 _CAPABILITIES = (
     mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
     | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
@@ -400,9 +405,28 @@ class GroundStation:
         self.fc.set_offboard_setpoint(position, velocity, yaw, yaw_rate)
 
     def _set_attitude_target(self, link: MavlinkLink, msg) -> None:
+        """PX4's type_mask semantics (mavlink_receiver.cpp): the attitude when it is not
+        ignored, else the three body rates (all needed here); thrust is 0..1 either way."""
+        mask = msg.type_mask
+        if mask & mavlink.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE:
+            self.unexpected += 1  # the reference autopilot has no "keep the last thrust"
+            return
+        if not math.isfinite(msg.thrust):
+            self.malformed += 1
+            return
+        if mask & mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE:
+            if mask & _RATES_IGNORED:
+                self.unexpected += 1  # neither an attitude nor all three body rates
+                return
+            rates = np.array([msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate])
+            if not np.isfinite(rates).all():
+                self.malformed += 1
+                return
+            self.fc.set_offboard_rates(rates, msg.thrust)
+            return
         q = np.array(msg.q, dtype=float)
         norm = float(np.linalg.norm(q))
-        if not (math.isfinite(norm) and norm > 0.5 and math.isfinite(msg.thrust)):
+        if not (math.isfinite(norm) and norm > 0.5):
             self.malformed += 1
             return
         self.fc.set_offboard_attitude(q / norm, msg.thrust)

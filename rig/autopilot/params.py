@@ -66,6 +66,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     # src/modules/sensors/vehicle_angular_velocity/imu_gyro_parameters.yaml
     _p("IMU_GYRO_CUTOFF", 40.0, 0.0, 1000.0, "Hz", "Low pass filter cutoff for the gyro"),
     _p("IMU_DGYRO_CUTOFF", 30.0, 0.0, 1000.0, "Hz", "Cutoff for the angular acceleration (D-term)"),
+    # src/modules/sensors/vehicle_imu/imu_parameters.c: sensor_combined's averaging interval
+    _p("IMU_INTEG_RATE", 200, 100, 1000, "Hz", "IMU integration rate (sensor_combined)"),
     # src/modules/mc_att_control/mc_att_control_params.yaml
     _p("MC_ROLL_P", 4.0, 0.0, 12.0, "", "Roll P gain (rad/s per rad)"),
     _p("MC_PITCH_P", 4.0, 0.0, 12.0, "", "Pitch P gain (rad/s per rad)"),
