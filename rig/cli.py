@@ -1,5 +1,5 @@
-"""``rig``: run scenarios closed-loop (``rig run``), the demo flight (``rig hil-sim``) and
-campaigns of many runs (``rig campaign``).
+"""``rig``: run scenarios closed-loop (``rig run``), the demo flight (``rig hil-sim``),
+replays of real flights (``rig replay``) and campaigns of many runs (``rig campaign``).
 
 Errors are one line on stderr (exit 1); Ctrl-C stops the run cleanly with the logs
 readable (exit 130).
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from rich.console import Console
@@ -19,6 +20,7 @@ from rig.errors import RigError
 from rig.link import LinkTimeouts
 from rig.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
 from rig.px4_sim_api import Ports
+from rig.replay import DRIVES, ReplayOptions, plan_replay, run_replay
 from rig.scenario import SENSOR_LAYERS, load_scenario
 
 HIL_SIM_SCENARIO = "hil_sim"
@@ -34,6 +36,23 @@ def main(argv: list[str] | None = None) -> int:
         "hil-sim", help="take off, hover, step, land with RTL sensors and the reference autopilot"
     )
     _add_run_options(demo)
+    replay = commands.add_parser(
+        "replay", help="fly a real PX4 flight log's own setpoints through the rig"
+    )
+    replay.add_argument("log", type=Path, help="the real flight's ULog")
+    replay.add_argument("--drive", choices=DRIVES, default="velocity",
+                        help="which of the log's setpoints drive the autopilot")  # fmt: skip
+    replay.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), default=None,
+                        help="boot seconds where --drive attitude|rates acts")  # fmt: skip
+    replay.add_argument("--start", type=float, default=None,
+                        help="boot seconds, landed (default: log start)")  # fmt: skip
+    replay.add_argument("--end", type=float, default=None,
+                        help="boot seconds (default: the log's last timestamp)")  # fmt: skip
+    replay.add_argument("--vehicle", default=None, metavar="NAME|PATH",
+                        help="vehicle file (default: from the log's SYS_AUTOSTART)")  # fmt: skip
+    replay.add_argument("--seed", type=int, default=0, help="seed of every random source")
+    replay.add_argument("--imu-hz", type=int, default=1000, help="IMU rate = lockstep rate")
+    _add_run_options(replay, scenario=False)
     campaign = commands.add_parser(
         "campaign", help="run a campaign file (resumable), or `campaign report DIR`"
     )
@@ -54,24 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "campaign":
         return _campaign(args, console)
     try:
-        scenario = load_scenario(HIL_SIM_SCENARIO if args.command == "hil-sim" else args.scenario)
-        options = RunOptions(
-            autopilot=args.autopilot,
-            instance=args.instance,
-            out_dir=args.out,
-            sensor_layer=args.sensor_layer,
-            duration_s=args.duration,
-            timeouts=LinkTimeouts(connect_s=args.connect_timeout),
-            autopilot_params=tuple(args.param),
-        )
-        ports = Ports(args.instance)
-        console.print(
-            f"[bold]{scenario.name}[/]: {scenario.description}\n"
-            f"sensor layer {options.sensor_layer or scenario.sensor_layer}, autopilot "
-            f"{options.autopilot}, simulator link TCP {ports.simulator_tcp}; a ground station "
-            f"can watch on UDP {ports.gcs_remote_udp} (QGroundControl, MAVProxy)"
-        )
-        result = _run_with_progress(scenario, options, console)
+        result = _replay(args, console) if args.command == "replay" else _run(args, console)
     except RigError as error:
         print(f"rig: error: {error}", file=sys.stderr)  # one line, never wrapped
         return 1
@@ -88,16 +90,68 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _add_run_options(parser: argparse.ArgumentParser) -> None:
+def _run(args: argparse.Namespace, console: Console) -> RunResult:
+    """``rig run`` and ``rig hil-sim``."""
+    scenario = load_scenario(HIL_SIM_SCENARIO if args.command == "hil-sim" else args.scenario)
+    options = _run_options(args)
+    _announce(console, scenario.name, scenario.description,
+              options.sensor_layer or scenario.sensor_layer, options)  # fmt: skip
+    return _run_with_progress(console, lambda p: run_scenario(scenario, options, p))
+
+
+def _replay(args: argparse.Namespace, console: Console) -> RunResult:
+    """``rig replay``: the plan first (a bad log fails before anything starts), then the run."""
+    replay_options = ReplayOptions(
+        drive=args.drive, window_s=tuple(args.window) if args.window else None,
+        start_s=args.start, end_s=args.end, vehicle=args.vehicle, seed=args.seed,
+        sensor_layer=args.sensor_layer or "tlm", imu_hz=args.imu_hz,
+    )  # fmt: skip
+    plan = plan_replay(args.log, replay_options)
+    options = _run_options(args)
+    _announce(console, f"replay of {plan.log_path.name}",
+              f"{plan.drive} drive, {plan.start_s:.3f}-{plan.end_s:.3f} s, vehicle "
+              f"{plan.vehicle} ({plan.vehicle_reason}), {len(plan.parameters)} parameters "
+              f"from the log", replay_options.sensor_layer, options)  # fmt: skip
+    for level, text in plan.notes:
+        console.print(f"{level}: {text}", highlight=False)
+    return _run_with_progress(console, lambda p: run_replay(plan, options, p))
+
+
+def _run_options(args: argparse.Namespace) -> RunOptions:
+    return RunOptions(
+        autopilot=getattr(args, "autopilot", "reference"),
+        instance=args.instance,
+        out_dir=args.out,
+        sensor_layer=args.sensor_layer,
+        duration_s=getattr(args, "duration", None),
+        timeouts=LinkTimeouts(connect_s=args.connect_timeout),
+        autopilot_params=tuple(args.param),
+    )
+
+
+def _announce(console: Console, name: str, description: str, sensor_layer: str,
+              options: RunOptions) -> None:  # fmt: skip
+    ports = Ports(options.instance)
+    console.print(
+        f"[bold]{name}[/]: {description}\n"
+        f"sensor layer {sensor_layer}, autopilot {options.autopilot}, simulator link TCP "
+        f"{ports.simulator_tcp}; a ground station can watch on UDP {ports.gcs_remote_udp} "
+        "(QGroundControl, MAVProxy)"
+    )
+
+
+def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) -> None:
+    """Options of every closed-loop run; ``scenario``: also those a replay takes from the log."""
     parser.add_argument("--sensor-layer", choices=SENSOR_LAYERS, default=None,
-                        help="override the scenario's sensor layer")  # fmt: skip
-    parser.add_argument("--autopilot", choices=AUTOPILOTS, default="reference",
-                        help="reference (rig starts it) or px4 (you start PX4)")  # fmt: skip
+                        help="default: the scenario's (tlm for a replay)")  # fmt: skip
     parser.add_argument("--instance", type=int, default=0, help="SITL instance i: ports +i")
     parser.add_argument("--out", type=Path, default=None,
-                        help="run folder (default runs/<scenario>-<UTC time>)")  # fmt: skip
-    parser.add_argument("--duration", type=float, default=None,
-                        help="simulated seconds (default: the scenario's)")  # fmt: skip
+                        help="run folder (default runs/<name>-<UTC time>)")  # fmt: skip
+    if scenario:
+        parser.add_argument("--autopilot", choices=AUTOPILOTS, default="reference",
+                            help="reference (rig starts it) or px4 (you start PX4)")  # fmt: skip
+        parser.add_argument("--duration", type=float, default=None,
+                            help="simulated seconds (default: the scenario's)")  # fmt: skip
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="reference-autopilot parameter (repeatable)")  # fmt: skip
     parser.add_argument("--connect-timeout", type=float, default=60.0,
@@ -144,7 +198,9 @@ def _status(progress: Progress) -> str:
     )
 
 
-def _run_with_progress(scenario, options: RunOptions, console: Console) -> RunResult:
+def _run_with_progress(
+    console: Console, run: Callable[[Callable[[Progress], None]], RunResult]
+) -> RunResult:
     """Run with a live status line (simulated time, RTF, altitude, mode) on a terminal,
     and one plain line every LOG_PROGRESS_EVERY_S of simulated time otherwise."""
     if not console.is_terminal:
@@ -156,9 +212,9 @@ def _run_with_progress(scenario, options: RunOptions, console: Console) -> RunRe
                 console.print(_status(progress), highlight=False)
                 next_line_s += LOG_PROGRESS_EVERY_S
 
-        return run_scenario(scenario, options, log_line)
+        return run(log_line)
     with Live(console=console, refresh_per_second=4, transient=False) as live:
-        return run_scenario(scenario, options, lambda p: live.update(Text(_status(p))))
+        return run(lambda p: live.update(Text(_status(p))))
 
 
 if __name__ == "__main__":

@@ -282,12 +282,11 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
 
 
 def run_replay(
-    log_path: str | Path,
-    options: ReplayOptions = ReplayOptions(),
+    replay: Replay,
     run_options: RunOptions | None = None,
     progress: Callable[[Progress], None] | None = None,
 ) -> RunResult:
-    """Plan and fly the replay; the run folder also gets ``vehicle.toml`` and ``replay.json``.
+    """Fly a planned replay; the run folder also gets ``vehicle.toml`` and ``replay.json``.
 
     ``run_options`` says where and how (instance, folder, timeouts); its ``--param`` values
     are applied after the log's, so they win.
@@ -298,7 +297,6 @@ def run_replay(
             "replay flies the reference autopilot only (its setpoints are "
             "acknowledged so a replay is deterministic)"
         )
-    replay = plan_replay(log_path, options)
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     run_dir = run_options.out_dir or RUNS_DIR / f"replay-{replay.log_path.stem}-{stamp}"
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -309,7 +307,7 @@ def run_replay(
     flown = replace(
         run_options,
         out_dir=run_dir,
-        sensor_layer=options.sensor_layer,
+        sensor_layer=replay.options.sensor_layer,
         autopilot_params=(*replay.autopilot_params, *run_options.autopilot_params),
         notes=(*replay.notes, *run_options.notes),
     )
@@ -330,15 +328,10 @@ class _FlightLog:
         try:
             with path.open("rb") as stream, contextlib.redirect_stdout(captured):
                 ulog = ULog(stream)
-        # A damaged file can fail anywhere in pyulog's parser; each of these means "unreadable".
-        except (
-            ULogException,
-            ValueError,
-            IndexError,
-            KeyError,
-            struct.error,
-            UnicodeError,
-        ) as error:
+        # A damaged file can fail anywhere in pyulog's parser; each of these means "unreadable"
+        # (OSError: a bogus length makes pyulog seek before the file's start).
+        except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError,
+                OSError) as error:  # fmt: skip
             raise ReplayError(f"{path}: not a readable ULog file ({error})") from None
         self.topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
         if not self.topics:

@@ -1,0 +1,316 @@
+"""``rig replay``: a real PX4 flight's own setpoints flown through the rig.
+
+The plan is checked against the real X500 log's facts (SOURCES.md, and the log itself where
+SOURCES rounds); the flights are short spans of that log: the take-off (velocity drive), a
+one-second rates window and a one-second attitude window during the climb.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import pyulog
+
+from rig.cli import main
+from rig.loop import RunOptions
+from rig.px4_sim_api import free_instance as find_free_instance
+from rig.replay import ReplayError, ReplayOptions, plan_replay, run_replay
+from rig.ulog import ULogWriter
+
+#: The X500 log's first timestamp (a stale config_overrides sample the logger wrote first).
+X500_FIRST_S = 407.404345
+#: PX4 logs from arming (SDLOG_MODE 0): "Armed by RC switch" at 408.889 s and
+#: vehicle_status.armed_time = 408.889359 s. SOURCES.md rounds the armed span to "407.4",
+#: the log's first timestamp.
+X500_ARMED_S = 408.889359
+#: The climb window: vz_sp = -1.5 m/s from 413.8 to 417.2 s, airborne (SOURCES.md: 413-419).
+CLIMB_WINDOW_S = (415.0, 416.0)
+
+
+@pytest.fixture(scope="module")
+def x500_path() -> Path:
+    return (
+        Path(__file__).resolve().parents[2]
+        / "data/flight_logs"
+        / ("px4_x500v2_v6xrt_flight_2026-03-20.ulg")
+    )
+
+
+@pytest.fixture(scope="module")
+def real_log(x500_path):
+    return pyulog.ULog(str(x500_path), [
+        "vehicle_local_position", "vehicle_local_position_setpoint", "vehicle_rates_setpoint",
+        "vehicle_attitude_setpoint",
+    ])  # fmt: skip
+
+
+def _fly(x500_path: Path, out: Path, instance: int, **options) -> tuple[pyulog.ULog, pyulog.ULog]:
+    plan = plan_replay(x500_path, ReplayOptions(seed=5, **options))
+    result = run_replay(plan, RunOptions(instance=instance, out_dir=out))
+    return pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
+
+
+@pytest.fixture(scope="module")
+def takeoff(x500_path, tmp_path_factory):
+    """407.4 → 420 s with the velocity drive: armed idle, the vz_sp step, the climb."""
+    out = tmp_path_factory.mktemp("takeoff")
+    return out, *_fly(x500_path, out, find_free_instance(60, 40), end_s=420.0)
+
+
+# -- the plan ---------------------------------------------------------------------------------
+
+
+def test_plan_reads_the_x500_configuration_from_its_log(x500_path):
+    plan = plan_replay(x500_path)
+    assert plan.vehicle == "x500_v2"
+    assert plan.vehicle_reason == "SYS_AUTOSTART = 4019"
+    assert plan.cell_count == 4
+    assert plan.vehicle_document["battery"]["cell_count"] == 4
+    assert plan.parameters["MC_ROLLRATE_P"] == pytest.approx(0.14, abs=1e-7)
+    assert plan.parameters["IMU_GYRO_CUTOFF"] == 30.0
+    assert plan.parameters["IMU_INTEG_RATE"] == 200
+    assert "MC_ROLLRATE_P=0.14000000059604645" in plan.autopilot_params  # the float32, exact
+    assert "MAV_SYS_ID" not in plan.parameters  # the rig's instance decides it
+    assert plan.skipped == ()
+    assert plan.unknown_parameter_count > 900
+    assert plan.start_s == pytest.approx(X500_FIRST_S, abs=1e-6)
+    assert plan.end_s == pytest.approx(504.1, abs=0.05)  # SOURCES.md: log ends at 504.1
+    assert plan.real_arm_s == pytest.approx(X500_ARMED_S, abs=1e-3)
+    assert plan.arm_s == plan.real_arm_s  # 1.5 s after the start: the autopilot is ready
+    assert plan.disarm_s == pytest.approx(503.1, abs=0.05)  # SOURCES.md: disarmed at 503.1
+    assert math.degrees(plan.yaw_rad) == pytest.approx(98.3, abs=0.1)  # heading 1.716 rad
+    assert plan.home.lat_deg == pytest.approx(51.901, abs=1e-3)
+    track = plan.tracks["velocity"]
+    times_s = plan.start_s + np.array(track.times_s)
+    vz = np.array(track.values)[:, 2]
+    assert times_s[np.argmax(vz <= -1.0)] == pytest.approx(413.0, abs=0.5)  # SOURCES: 413
+    assert vz[0] == 0.0  # NaN before take-off: held at rest
+    assert [c.action for c in plan.commands] == ["arm", "track", "disarm"]
+
+
+def test_plan_window_switches_drives_and_back(x500_path):
+    plan = plan_replay(x500_path, ReplayOptions(drive="rates", window_s=CLIMB_WINDOW_S))
+    kinds = [(c.action, c.params["track"].kind if c.action == "track" else None)
+             for c in plan.commands]  # fmt: skip
+    assert kinds == [("arm", None), ("track", "velocity"), ("track", "rates"),
+                     ("track", "velocity"), ("disarm", None)]  # fmt: skip
+    assert plan.commands[2].at_s + plan.start_s == pytest.approx(CLIMB_WINDOW_S[0])
+    rates = plan.tracks["rates"]
+    assert rates.values[1][3] == pytest.approx(0.0, abs=0.2)  # thrust = −thrust_body[2] ≥ 0
+
+
+def test_a_late_start_arms_once_the_autopilot_is_ready(x500_path):
+    plan = plan_replay(x500_path, ReplayOptions(start_s=408.5, end_s=412.0))
+    assert plan.arm_s == pytest.approx(409.5)  # start + AUTOPILOT_READY_S, not 408.889
+    assert "armed at 409.500 s instead of 408.889 s" in " ".join(t for _, t in plan.notes)
+
+
+def test_vehicle_option_wins_and_keeps_the_log_cell_count(x500_path, tmp_path):
+    plan = plan_replay(x500_path, ReplayOptions(vehicle="f450_high_precision"))
+    assert plan.vehicle_reason == "--vehicle"
+    assert plan.vehicle_document["battery"]["cell_count"] == 4
+
+
+# -- bad input: one line naming the file, field and value ----------------------------------
+
+
+def _synthetic_log(path: Path, parameters: dict, *, landed: bool = True,
+                   setpoints: bool = True) -> Path:  # fmt: skip
+    """A small ULog with what a replay reads, 100-110 s, at rest."""
+    topics = {
+        "vehicle_status": [("uint64_t", "armed_time"), ("uint8_t", "arming_state")],
+        "vehicle_land_detected": [("bool", "landed")],
+        "vehicle_local_position": [("float", "heading")],
+        "vehicle_local_position_setpoint": [
+            ("float", "vx"),
+            ("float", "vy"),
+            ("float", "vz"),
+            ("float", "yaw"),
+        ],
+    }
+    with ULogWriter(path, topics, info={"sys_name": "PX4"}, parameters=parameters) as log:
+        for k in range(11):
+            t_us = 100_000_000 + k * 1_000_000
+            log.write("vehicle_status", t_us, armed_time=101_000_000, arming_state=2)
+            log.write("vehicle_land_detected", t_us, landed=landed)
+            log.write("vehicle_local_position", t_us, heading=0.5)
+            if setpoints:
+                log.write("vehicle_local_position_setpoint", t_us, vx=0.0, vy=0.0, vz=0.0,
+                          yaw=0.5)  # fmt: skip
+    return path
+
+
+def _error(path, **options) -> str:
+    with pytest.raises(ReplayError) as error:
+        plan_replay(path, ReplayOptions(**options))
+    message = str(error.value)
+    assert "\n" not in message
+    return message
+
+
+def test_bad_logs_fail_with_one_line(tmp_path, x500_path):
+    assert _error(tmp_path / "none.ulg") == f"{tmp_path / 'none.ulg'}: flight log not found"
+    text = tmp_path / "text.ulg"
+    text.write_text("not a flight log\n" * 20)
+    assert _error(text).startswith(f"{text}: not a readable ULog file (")
+    corrupt = tmp_path / "corrupt.ulg"
+    corrupt.write_bytes(x500_path.read_bytes()[:16] + bytes(range(256)) * 50)
+    assert _error(corrupt).startswith(f"{corrupt}: not a readable ULog file (")
+    truncated = tmp_path / "truncated.ulg"
+    truncated.write_bytes(x500_path.read_bytes()[:3000])
+    assert _error(truncated) == f"{truncated}: the ULog holds no logged data"
+
+
+def test_airframe_errors_name_the_parameter_and_the_override(tmp_path):
+    no_autostart = _synthetic_log(tmp_path / "a.ulg", {"BAT1_N_CELLS": 4})
+    assert _error(no_autostart) == (
+        f"{no_autostart}: parameter SYS_AUTOSTART is not in the log; give --vehicle NAME|PATH"
+    )
+    unknown = _synthetic_log(tmp_path / "b.ulg", {"SYS_AUTOSTART": 4001})
+    assert _error(unknown) == (
+        f"{unknown}: parameter SYS_AUTOSTART = 4001 is an airframe without a bundled vehicle "
+        "(known: 4019 x500_v2); --vehicle NAME|PATH overrides it"
+    )
+    assert plan_replay(unknown, ReplayOptions(vehicle="x500_v2")).vehicle == "x500_v2"
+    assert _error(unknown, vehicle="no_such_frame").startswith("--vehicle: ")
+
+
+def test_out_of_range_parameters_are_reported_not_clamped(tmp_path):
+    parameters = {"SYS_AUTOSTART": 4019, "MC_ROLLRATE_P": 0.9, "MC_PITCHRATE_P": 0.2,
+                  "SDLOG_PROFILE": 1}  # fmt: skip
+    log = _synthetic_log(tmp_path / "p.ulg", parameters)
+    plan = plan_replay(log)
+    assert plan.parameters == {"MC_PITCHRATE_P": pytest.approx(0.2)}
+    (skipped,) = plan.skipped
+    assert (skipped.name, skipped.value) == ("MC_ROLLRATE_P", pytest.approx(0.9))
+    assert "outside 0.01..0.5" in skipped.reason
+    assert plan.unknown_parameter_count == 2  # SYS_AUTOSTART, SDLOG_PROFILE
+    assert ("warn", f"replay: parameter MC_ROLLRATE_P = 0.9 skipped ({skipped.reason})") in (
+        plan.notes
+    )
+
+
+def test_bad_options_fail_with_one_line(tmp_path, x500_path):
+    assert _error(x500_path, drive="rates") == (
+        "--drive rates needs --window START END (boot seconds): it is open loop on position, "
+        "the velocity drive flies outside it"
+    )
+    assert _error(x500_path, drive="attitude", window_s=(500.0, 510.0)) == (
+        f"{x500_path}: --window 500 510 must lie inside the replay (408.404-504.068 s) with "
+        "START < END"
+    )
+    assert _error(x500_path, start_s=430.0) == (
+        f"{x500_path}: the vehicle is airborne at --start 430 s (vehicle_land_detected.landed "
+        "= 0); start while it is landed"
+    )
+    assert _error(x500_path, end_s=600.0) == (
+        f"{x500_path}: --end 600 s is outside the log (407.404-504.068 s)"
+    )
+    no_setpoints = _synthetic_log(tmp_path / "s.ulg", {"SYS_AUTOSTART": 4019}, setpoints=False)
+    assert _error(no_setpoints) == (
+        f"{no_setpoints}: topic vehicle_local_position_setpoint (needed by --drive velocity) "
+        "is not in the log"
+    )
+    assert _error(no_setpoints, drive="rates", window_s=(103.0, 104.0)) == (
+        f"{no_setpoints}: topic vehicle_local_position_setpoint (needed by --drive velocity) "
+        "is not in the log"
+    )
+    airborne = _synthetic_log(tmp_path / "air.ulg", {"SYS_AUTOSTART": 4019}, landed=False)
+    assert "is airborne at --start 100 s" in _error(airborne)
+
+
+def test_cli_prints_one_line_errors(capsys, tmp_path):
+    assert main(["replay", str(tmp_path / "missing.ulg")]) == 1
+    assert (
+        capsys.readouterr().err == f"rig: error: {tmp_path / 'missing.ulg'}: flight log not found\n"
+    )
+
+
+# -- flights ----------------------------------------------------------------------------------
+
+
+def test_replay_runs_on_the_real_logs_clock_and_takes_off_with_it(takeoff, real_log):
+    out, rig, autopilot = takeoff
+    for log in (rig, autopilot):
+        times_s = np.concatenate([d.data["timestamp"] for d in log.data_list]) / 1e6
+        assert times_s.min() >= X500_FIRST_S
+        assert times_s.max() <= 420.0
+    summary = json.loads((out / "replay.json").read_text())
+    assert summary["parameters_applied"]["MC_ROLLRATE_P"] == pytest.approx(0.14)
+    assert summary["wind"] == "zero: the real wind is unknown"
+    assert "cell_count = 4" in (out / "vehicle.toml").read_text()
+    # lift-off: the first climb faster than 0.3 m/s (the real z estimate drifts by 0.1 m on
+    # the ground, its vz does not)
+    truth = rig.get_dataset("vehicle_local_position_groundtruth").data
+    truth_s = truth["timestamp"] / 1e6
+    sim_liftoff_s = truth_s[np.argmax(truth["vz"] < -0.3)]
+    real = real_log.get_dataset("vehicle_local_position").data
+    real_liftoff_s = real["timestamp"][np.argmax(real["vz"] < -0.3)] / 1e6
+    assert real_liftoff_s == pytest.approx(413.0, abs=0.5)  # SOURCES.md: the climb from 413
+    assert sim_liftoff_s == pytest.approx(real_liftoff_s, abs=1.0)
+    # the climb tracks the real vz_sp step (−1.5 m/s over 414-417 s), as a climb can
+    climbing = (truth_s > 414.5) & (truth_s < 417.0)
+    assert float(np.mean(truth["vz"][climbing])) == pytest.approx(-1.5, abs=0.3)
+    events = [m.message for m in autopilot.logged_messages]
+    assert events[:2] == ["Armed by external command", "Takeoff detected"]
+
+
+def test_autopilot_logs_topics_at_least_at_the_real_rates(takeoff):
+    _, _, autopilot = takeoff
+    # SOURCES.md rates of the real X500 log (Hz)
+    real_hz = {"vehicle_rates_setpoint": 49.8, "vehicle_attitude_setpoint": 19.9,
+               "vehicle_local_position_setpoint": 10, "vehicle_torque_setpoint": 49.8,
+               "vehicle_thrust_setpoint": 49.8, "actuator_motors": 10,
+               "sensor_combined": 200.8}  # fmt: skip
+    for topic, hz in real_hz.items():
+        t = autopilot.get_dataset(topic).data["timestamp"] / 1e6
+        assert (len(t) - 1) / (t[-1] - t[0]) >= hz * 0.99, topic
+    combined = autopilot.get_dataset("sensor_combined").data
+    assert set(combined["gyro_integral_dt"]) == {5000}  # 1 kHz samples in 200 Hz blocks
+    assert set(combined["accelerometer_integral_dt"]) == {5000}
+
+
+def test_same_seed_same_replay(takeoff, x500_path, tmp_path, free_instance):
+    _, first_rig, first_autopilot = takeoff
+    rig, autopilot = _fly(x500_path, tmp_path, free_instance(), end_s=420.0)
+    for name, a, b in (("sensor_combined", first_rig, rig),
+                       ("actuator_motors", first_autopilot, autopilot)):  # fmt: skip
+        x, y = a.get_dataset(name).data, b.get_dataset(name).data
+        assert x.keys() == y.keys()
+        for field in x:
+            np.testing.assert_array_equal(x[field], y[field], err_msg=f"{name}.{field}")
+
+
+@pytest.mark.parametrize(
+    ("drive", "topic", "fields"),
+    [
+        ("rates", "vehicle_rates_setpoint", ("roll", "pitch", "yaw", "thrust_body[2]")),
+        ("attitude", "vehicle_attitude_setpoint",
+         ("q_d[0]", "q_d[1]", "q_d[2]", "q_d[3]", "thrust_body[2]")),
+    ],
+)  # fmt: skip
+def test_window_drive_flies_the_logs_setpoints(
+    drive, topic, fields, x500_path, real_log, tmp_path, free_instance
+):
+    """Inside the window the autopilot's logged setpoints are the real log's, sample for
+    sample (zero-order hold): each real sample is in force from the first frame after it
+    (1 ms) and the fast log's 4 ms period, so every rig sample from 5 ms after it to the next
+    real sample equals it (float32; the attitude is renormalized, hence 1e-6)."""
+    _, autopilot = _fly(x500_path, tmp_path, free_instance(), drive=drive, end_s=417.0,
+                        window_s=CLIMB_WINDOW_S)  # fmt: skip
+    real = real_log.get_dataset(topic).data
+    rig = autopilot.get_dataset(topic).data
+    real_s, rig_s = real["timestamp"] / 1e6, rig["timestamp"] / 1e6
+    inside = np.nonzero((real_s >= CLIMB_WINDOW_S[0]) & (real_s < CLIMB_WINDOW_S[1]))[0]
+    compared = 0
+    for k in inside[:-1]:
+        held = (rig_s >= real_s[k] + 0.005) & (rig_s < real_s[k + 1])
+        for field in fields:
+            np.testing.assert_allclose(rig[field][held], real[field][k], rtol=0, atol=1e-6)
+        compared += int(held.sum())
+    assert len(inside) >= 19
+    assert compared >= len(inside)
+    after = rig_s > CLIMB_WINDOW_S[1] + 0.1  # the velocity drive is back: its own setpoints
+    assert not np.isin(rig[fields[0]][after], real[fields[0]]).all()
