@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from quad_model import QuadModel, SensorReadings, SensorSuite, VehicleTruth, load_vehicle
-from quad_model.frames import quat_to_dcm
+from quad_model.frames import euler_from_quat, quat_to_dcm
 from rig.autopilot import FlightController, GpsFix, Parameters, SensorFrame
 from rig.autopilot.navigator import NavState
 
@@ -197,3 +197,39 @@ def test_lands_and_disarms_after_touchdown():
     assert disarmed[0] - touchdown[0] < 10.0
     texts = [text for _, text in controller.status_messages]
     assert texts[-2:] == ["Landing detected", "Disarmed: landed (COM_DISARM_LAND)"]
+
+
+def test_offboard_body_rates_drive_the_rate_loop_only():
+    """From a 5 m hover, offboard body rates (SET_ATTITUDE_TARGET with the attitude ignored):
+    a 0.6 rad/s yaw rate at the hover thrust. The rate setpoint is the commanded one in every
+    frame (no attitude loop in between); the PI rate loop brings the true yaw rate to it
+    (mean within 0.05 rad/s over the last 0.5 s) and holds roll near 0, and the heading turns
+    by ∫r dt instead of being held. Pitch is not judged: this 250 Hz F450 harness has a
+    pitch-rate limit cycle (±4 rad/s) in every mode, attitude hold included."""
+    flight = Flight.start(seed=12)
+    flight.fly(3.0)
+    controller = flight.controller
+    controller.set_parameter("MIS_TAKEOFF_ALT", 5.0)
+    assert controller.takeoff(math.nan).result == 0
+    assert controller.arm().result == 0
+    flight.fly(8.0)
+    commanded = np.array([0.0, 0.0, 0.6])
+    thrust = controller.collective_thrust
+    controller.set_offboard_rates(commanded, thrust)
+    assert controller.set_mode(NavState.OFFBOARD).result == 0
+    yaw_start = euler_from_quat(flight.truth.attitude_quat)[2]
+    rates, setpoints = [], []
+
+    def watch(f: Flight) -> None:
+        f.controller.set_offboard_rates(commanded, thrust)  # the stream
+        rates.append(f.truth.angular_rate_frd_radps.copy())
+        setpoints.append(f.controller.rates_sp.copy())
+
+    flight.fly(2.0, watch)
+    assert -flight.truth.position_ned_m[2] > 1.0  # still flying
+    np.testing.assert_array_equal(np.array(setpoints), np.tile(commanded, (len(setpoints), 1)))
+    settled = np.array(rates[round(1.5 * IMU_RATE_HZ) :])
+    assert settled[:, 2].mean() == pytest.approx(0.6, abs=0.05)
+    assert settled[:, 0].mean() == pytest.approx(0.0, abs=0.05)
+    turned = (euler_from_quat(flight.truth.attitude_quat)[2] - yaw_start) % (2 * math.pi)
+    assert turned == pytest.approx(np.array(rates)[:, 2].sum() / IMU_RATE_HZ, abs=0.05)
