@@ -68,10 +68,22 @@ def main(argv: list[str] | None = None) -> int:
                           help="local processes (default: the cores given)")  # fmt: skip
     campaign.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
                           help="run on this Dask cluster instead of local processes")  # fmt: skip
+    identify = commands.add_parser(
+        "identify", help="identify hover, roll/pitch plant and inertia from a flight log"
+    )
+    identify.add_argument("log", type=Path, help="PX4-style ULog (real flight, SITL or rig)")
+    identify.add_argument("--vehicle", default=None, metavar="NAME|PATH",
+                          help="vehicle file (default: from the log's SYS_AUTOSTART)")  # fmt: skip
+    identify.add_argument("--window", type=float, nargs=2, metavar=("START", "END"),
+                          help="boot seconds of the rate-loop fit (default: airborne)")  # fmt: skip
+    identify.add_argument("--toml", action="store_true",
+                          help="print [body]/[propulsion] lines for the vehicle file")  # fmt: skip
     args = parser.parse_args(argv)
     console = Console(stderr=True)
     if args.command == "campaign":
         return _campaign(args, console)
+    if args.command == "identify":
+        return _identify(args)
     try:
         result = _replay(args, console) if args.command == "replay" else _run(args, console)
     except RigError as error:
@@ -183,6 +195,25 @@ def _campaign(args: argparse.Namespace, console: Console) -> int:
     except KeyboardInterrupt:
         print("rig: interrupted; finished cases are saved, rerun to resume", file=sys.stderr)
         return 130
+    return 0
+
+
+def _identify(args: argparse.Namespace) -> int:
+    """``rig identify``: the table (or ``--toml`` lines) on stdout, errors as one line."""
+    from quad_model.vehicle import VehicleFileError, load_vehicle  # on demand
+    from rig import identify
+
+    try:
+        vehicle = load_vehicle(args.vehicle or identify.vehicle_name_for_log(args.log))
+        window = tuple(args.window) if args.window else None
+        result = identify.identify_vehicle(args.log, vehicle, window)
+    except (RigError, VehicleFileError) as error:
+        print(f"rig: error: {error}", file=sys.stderr)
+        return 1
+    if args.toml:
+        print(identify.identification_toml(result, vehicle), end="")
+    else:
+        Console(width=160).print(identify.identification_table(result))
     return 0
 
 
