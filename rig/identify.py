@@ -79,6 +79,11 @@ GRID_POINTS = 40
 #: Upper end of the analysis band as a fraction of the log's sample rate (0.4: 20 Hz at
 #: 50 Hz logging, below the Nyquist frequency with margin for the logger's decimation).
 BAND_TOP_FRACTION = 0.2
+#: Below this log rate the rate loop's torque noise (D term) folds into the analysis band and
+#: biases B low; ALIASING_BIAS bounds that bias (rig flights resampled to 50 Hz: 11-20 %,
+#: tests/rig/test_identify.py) and enters B's uncertainty.
+ALIASING_RATE_HZ = 100.0
+ALIASING_BIAS = 0.25
 #: Above this relative uncertainty of B an inertia is not called identified: the paper's
 #: low-precision inertias differ from the measured ones by 20-50 %, so a looser estimate
 #: could not tell a high-precision model from a low-precision one.
@@ -299,18 +304,14 @@ def identify_vehicle(
     )
 
 
-#: Below this log rate the rate loop's torque noise folds into the analysis band.
-ALIASING_RATE_HZ = 100.0
-
-
 def _notes(sample_rate_hz: float) -> tuple[str, ...]:
     if sample_rate_hz >= ALIASING_RATE_HZ:
         return ()
     return (
         f"log rate {sample_rate_hz:.0f} Hz: the torque set-point's noise above "
         f"{sample_rate_hz / 2:.0f} Hz (rate D-term) folds into the band, so B reads low and I "
-        "high: on the rig's own flights resampled to 50 Hz by 10-25 % (tests/rig/test_identify.py)"
-        "; log the rate topics at ≥ 200 Hz (SDLOG_PROFILE high rate) for a clean estimate",
+        f"high (≤ {ALIASING_BIAS:.0%}, in the uncertainty); log the rate topics at ≥ 200 Hz "
+        "(SDLOG_PROFILE high rate) for a clean estimate",
     )
 
 
@@ -616,11 +617,15 @@ def _identify_axis(
         return AxisIdentification(name, identified=False, reason=fit)
     cross = _fit_plant(log, axis, airborne, rate_hz, cutoff_hz)
     cross_gain = None if isinstance(cross, str) else cross.gain
-    # the larger of the fit's own σ and the disagreement with the whole-flight fit
-    gain_spread = max(fit.gain * fit.std[0], abs(fit.gain - (cross_gain or fit.gain)))
+    # the larger of the fit's own σ and the disagreement with the whole-flight fit, and for a
+    # slow log the aliasing bias bound, in quadrature
+    random_spread = max(fit.gain * fit.std[0], abs(fit.gain - (cross_gain or fit.gain)))
+    aliasing = ALIASING_BIAS if rate_hz < ALIASING_RATE_HZ else 0.0
+    gain_spread = math.hypot(random_spread, aliasing * fit.gain)
     method = (
         f"rate_sp-instrumented torque_sp→rate fit, {fit.points} pts "
         f"{fit.band_hz[0]:.2g}-{fit.band_hz[1]:.2g} Hz, ± max(fit σ, whole-flight Δ)"
+        + (f" ⊕ {aliasing:.0%} aliasing" if aliasing else "")
     )
     inertia = torque_per_unit / fit.gain
     problems = []
