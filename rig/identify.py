@@ -80,8 +80,8 @@ GRID_POINTS = 40
 #: 50 Hz logging, below the Nyquist frequency with margin for the logger's decimation).
 BAND_TOP_FRACTION = 0.2
 #: Below this log rate the rate loop's torque noise (D term) folds into the analysis band and
-#: biases B low; ALIASING_BIAS bounds that bias (rig flights resampled to 50 Hz: 11-20 %,
-#: tests/rig/test_identify.py) and enters B's uncertainty.
+#: biases B low, by how much depends on that noise; ALIASING_BIAS bounds it (rig flights
+#: resampled to 50 Hz read B 1-20 % low, tests/rig/test_identify.py) and enters B's uncertainty.
 ALIASING_RATE_HZ = 100.0
 ALIASING_BIAS = 0.25
 #: Above this relative uncertainty of B an inertia is not called identified: the paper's

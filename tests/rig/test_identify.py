@@ -1,0 +1,297 @@
+"""rig.identify: known inertia, motor lag and hover throttle recovered from a rig flight (at the
+autopilot's own 250 Hz and resampled to the real log's 50 Hz), the real X500 log against the
+vehicle files, and one-line errors."""
+
+import re
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pyulog import ULog
+
+from quad_model.environment import PX4_DEFAULT_HOME, isa_density_kgpm3
+from quad_model.model import Mount, QuadModel
+from quad_model.vehicle import VEHICLES_DIR, load_vehicle
+from rig import cli
+from rig.autopilot.flight_log import TOPICS as AUTOPILOT_TOPICS
+from rig.identify import (
+    ALIASING_BIAS,
+    IdentificationError,
+    identification_toml,
+    identify_vehicle,
+)
+from rig.link import LinkTimeouts
+from rig.loop import RunOptions, run_scenario
+from rig.px4_sim_api import free_instance
+from rig.scenario import scenario_from_dict
+from rig.ulog import ULogWriter
+
+#: Real flight logs carried with the project (the x500_log fixture's folder; a module-scoped
+#: fixture cannot use the function-scoped one).
+FLIGHT_LOGS = Path(__file__).resolve().parents[2] / "data" / "flight_logs"
+#: The truth of the synthetic flight: the X500 with other inertias (roll ≠ pitch) and a slower
+#: motor, so a recovered value cannot be the bundled file's by coincidence.
+TRUE_INERTIA_KGM2 = (0.030, 0.025, 0.045)
+TRUE_MOTOR_TAU_S = 0.03
+#: The manual-flight window of the real log (SOURCES.md: roll ramp-step, pitch doublet).
+REAL_WINDOW_S = (455.0, 481.5)
+#: PX4's logger rates for SDLOG_PROFILE default: rate-loop topics 50 Hz, the rest 10/5 Hz.
+FAST_TOPICS = ("vehicle_torque_setpoint", "vehicle_angular_velocity", "vehicle_rates_setpoint",
+               "vehicle_thrust_setpoint")  # fmt: skip
+SLOW_TOPICS = ("vehicle_local_position", "vehicle_land_detected", "actuator_motors")
+
+
+def _truth_vehicle_file(folder: Path) -> Path:
+    """x500_v2.toml with the truth above; vibration halved: at the full X500 level the
+    reference autopilot's hover wobbles at 0.2-0.35 rad/s RMS (the real PX4 0.07), and the
+    hover detector wants a steady hover."""
+    text = (VEHICLES_DIR / "x500_v2.toml").read_text(encoding="utf-8")
+    ixx, iyy, izz = TRUE_INERTIA_KGM2
+    text = re.sub(r"(?m)^inertia_kgm2 = .*$",
+                  f"inertia_kgm2 = [[{ixx}, 0.0, 0.0], [0.0, {iyy}, 0.0], [0.0, 0.0, {izz}]]",
+                  text)  # fmt: skip
+    text = re.sub(r"(?m)^motor_time_constant_s = .*$",
+                  f"motor_time_constant_s = {TRUE_MOTOR_TAU_S}", text)  # fmt: skip
+    for key in ("accel_harmonic_amplitude_mps2", "gyro_harmonic_amplitude_radps",
+                "accel_broadband_std_mps2", "gyro_broadband_std_radps"):  # fmt: skip
+        value = tomllib.loads(text)["vibration"][key]
+        halved = [v / 2 for v in value] if isinstance(value, list) else value / 2
+        text = re.sub(rf"(?m)^{key} = .*$", f"{key} = {halved}", text)
+    path = folder / "x500_truth.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _decimate(time_us: np.ndarray, period_us: float) -> list[int]:
+    """PX4's logger: a topic is written when at least ``period`` passed since its last write
+    (no averaging, so everything above the logging Nyquist frequency aliases, as on a real log)."""
+    keep, last = [], None
+    for index, t in enumerate(time_us):
+        if last is None or t - last >= period_us:
+            keep.append(index)
+            last = t
+    return keep
+
+
+def _px4_style_log(autopilot_log: Path, rig_log: Path, out: Path, rate_hz: float) -> Path:
+    """The autopilot's log at PX4's logging rates (rate loop at ``rate_hz``, the rest 10 Hz),
+    plus what a real PX4 log has and the reference autopilot does not write:
+    ``battery_status.voltage_v`` (the model's battery) and ``vehicle_air_data.rho`` (ISA at the
+    true altitude)."""
+    autopilot, rig = ULog(str(autopilot_log)), ULog(str(rig_log))
+    topics = {name: AUTOPILOT_TOPICS[name] for name in FAST_TOPICS + SLOW_TOPICS}
+    topics |= {"battery_status": [("float", "voltage_v")], "vehicle_air_data": [("float", "rho")]}
+    rows = []
+    for name in FAST_TOPICS + SLOW_TOPICS:
+        data = autopilot.get_dataset(name).data
+        for i in _decimate(data["timestamp"], 1e6 / (rate_hz if name in FAST_TOPICS else 10.0)):
+            values = {}
+            for kind, field in AUTOPILOT_TOPICS[name]:
+                size = re.search(r"\[(\d+)\]$", kind)
+                values[field] = (
+                    np.array([data[f"{field}[{k}]"][i] for k in range(int(size[1]))])
+                    if size else data[field][i]
+                )  # fmt: skip
+            rows.append((int(data["timestamp"][i]), name, values))
+    battery = rig.get_dataset("battery_status_groundtruth").data
+    for i in _decimate(battery["timestamp"], 2e5):
+        rows.append((int(battery["timestamp"][i]), "battery_status",
+                     {"voltage_v": battery["voltage_v"][i]}))  # fmt: skip
+    position = rig.get_dataset("vehicle_local_position_groundtruth").data
+    for i in _decimate(position["timestamp"], 2e5):
+        rho = isa_density_kgpm3(PX4_DEFAULT_HOME.alt_amsl_m - position["z"][i])
+        rows.append((int(position["timestamp"][i]), "vehicle_air_data", {"rho": rho}))
+    rows.sort(key=lambda row: row[0])
+    with ULogWriter(out, topics, parameters=autopilot.initial_parameters) as log:
+        for time_us, name, values in rows:
+            log.write(name, time_us, **values)
+    return out
+
+
+@pytest.fixture(scope="module")
+def synthetic_flight(tmp_path_factory):
+    """Take off to 3 m, hover, fly a 1.5 m zig-zag of position steps (roll and pitch
+    excitation), hover again: 34 s simulated, ≈ 20 s on this machine."""
+    folder = tmp_path_factory.mktemp("identify")
+    truth_path = _truth_vehicle_file(folder)
+    points = [[1.5, 0, -3], [1.5, 1.5, -3], [0, 1.5, -3], [0, 0, -3], [-1.5, 0, -3],
+              [-1.5, -1.5, -3], [0, -1.5, -3], [0, 0, -3]]  # fmt: skip
+    commands = [{"at_s": 0.5, "action": "arm"},
+                {"at_s": 0.6, "action": "takeoff", "altitude_m": 3.0}]  # fmt: skip
+    commands += [{"at_s": 10.0 + 2.5 * i, "action": "goto", "position_ned_m": p}
+                 for i, p in enumerate(points)]  # fmt: skip
+    scenario = scenario_from_dict({"name": "identify", "vehicle": str(truth_path),
+                                   "duration_s": 34.0, "seed": 5, "sensor_layer": "tlm",
+                                   "commands": commands})  # fmt: skip
+    options = RunOptions(instance=free_instance(60, 40), out_dir=folder / "run",
+                         timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
+    result = run_scenario(scenario, options)
+    return folder, load_vehicle(truth_path), result.autopilot_log, result.rig_log
+
+
+@pytest.mark.closed_loop
+def test_recovers_inertia_motor_lag_and_hover_at_the_autopilots_rate(synthetic_flight):
+    """At 250 Hz (the reference autopilot's log rate) nothing aliases: the fit's own σ is
+    1-2 % on B, so 5 % on I (measured -1 %); τ_m and the delay separate (σ ≈ 3 %, measured
+    -2 %), 15 % on τ_m. The hover offset: the throttle's sample σ (≈ 0.013) carried over is
+    ≈ ±16 rad/s (measured -4 rad/s); 3 σ."""
+    folder, truth, autopilot_log, rig_log = synthetic_flight
+    log = _px4_style_log(autopilot_log, rig_log, folder / "px4_250hz.ulg", rate_hz=250.0)
+    result = identify_vehicle(log, truth)
+    assert result.sample_rate_hz == pytest.approx(250.0, rel=0.01)
+    assert result.notes == ()
+    for index, name in enumerate(("roll", "pitch")):
+        axis = result.axis(name)
+        assert axis.reliable, axis.reason
+        assert axis.inertia_kgm2.value == pytest.approx(TRUE_INERTIA_KGM2[index], rel=0.05)
+        assert axis.motor_lag_identified
+        assert axis.motor_time_constant_s.value == pytest.approx(TRUE_MOTOR_TAU_S, rel=0.15)
+    assert not result.axis("yaw").identified
+    offset = result.hover.speed_offset_radps
+    assert abs(offset.value - truth.propulsion.speed_offset_radps) <= 3 * offset.uncertainty
+    # the full-throttle point is kept
+    full = truth.propulsion.speed_slope_radps + truth.propulsion.speed_offset_radps
+    assert result.hover.speed_slope_radps + offset.value == pytest.approx(full)
+
+
+@pytest.mark.closed_loop
+def test_recovers_inertia_within_the_aliasing_bound_at_50_hz(synthetic_flight):
+    """At the real log's 50 Hz the torque set-point's rate-D-term noise above 25 Hz folds into
+    the band and reads as input the rates did not answer: B low, I high, by how much depends on
+    that noise. On this flight I comes out within 2 % of the truth; a development flight with a
+    noisier rate loop read +13 % (roll) and +25 % (pitch), hence ALIASING_BIAS = 25 %. The test
+    allows that bound plus the 5 % of the full-rate fit; the reported uncertainty carries the
+    bound and the note says why."""
+    folder, truth, autopilot_log, rig_log = synthetic_flight
+    log = _px4_style_log(autopilot_log, rig_log, folder / "px4_50hz.ulg", rate_hz=50.0)
+    result = identify_vehicle(log, truth)
+    assert result.sample_rate_hz == pytest.approx(50.0, rel=0.01)
+    assert "folds into the band" in result.notes[0]
+    for index, name in enumerate(("roll", "pitch")):
+        inertia = result.axis(name).inertia_kgm2
+        error = inertia.value / TRUE_INERTIA_KGM2[index] - 1.0
+        assert -0.05 <= error <= ALIASING_BIAS + 0.05, name
+        assert inertia.relative_uncertainty >= ALIASING_BIAS
+    # hover needs no fast data: the same offset as at 250 Hz within its uncertainty
+    offset = result.hover.speed_offset_radps
+    assert abs(offset.value - truth.propulsion.speed_offset_radps) <= 3 * offset.uncertainty
+
+
+def _hover_throttle_at(vehicle, voltage_v: float) -> float:
+    """The model's own hover throttle on a bench supply at ``voltage_v`` (the model's default
+    home, 488 m, has the log's air density 1.167 kg/m³)."""
+    battery = replace(vehicle.battery, cell_full_v=voltage_v / vehicle.battery.cell_count,
+                      internal_resistance_ohm=0.0)  # fmt: skip
+    model = QuadModel(replace(vehicle, battery=battery), np.random.default_rng(0),
+                      mount=Mount.THRUST_STAND)  # fmt: skip
+    return model.hover_throttle()
+
+
+@pytest.fixture(scope="module")
+def real_identification():
+    log = FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
+    vehicle = load_vehicle("x500_v2")
+    return identify_vehicle(log, vehicle, REAL_WINDOW_S), vehicle
+
+
+def test_real_log_hover_reads_the_motor_outputs_through_the_logs_pwm_range(real_identification):
+    """Closed form of the data path: with no torque the mixer sets every motor to the thrust
+    set-point, and PWM_AUX_MIN/MAX = 1100/1900 µs put command u at throttle 0.1 + 0.8·u."""
+    result, _ = real_identification
+    hover = result.hover
+    assert result.pwm_range_us == (1100.0, 1900.0)
+    assert np.mean(hover.motor_command) == pytest.approx(hover.thrust_setpoint, abs=0.01)
+    assert hover.throttle.value == pytest.approx(0.1 + 0.8 * np.mean(hover.motor_command))
+    # PX4's own hover-thrust estimator agrees with the logged command within 2.5 %
+    assert hover.px4_hover_thrust == pytest.approx(hover.thrust_setpoint, rel=0.025)
+    assert any(a <= 420.0 and b >= 423.0 for a, b in hover.windows_s)  # SOURCES: 419-437.9
+
+
+def test_x500_vehicle_file_holds_what_rig_identify_prints(real_identification):
+    """Provenance that cannot rot: the [identified] speed curve, and the inertia and τ_m kept
+    because the 50 Hz log cannot confirm them, are exactly `rig identify --toml`'s lines; the
+    file's speed curve flies the log's hover throttle on the model."""
+    result, vehicle = real_identification
+    printed = tomllib.loads(identification_toml(result, vehicle))
+    assert printed["body"]["inertia_kgm2"] == [list(row) for row in vehicle.body.inertia_kgm2]
+    for key in ("speed_slope_radps", "speed_offset_radps"):
+        assert getattr(vehicle.propulsion, key) == printed["propulsion"][key], key
+    assert "motor_time_constant_s" not in printed["propulsion"]
+    assert not result.axis("roll").reliable
+    assert not result.axis("pitch").reliable
+    assert vehicle.vibration.reference_rotor_speed_radps == pytest.approx(
+        result.hover.rotor_speed_radps, abs=1.0
+    )
+    throttle = _hover_throttle_at(vehicle, result.hover.battery_voltage_v)
+    assert throttle == pytest.approx(result.hover.throttle.value, abs=0.005)
+
+
+def test_low_precision_set_is_off_the_identified_hover(real_identification):
+    """The parts-list set (x500_v2_low_precision.toml) hovers at throttle ≈ 0.47 at the log's
+    14.35 V and 1.167 kg/m³ where the real X500 needs 0.522 (≈ -10 %): its mass is 1.69 kg
+    (-16 % against the 2.0 kg of the identified set) and its momentum-theory k_T 1.42e-5
+    (+66 % against Gazebo's), only partly cancelled by the ideal ESC's steeper curve. The
+    identified hover throttle's own uncertainty is ±0.017 (3 %), so the gap is real."""
+    result, _ = real_identification
+    low = load_vehicle("x500_v2_low_precision")
+    throttle = _hover_throttle_at(low, result.hover.battery_voltage_v)
+    gap = throttle / result.hover.throttle.value - 1.0
+    assert -0.14 <= gap <= -0.06
+    assert abs(gap) > 2 * result.hover.throttle.relative_uncertainty
+
+
+# ------------------------------------------------------------------ one-line errors
+def _tiny_log(path: Path, landed: bool, speed_mps: float = 2.0, rate_radps: float = 0.5) -> Path:
+    """8 s at 50 Hz of the topics hover detection reads, and nothing else."""
+    topics = {
+        "vehicle_land_detected": [("bool", "landed")],
+        "vehicle_angular_velocity": [("float[3]", "xyz")],
+        "vehicle_local_position": [("float", "vx"), ("float", "vy"), ("float", "vz")],
+    }
+    with ULogWriter(path, topics) as log:
+        for k in range(400):
+            t = 1000 + 20_000 * k
+            log.write("vehicle_land_detected", t, landed=landed)
+            log.write("vehicle_angular_velocity", t, xyz=np.full(3, rate_radps * np.sin(k)))
+            log.write("vehicle_local_position", t, vx=speed_mps, vy=0.0, vz=0.0)
+    return path
+
+
+def test_errors_are_one_line_naming_the_problem(tmp_path):
+    vehicle = load_vehicle("x500_v2")
+    cases = [
+        (tmp_path / "missing.ulg", "log file not found"),
+        (tmp_path / "junk.ulg", "not a readable ULog file"),
+        (_tiny_log(tmp_path / "ground.ulg", landed=True), "the vehicle never left the ground"),
+        (_tiny_log(tmp_path / "moving.ulg", landed=False), "no hover window found"),
+    ]
+    (tmp_path / "junk.ulg").write_bytes(b"not a ulog at all")
+    for path, message in cases:
+        with pytest.raises(IdentificationError) as error:
+            identify_vehicle(path, vehicle)
+        assert message in str(error.value)
+        assert str(path) in str(error.value)
+        assert "\n" not in str(error.value)
+
+
+def test_missing_topic_and_bad_window_are_named(tmp_path, real_identification):
+    log = _tiny_log(tmp_path / "hover_only.ulg", landed=False, speed_mps=0.1, rate_radps=0.01)
+    with pytest.raises(IdentificationError, match=r"no topic 'actuator_motors' \(hover motor"):
+        identify_vehicle(log, load_vehicle("x500_v2"))
+    real = real_identification[0].log
+    with pytest.raises(IdentificationError, match=r"excitation window 300-320 s is not inside"):
+        identify_vehicle(real, load_vehicle("x500_v2"), (300.0, 320.0))
+
+
+def test_cli_prints_the_table_and_fails_in_one_line(capsys, tmp_path, real_identification):
+    real = real_identification[0].log
+    assert cli.main(["identify", str(real), "--window", "455", "481.5", "--toml"]) == 0
+    printed = capsys.readouterr().out
+    assert "speed_offset_radps = 428.0" in printed
+    assert cli.main(["identify", str(tmp_path / "none.ulg"), "--vehicle", "x500_v2"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("rig: error: ")
+    assert err.count("\n") == 1
+    assert "log file not found" in err
