@@ -76,8 +76,9 @@ COHERENCE_MIN = 0.4
 #: as not identifiable: three parameters need a margin of degrees of freedom.
 MIN_FIT_POINTS = 6
 GRID_POINTS = 40
-#: Upper end of the analysis band as a fraction of the log's sample rate (0.4: 20 Hz at
-#: 50 Hz logging, below the Nyquist frequency with margin for the logger's decimation).
+#: Upper end of the analysis band as a fraction of the log's sample rate (10 Hz at 50 Hz
+#: logging): nearer the Nyquist frequency the folded torque noise turns the phase (-30° at
+#: 15 Hz on a rig flight logged at 50 Hz).
 BAND_TOP_FRACTION = 0.2
 #: Below this log rate the rate loop's torque noise (D term) folds into the analysis band and
 #: biases B low, by how much depends on that noise; ALIASING_BIAS bounds it (rig flights
@@ -85,7 +86,8 @@ BAND_TOP_FRACTION = 0.2
 ALIASING_RATE_HZ = 100.0
 ALIASING_BIAS = 0.25
 #: Above this relative uncertainty of B an inertia is not called identified: the paper's
-#: low-precision inertias differ from the measured ones by 20-50 %, so a looser estimate
+#: low-precision inertias differ from the measured ones by 40-50 % (f450_low_precision.toml),
+#: so a looser estimate
 #: could not tell a high-precision model from a low-precision one.
 MAX_RELATIVE_UNCERTAINTY = 0.3
 #: Fit bounds: τ_m and d between 1 ms and 0.2 s cover hobby to heavy-lift propulsion.
@@ -100,7 +102,6 @@ SETTLE_TIME_CONSTANTS = 20.0
 _MOTOR_FUNCTIONS = (101, 102, 103, 104)
 _GEOMETRY_PARAM = re.compile(rf"CA_ROTOR[0-{ROTOR_COUNT - 1}]_(PX|PY|KM)")
 _AXES = ("roll", "pitch", "yaw")
-_RATE_SP_FIELDS = ("roll", "pitch", "yaw")
 _TOPICS = (
     "vehicle_torque_setpoint",
     "vehicle_angular_velocity",
@@ -179,6 +180,8 @@ class AxisIdentification:
 
 @dataclass(frozen=True)
 class Identification:
+    """What one log says about one vehicle; ``notes`` are caveats to read with the numbers."""
+
     log: Path
     vehicle_name: str
     sample_rate_hz: float
@@ -186,7 +189,6 @@ class Identification:
     pwm_range_us: tuple[float, float]
     hover: HoverIdentification
     axes: tuple[AxisIdentification, ...]
-    #: Caveats a user must read with the numbers (low log rate, ...).
     notes: tuple[str, ...]
 
     def axis(self, name: str) -> AxisIdentification:
@@ -229,10 +231,9 @@ def _read_log(path: Path) -> _Log:
     for dataset in ulog.data_list:
         if dataset.multi_id == 0:
             data = dict(dataset.data)
-            # the rate's measurement time where logged, so the fitted delay is physical
-            stamp = data.get("timestamp_sample", data["timestamp"])
-            if dataset.name != "vehicle_angular_velocity":
-                stamp = data["timestamp"]
+            # the rates at their measurement time, so the fitted delay is physical
+            measured = dataset.name == "vehicle_angular_velocity" and "timestamp_sample" in data
+            stamp = data["timestamp_sample" if measured else "timestamp"]
             order = np.argsort(stamp, kind="stable")
             topics[dataset.name] = {k: np.asarray(v)[order] for k, v in data.items()}
             topics[dataset.name]["t"] = stamp[order] * 1e-6
@@ -255,6 +256,12 @@ def identify_vehicle(
     gyro_cutoff_hz = float(log.params.get("IMU_GYRO_CUTOFF", 0.0))
     pwm_range = _motor_pwm_range(log.params)
     airborne = _airborne_span(log)
+    window = excitation_window_s or airborne
+    if not (airborne[0] <= window[0] < window[1] <= airborne[1]):
+        raise IdentificationError(
+            f"{log.path}: excitation window {window[0]:g}-{window[1]:g} s is not inside the "
+            f"airborne span {airborne[0]:.1f}-{airborne[1]:.1f} s"
+        )
     hover = _identify_hover(log, vehicle, pwm_range)
     identified_vehicle = replace(
         vehicle,
@@ -272,12 +279,6 @@ def identify_vehicle(
         hover.battery_voltage_v,
         hover.air_density_kgpm3,
     )
-    window = excitation_window_s or airborne
-    if not (airborne[0] <= window[0] < window[1] <= airborne[1]):
-        raise IdentificationError(
-            f"{log.path}: excitation window {window[0]:g}-{window[1]:g} s is not inside the "
-            f"airborne span {airborne[0]:.1f}-{airborne[1]:.1f} s"
-        )
     axes = [
         _identify_axis(
             log, axis, window, airborne, sample_rate_hz, gyro_cutoff_hz, torque_per_unit[axis]
@@ -552,7 +553,7 @@ def _fit_plant(
     for name, topic, field in (
         ("torque", "vehicle_torque_setpoint", f"xyz[{axis}]"),
         ("rate", "vehicle_angular_velocity", f"xyz[{axis}]"),
-        ("rate_sp", "vehicle_rates_setpoint", _RATE_SP_FIELDS[axis]),
+        ("rate_sp", "vehicle_rates_setpoint", _AXES[axis]),
     ):
         t, v = log.series(topic, field, "rate-loop fit")
         signals[name] = np.interp(grid, t, v)
