@@ -301,19 +301,27 @@ def identify_vehicle(
         pwm_range_us=pwm_range,
         hover=hover,
         axes=tuple(axes),
-        notes=_notes(sample_rate_hz),
+        notes=_notes(sample_rate_hz, log.params),
     )
 
 
-def _notes(sample_rate_hz: float) -> tuple[str, ...]:
-    if sample_rate_hz >= ALIASING_RATE_HZ:
-        return ()
-    return (
-        f"log rate {sample_rate_hz:.0f} Hz: the torque set-point's noise above "
-        f"{sample_rate_hz / 2:.0f} Hz (rate D-term) folds into the band, so B reads low and I "
-        f"high (≤ {ALIASING_BIAS:.0%}, in the uncertainty); log the rate topics at ≥ 200 Hz "
-        "(SDLOG_PROFILE high rate) for a clean estimate",
-    )
+def _notes(sample_rate_hz: float, params: Mapping[str, float]) -> tuple[str, ...]:
+    notes = []
+    if sample_rate_hz < ALIASING_RATE_HZ:
+        notes.append(
+            f"log rate {sample_rate_hz:.0f} Hz: the torque set-point's noise above "
+            f"{sample_rate_hz / 2:.0f} Hz (rate D-term) folds into the band, so B reads low and "
+            f"I high (≤ {ALIASING_BIAS:.0%}, in the uncertainty); log the rate topics at "
+            "≥ 200 Hz (SDLOG_PROFILE high rate) for a clean estimate"
+        )
+    if params.get("THR_MDL_FAC", 0.0) != 0.0:
+        # the mixer here allocates with a thrust linear in the motor command, as PX4 with
+        # THR_MDL_FAC = 0; a non-linear thrust model changes the torque per unit command
+        notes.append(
+            f"THR_MDL_FAC = {params['THR_MDL_FAC']:g}: the torque per unit assumes PX4's linear "
+            "thrust model (THR_MDL_FAC = 0), so I carries that error too"
+        )
+    return tuple(notes)
 
 
 def _sample_rate_hz(log: _Log) -> float:

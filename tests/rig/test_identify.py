@@ -149,6 +149,14 @@ def test_recovers_inertia_motor_lag_and_hover_at_the_autopilots_rate(synthetic_f
         assert axis.motor_lag_identified
         assert axis.motor_time_constant_s.value == pytest.approx(TRUE_MOTOR_TAU_S, rel=0.15)
     assert not result.axis("yaw").identified
+    # reliable axes go into the vehicle-file lines, tagged, I_zz and τ_m as the mean of the axes
+    printed = tomllib.loads(identification_toml(result, truth))
+    inertia = np.diag(printed["body"]["inertia_kgm2"])
+    identified = [result.axis(a).inertia_kgm2.value for a in ("roll", "pitch")]
+    np.testing.assert_allclose(inertia, [*identified, TRUE_INERTIA_KGM2[2]], atol=5e-6)
+    assert printed["propulsion"]["motor_time_constant_s"] == pytest.approx(
+        TRUE_MOTOR_TAU_S, rel=0.15
+    )
     offset = result.hover.speed_offset_radps
     assert abs(offset.value - truth.propulsion.speed_offset_radps) <= 3 * offset.uncertainty
     # the full-throttle point is kept
