@@ -546,5 +546,5 @@ def _commands(replay: Replay) -> tuple[Command, ...]:
             Command(b - start, "track", {"track": tracks["velocity"]}),
         ]
     if replay.disarm_s is not None:
-        commands.append(Command(replay.disarm_s - start, "disarm"))
+        commands.append(Command(replay.disarm_s - start, "disarm", {"may_refuse": True}))
     return tuple(sorted(commands, key=lambda c: c.at_s))

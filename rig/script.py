@@ -114,7 +114,8 @@ class CommandScript:
             return
         conversations = {
             "arm": lambda: g.arm(True),
-            "disarm": lambda: g.arm(False),
+            # a replay's disarm follows the real flight's and may find this one still flying
+            "disarm": lambda: g.attempt(g.arm(False)) if p.get("may_refuse") else g.arm(False),
             "takeoff": lambda: g.takeoff(p["altitude_m"]),
             "land": g.land,
             "mission": lambda: g.mission(p["waypoints_ned_m"]),

@@ -408,13 +408,19 @@ class FlightController:
             m["gps"].sample(sensors.gps, time_us)
 
     def _estimate(self, sensors: SensorFrame, dt_s: float, time_us: int) -> None:
-        self._imu_frames += 1
-        if self._rates_filter is None:
-            self._rates_filter = AngularVelocityFilter(self.params, round(1.0 / dt_s))
         if sensors.mag_gauss is not None:
             self._last_mag_gauss = sensors.mag_gauss
         # the latest field is used every frame, as PX4's filter keeps it between samples
         mag = self._last_mag_gauss if self.monitors["mag"].healthy(time_us) else None
+        if mag is None and self.params["SYS_HAS_MAG"] and not self.attitude.initialized:
+            # PX4's attitude_estimator_q initializes only once it has a field sample (its
+            # init_attq takes north from the magnetometer): the first IMU frames come before
+            # the first mag sample, and north from nothing would start the heading at 0 and
+            # take tens of seconds to converge on a vehicle that does not face north.
+            return
+        self._imu_frames += 1
+        if self._rates_filter is None:
+            self._rates_filter = AngularVelocityFilter(self.params, round(1.0 / dt_s))
         compensation = None
         if self.params["ATT_ACC_COMP"] and self.monitors["gps"].healthy(time_us):
             compensation = self._gps_accel_ned

@@ -258,3 +258,53 @@ def test_log_chirp_frequency_runs_from_f_min_to_f_max():
     omega_expected = f0 * (f1 / f0) ** (crossings[-2] / duration)
     assert math.pi / spacing == pytest.approx(omega_expected, rel=1e-3)
     assert omega_expected == pytest.approx(f1, rel=0.02)  # the last crossing, just before T
+
+
+def test_a_tolerated_refusal_is_the_result_not_an_error(pair):
+    """A replay's disarm follows the real flight's; a simulated vehicle still in the air is
+    refused, and the run goes on with the refusal in its log."""
+    link, _ = pair(
+        refuse={mavlink.MAV_CMD_COMPONENT_ARM_DISARM}, statustext="Disarming denied: not landed"
+    )
+    assert link.converse_now("disarm", link.attempt(link.arm(False))) == (
+        "the autopilot refused disarm: MAV_RESULT_DENIED (2) (Disarming denied: not landed); "
+        "the run goes on"
+    )
+
+
+def test_velocity_rates_and_quaternion_setpoints_say_what_they_control():
+    """PX4's type_mask semantics (MAVLink common.xml POSITION_TARGET_TYPEMASK,
+    ATTITUDE_TARGET_TYPEMASK), checked after a round trip through pymavlink."""
+    for instance in range(60, 100):
+        try:
+            link = GroundLink(Ports(instance), PX4_DEFAULT_HOME)
+            break
+        except GroundLinkError:
+            continue
+    parser = mavlink.MAVLink(None, 1, 1)
+    messages = [
+        link.velocity_setpoint((1.0, -2.0, -1.5), 1.7, 413.25),
+        link.velocity_setpoint((1.0, -2.0, -1.5), None, 413.25),
+        link.rates_setpoint((0.1, -0.2, 0.3), 0.55, 415.02),
+        link.quaternion_setpoint((0.9, 0.1, 0.2, 0.3), 0.6, 415.02),
+    ]
+    link.close()
+    velocity, no_yaw, rates, attitude = (parser.parse_buffer(m.pack(link.mav))[0] for m in messages)
+    assert (velocity.vx, velocity.vy, velocity.vz) == (1.0, -2.0, -1.5)
+    assert velocity.yaw == pytest.approx(1.7)
+    assert velocity.time_boot_ms == 413250
+    position_ignored = (mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE
+                        | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
+                        | mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE)  # fmt: skip
+    assert velocity.type_mask & position_ignored == position_ignored
+    assert velocity.type_mask & (mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE
+                                 | mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE) == 0  # fmt: skip
+    assert no_yaw.type_mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+    assert rates.type_mask == mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE  # rates used
+    assert (rates.body_roll_rate, rates.body_pitch_rate, rates.body_yaw_rate) == pytest.approx(
+        (0.1, -0.2, 0.3)
+    )
+    assert rates.thrust == pytest.approx(0.55)
+    assert rates.time_boot_ms == 415020
+    assert attitude.type_mask == 0b111  # body rates ignored, attitude and thrust used
+    assert attitude.q == pytest.approx([0.9, 0.1, 0.2, 0.3])
