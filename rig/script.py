@@ -5,7 +5,10 @@ Turns each :class:`rig.scenario.Command` into a ground-station conversation
 MAVSDK does (PX4 leaves offboard when setpoints stop): a ``goto`` re-sends its position
 setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at ``rate_hz``, a
 ``track`` sends a :class:`SetpointTrack`'s recorded setpoints at their times and holds the
-last one (re-sent every 0.1 s) between them. Any command ends the running stream.
+last one (re-sent every 0.1 s) between them. A mode command (takeoff, land, mission,
+motor test, another stream) ends the running stream; arm, disarm and set_param do not
+change the mode, so the stream goes on as MAVSDK's does (a replay arms and disarms
+mid-stream).
 
 With ``barrier=True`` (the reference autopilot) every setpoint travels inside an
 acknowledged conversation, so it acts at a known frame; with PX4 the stream is sent
@@ -71,6 +74,10 @@ class _Stream:
     sample: int = 0  # a track's latest sample due
 
 
+#: Commands that leave the flight mode, and so a running setpoint stream, as they are.
+_KEEP_STREAM = frozenset({"arm", "disarm", "set_param"})
+
+
 class CommandScript:
     """Walks the scenario's commands in time order and yields the actions due.
 
@@ -106,7 +113,8 @@ class CommandScript:
 
     def _start(self, command: Command, time_s: float) -> Iterator[Action]:
         g, p, name = self.ground, command.params, f"{command.action} at t={command.at_s:g} s"
-        self._stream = None  # every command takes over from a running setpoint stream
+        if command.action not in _KEEP_STREAM:
+            self._stream = None  # a mode command takes over from a running setpoint stream
         if command.action in ("goto", "pitch_sweep", "track"):
             rate_hz = p.get("rate_hz", 50.0) if command.action == "pitch_sweep" else None
             period = 1.0 / rate_hz if rate_hz else OFFBOARD_KEEPALIVE_S
