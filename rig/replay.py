@@ -123,6 +123,7 @@ class Replay:
     tracks: dict[str, SetpointTrack]
     commands: tuple[Command, ...]
     options: ReplayOptions
+    log_warnings: tuple[str, ...] = ()  # what pyulog reported (a damaged message skipped)
 
     @property
     def autopilot_params(self) -> tuple[str, ...]:
@@ -132,7 +133,8 @@ class Replay:
     @property
     def notes(self) -> tuple[tuple[str, str], ...]:
         """Warnings for the run's log: what the replay could not take from the real flight."""
-        notes = [
+        notes = [("warn", f"replay: {warning}") for warning in self.log_warnings]
+        notes += [
             ("warn", f"replay: parameter {s.name} = {s.value:g} skipped ({s.reason})")
             for s in self.skipped
         ]
@@ -196,6 +198,7 @@ class Replay:
                 {"name": s.name, "value": s.value, "reason": s.reason} for s in self.skipped
             ],
             "parameters_unknown_count": self.unknown_parameter_count,
+            "log_warnings": list(self.log_warnings),
             "start_yaw_deg": math.degrees(self.yaw_rad),
             "home": None
             if self.home is None
@@ -277,6 +280,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         tracks=tracks,
         commands=(),
         options=options,
+        log_warnings=log.warnings,
     )
     return replace(replay, commands=_commands(replay))
 
@@ -324,7 +328,7 @@ class _FlightLog:
         self.path = path
         if not path.is_file():
             raise ReplayError(f"{path}: flight log not found")
-        captured = io.StringIO()  # pyulog prints its corruption warnings; keep them quiet
+        captured = io.StringIO()  # pyulog prints its corruption warnings: keep them as notes
         try:
             with path.open("rb") as stream, contextlib.redirect_stdout(captured):
                 ulog = ULog(stream)
@@ -333,6 +337,9 @@ class _FlightLog:
         except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError,
                 OSError) as error:  # fmt: skip
             raise ReplayError(f"{path}: not a readable ULog file ({error})") from None
+        self.warnings = tuple(
+            f"{path.name}: {line.strip()}" for line in captured.getvalue().splitlines() if line
+        )
         self.topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
         if not self.topics:
             raise ReplayError(f"{path}: the ULog holds no logged data")

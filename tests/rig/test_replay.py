@@ -88,6 +88,10 @@ def test_plan_reads_the_x500_configuration_from_its_log(x500_path):
     assert times_s[np.argmax(vz <= -1.0)] == pytest.approx(413.0, abs=0.5)  # SOURCES: 413
     assert vz[0] == 0.0  # NaN before take-off: held at rest
     assert [c.action for c in plan.commands] == ["arm", "track", "disarm"]
+    # the log's one bit-rotted message (SOURCES.md) is reported, not swallowed
+    (warning,) = plan.log_warnings
+    assert "no subscription found for message id 32812" in warning
+    assert ("warn", f"replay: {warning}") in plan.notes
 
 
 def test_plan_window_switches_drives_and_back(x500_path):
