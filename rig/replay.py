@@ -282,7 +282,9 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         options=options,
         log_warnings=log.warnings,
     )
-    return replace(replay, commands=_commands(replay))
+    replay = replace(replay, commands=_commands(replay))
+    replay.scenario(Path(vehicle))  # a bad rate fails here, before a run folder exists
+    return replay
 
 
 def run_replay(
