@@ -63,11 +63,13 @@ RIG_OWNED_PARAMETERS = frozenset({"MAV_SYS_ID"})
 WMM_EPOCH_YEAR = 2026.0
 #: PX4 vehicle_status.arming_state ARMED (msg/VehicleStatus.msg).
 ARMING_STATE_ARMED = 2
-_TOPICS = {
-    "velocity": "vehicle_local_position_setpoint",
-    "attitude": "vehicle_attitude_setpoint",
-    "rates": "vehicle_rates_setpoint",
-}
+#: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
+_DRIVE_FIELDS = {
+    "velocity": ("vehicle_local_position_setpoint", ("vx", "vy", "vz", "yaw")),
+    "attitude": ("vehicle_attitude_setpoint",
+                 ("q_d[0]", "q_d[1]", "q_d[2]", "q_d[3]", "thrust_body[2]")),
+    "rates": ("vehicle_rates_setpoint", ("roll", "pitch", "yaw", "thrust_body[2]")),
+}  # fmt: skip
 
 
 class ReplayError(RigError):
@@ -412,13 +414,8 @@ class _FlightLog:
         still command something there; before any finite value a velocity is 0 (the vehicle
         is landed at the start) and a rate or thrust is 0. Yaw stays NaN (not controlled).
         """
-        name = _TOPICS[drive]
+        name, fields = _DRIVE_FIELDS[drive]
         data = self.topic(name, f"needed by --drive {drive}")
-        fields = {
-            "velocity": ("vx", "vy", "vz", "yaw"),
-            "attitude": ("q_d[0]", "q_d[1]", "q_d[2]", "q_d[3]", "thrust_body[2]"),
-            "rates": ("roll", "pitch", "yaw", "thrust_body[2]"),
-        }[drive]
         missing = [f for f in fields if f not in data]
         if missing:
             raise ReplayError(
