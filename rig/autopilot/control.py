@@ -81,26 +81,82 @@ def _lowpass_step(b, a, state, x):
     return y
 
 
+#: PX4 ``VehicleAngularVelocity::CheckFilters``: the gyro filters are redesigned when the
+#: measured IMU rate differs from their design rate by more than 1 %.
+_RATE_TOLERANCE = 0.01
+#: Sample intervals averaged per rate check. PX4 averages 1000; 100 corrects a wrong design
+#: within 0.4 s at 250 Hz and still averages a jittery link's intervals.
+_RATE_WINDOW_SAMPLES = 100
+#: PX4 bounds the derivative's dt to 0.2..20 ms (``VehicleAngularVelocity::Run``).
+_DT_RANGE_S = (2e-4, 0.02)
+
+
 class AngularVelocityFilter:
     """Filtered body rates and angular acceleration, PX4's ``VehicleAngularVelocity``:
     gyro low-pass ``IMU_GYRO_CUTOFF``; derivative of the raw rate low-passed at
-    ``IMU_DGYRO_CUTOFF`` for the rate controller's D term."""
+    ``IMU_DGYRO_CUTOFF`` for the rate controller's D term.
 
-    def __init__(self, params: Parameters, sample_rate_hz: float) -> None:
-        self.sample_rate_hz = sample_rate_hz
-        self._rate_filter = LowPass2p(sample_rate_hz, params["IMU_GYRO_CUTOFF"])
-        self._accel_filter = LowPass2p(sample_rate_hz, params["IMU_DGYRO_CUTOFF"])
-        self._previous: NDArray[np.float64] | None = None
+    The digital filters are designed for the IMU rate measured from the sample timestamps,
+    never assumed: a 40 Hz Butterworth designed for 1 kHz but run at 250 Hz cuts at 10 Hz,
+    and its phase lag drives the rate loop into a limit cycle. The first interval sets the
+    design; each window of intervals re-checks it, as PX4 does, within 1 %.
+    """
+
+    def __init__(self, params: Parameters) -> None:
+        self.sample_rate_hz: float | None = None  # None: no interval seen yet
         self.rates_radps = np.zeros(3)
         self.angular_accel_radps2 = np.zeros(3)
+        self._last_time_us: int | None = None
+        self._previous = np.zeros(3)
+        self._interval_sum_us = 0
+        self._interval_count = 0
+        self.configure(params)
 
-    def update(self, rates_radps: NDArray[np.float64], dt_s: float) -> None:
-        derivative = (
-            np.zeros(3) if self._previous is None else (rates_radps - self._previous) / dt_s
-        )
+    def configure(self, params: Parameters) -> None:
+        """Take the cutoffs; the filters restart at the current outputs (no transient)."""
+        self.gyro_cutoff_hz = params["IMU_GYRO_CUTOFF"]
+        self.dgyro_cutoff_hz = params["IMU_DGYRO_CUTOFF"]
+        if self.sample_rate_hz is not None:
+            self._design(self.sample_rate_hz)
+
+    def update(self, rates_radps: NDArray[np.float64], time_us: int) -> None:
+        """One gyro sample (bias-corrected, rad/s) taken at ``time_us``."""
+        last, self._last_time_us = self._last_time_us, time_us
+        rates_radps = np.asarray(rates_radps, dtype=float)
+        if last is None or time_us <= last:  # no interval: nothing to differentiate
+            self._previous = self.rates_radps = rates_radps
+            self._interval_sum_us = self._interval_count = 0
+            return
+        interval_us = time_us - last
+        self._check_rate(interval_us)
+        dt_s = min(max(interval_us * 1e-6, _DT_RANGE_S[0]), _DT_RANGE_S[1])
+        derivative = (rates_radps - self._previous) / dt_s
         self._previous = rates_radps
         self.rates_radps = self._rate_filter.apply(rates_radps)
         self.angular_accel_radps2 = self._accel_filter.apply(derivative)
+
+    def _check_rate(self, interval_us: int) -> None:
+        if not _DT_RANGE_S[0] <= interval_us * 1e-6 <= _DT_RANGE_S[1]:
+            self._interval_sum_us = self._interval_count = 0  # a gap is not a rate
+            return
+        if self.sample_rate_hz is None:
+            self._design(1e6 / interval_us)
+            return
+        self._interval_sum_us += interval_us
+        self._interval_count += 1
+        if self._interval_count < _RATE_WINDOW_SAMPLES:
+            return
+        measured_hz = 1e6 * self._interval_count / self._interval_sum_us
+        self._interval_sum_us = self._interval_count = 0
+        if abs(measured_hz - self.sample_rate_hz) > _RATE_TOLERANCE * self.sample_rate_hz:
+            self._design(measured_hz)
+
+    def _design(self, sample_rate_hz: float) -> None:
+        self.sample_rate_hz = sample_rate_hz
+        self._rate_filter = LowPass2p(sample_rate_hz, self.gyro_cutoff_hz)
+        self._rate_filter.reset(self.rates_radps)
+        self._accel_filter = LowPass2p(sample_rate_hz, self.dgyro_cutoff_hz)
+        self._accel_filter.reset(self.angular_accel_radps2)
 
 
 class RateController:
@@ -275,11 +331,42 @@ def thrust_to_attitude(
     return quat_from_dcm(np.column_stack([body_x, body_y, body_z])), magnitude
 
 
+class FilteredDerivative:
+    """PX4's ``BlockDerivative``: the difference quotient through a first-order low-pass.
+
+    The low-pass is PX4's ``BlockLowPass`` (``a = b / (1 + b)``, ``b = 2π·f_c·dt``; a
+    cutoff of 0 disables it, as ``MPC_VELD_LP = 0`` does). The first update after a reset
+    returns 0, since one sample has no derivative.
+    """
+
+    def __init__(self, cutoff_hz: float) -> None:
+        self.cutoff_hz = cutoff_hz
+        self.reset()
+
+    def reset(self) -> None:
+        self._previous: NDArray[np.float64] | None = None
+        self.value = np.zeros(3)
+
+    def update(self, sample: NDArray[np.float64], dt_s: float) -> NDArray[np.float64]:
+        previous, self._previous = self._previous, np.array(sample, dtype=float)
+        if previous is None or dt_s <= 0.0:
+            return self.value
+        raw = (self._previous - previous) / dt_s
+        if self.cutoff_hz > 0.0:
+            b = 2.0 * math.pi * self.cutoff_hz * dt_s
+            self.value = self.value + (b / (1.0 + b)) * (raw - self.value)
+        else:
+            self.value = raw
+        return self.value
+
+
 class PositionController:
     """PX4 ``mc_pos_control/PositionControl/PositionControl.cpp``.
 
     Position P → velocity set-point (horizontal limit, position term first); velocity PID
-    (D on the measured acceleration) → acceleration set-point; acceleration → thrust vector
+    (D on the velocity estimate's derivative, low-passed at ``MPC_VELD_LP`` as PX4's
+    ``_vel_*_deriv``: the raw accelerometer would feed frame vibration straight into the
+    tilt set-point) → acceleration set-point; acceleration → thrust vector
     through the hover thrust, tilt limited to ``MPC_TILTMAX_AIR``; vertical thrust has
     priority with a horizontal margin ``MPC_THR_XY_MARG``; anti-windup vertical by clamping
     and horizontal by tracking. Set-point entries that are NaN are not controlled.
@@ -287,6 +374,7 @@ class PositionController:
 
     def __init__(self, params: Parameters) -> None:
         self.velocity_integral = np.zeros(3)
+        self.velocity_derivative = FilteredDerivative(params["MPC_VELD_LP"])
         self.configure(params)
 
     def configure(self, params: Parameters) -> None:
@@ -302,15 +390,17 @@ class PositionController:
         self.thrust_max = params["MPC_THR_MAX"]
         self.thrust_xy_margin = params["MPC_THR_XY_MARG"]
         self.tilt_max_rad = math.radians(params["MPC_TILTMAX_AIR"])
+        self.velocity_derivative.cutoff_hz = params["MPC_VELD_LP"]
 
     def reset_integral(self) -> None:
+        """Clear the velocity integral and the derivative's memory (the loop restarts)."""
         self.velocity_integral[:] = 0.0
+        self.velocity_derivative.reset()
 
     def update(
         self,
         position_ned_m: NDArray[np.float64],
         velocity_ned_mps: NDArray[np.float64],
-        accel_ned_mps2: NDArray[np.float64],
         position_sp: NDArray[np.float64],
         velocity_sp: NDArray[np.float64],
         velocity_limits_mps: tuple[float, float, float],
@@ -334,6 +424,7 @@ class PositionController:
         free = np.isnan(position_sp) & np.isnan(velocity_sp)
         vel_error = np.where(free, 0.0, vel_sp - velocity_ned_mps)
         acc_sp = vel_error * self.gain_vel_p + np.where(free, 0.0, self.velocity_integral)
+        accel_ned_mps2 = self.velocity_derivative.update(velocity_ned_mps, dt_s)
         acc_sp -= np.where(free, 0.0, accel_ned_mps2 * self.gain_vel_d)
         thrust = self._acceleration_to_thrust(acc_sp)
 

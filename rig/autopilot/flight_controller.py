@@ -149,7 +149,7 @@ class FlightController:
         self.truth: GroundTruth | None = None
         self._gps_good = False
         self._params_version = -1
-        self._rates_filter: AngularVelocityFilter | None = None
+        self._rates_filter = AngularVelocityFilter(self.params)
         self._imu_frames = 0
         self._last_position_loop_us = -POSITION_LOOP_PERIOD_US
         self._last_fast_log_us = -FAST_LOG_PERIOD_US
@@ -388,8 +388,7 @@ class FlightController:
         self.allocator.configure(p)
         if not p["ATT_MAG_DECL_A"]:
             self.attitude.set_declination(math.radians(p["ATT_MAG_DECL"]))
-        if self._rates_filter is not None:
-            self._rates_filter = AngularVelocityFilter(p, self._rates_filter.sample_rate_hz)
+        self._rates_filter.configure(p)
         if self._imu_average is None or self._imu_average.rate_hz != p["IMU_INTEG_RATE"]:
             self._imu_average = ImuAverage(p["IMU_INTEG_RATE"])
         self._params_version = p.version
@@ -419,8 +418,6 @@ class FlightController:
             # take tens of seconds to converge on a vehicle that does not face north.
             return
         self._imu_frames += 1
-        if self._rates_filter is None:
-            self._rates_filter = AngularVelocityFilter(self.params, round(1.0 / dt_s))
         compensation = None
         if self.params["ATT_ACC_COMP"] and self.monitors["gps"].healthy(time_us):
             compensation = self._gps_accel_ned
@@ -429,7 +426,7 @@ class FlightController:
             if offsets is not None:
                 self.attitude.gyro_bias_radps = offsets
         self.attitude.update(sensors.gyro_radps, sensors.accel_mps2, mag, dt_s, compensation)
-        self._rates_filter.update(self.attitude.rates_radps, dt_s)
+        self._rates_filter.update(self.attitude.rates_radps, time_us)
         self.position.predict(quat_to_dcm(self.attitude.q) @ sensors.accel_mps2, dt_s)
         baro_ok = self.monitors["baro"].healthy(time_us)
         if sensors.baro_pressure_pa is not None and baro_ok:
@@ -623,7 +620,6 @@ class FlightController:
         thrust, self.velocity_sp, self.acceleration_sp = self.position_control.update(
             position,
             est.velocity_ned_mps,
-            est.accel_ned_mps2,
             setpoint.position_ned_m,
             setpoint.velocity_ned_mps,
             setpoint.velocity_limits_mps,

@@ -9,8 +9,10 @@ from scipy import signal
 
 from quad_model.frames import STANDARD_GRAVITY_MPS2, quat_from_euler, quat_to_dcm
 from rig.autopilot.control import (
+    AngularVelocityFilter,
     AttitudeController,
     ControlAllocator,
+    FilteredDerivative,
     LowPass2p,
     PositionController,
     RateController,
@@ -107,7 +109,7 @@ def test_attitude_error_law_is_px4s():
 def test_hover_needs_hover_thrust_and_level_attitude():
     control = PositionController(Parameters())
     thrust, _, _ = control.update(
-        np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.full(3, np.nan), (5, 3, 1.5), 0.02
+        np.zeros(3), np.zeros(3), np.zeros(3), np.full(3, np.nan), (5, 3, 1.5), 0.02
     )
     assert thrust == pytest.approx([0, 0, -0.5])
     q, collective = thrust_to_attitude(thrust, math.radians(30))
@@ -118,7 +120,7 @@ def test_hover_needs_hover_thrust_and_level_attitude():
 def test_horizontal_error_tilts_towards_it_within_the_tilt_limit():
     control = PositionController(Parameters())
     thrust, vel_sp, acc_sp = control.update(
-        np.zeros(3), np.zeros(3), np.zeros(3), np.array([100.0, 0, 0]), np.full(3, np.nan),
+        np.zeros(3), np.zeros(3), np.array([100.0, 0, 0]), np.full(3, np.nan),
         (5.0, 3.0, 1.5), 0.02,
     )  # fmt: skip
     assert vel_sp[0] == pytest.approx(5.0)  # horizontal speed limit
@@ -128,3 +130,85 @@ def test_horizontal_error_tilts_towards_it_within_the_tilt_limit():
     tilt = math.acos(body_z[2])
     assert tilt == pytest.approx(math.atan(9.0 / STANDARD_GRAVITY_MPS2), abs=1e-6)
     assert body_z[0] < 0  # nose down: thrust points forward
+
+
+def test_filtered_derivative_of_a_ramp_is_a_first_order_step_to_its_slope():
+    """A ramp of slope s: the first call has no derivative (0), then every difference
+    quotient is s and PX4's BlockLowPass (a = b/(1+b), b = 2π·f_c·dt) approaches it as the
+    discrete first-order step response s·(1 − (1/(1+b))ⁿ) after n quotients."""
+    dt, cutoff_hz = 0.02, 5.0
+    slope = np.array([1.5, -0.5, 2.0])
+    derivative = FilteredDerivative(cutoff_hz)
+    assert derivative.update(np.zeros(3), dt) == pytest.approx(np.zeros(3), abs=0.0)
+    b = 2 * math.pi * cutoff_hz * dt
+    for n in range(1, 51):
+        value = derivative.update(slope * n * dt, dt)
+        assert value == pytest.approx(slope * (1 - (1 / (1 + b)) ** n), rel=1e-9)
+    assert value == pytest.approx(slope, rel=1e-6)  # settled: the slope itself
+
+
+def test_filtered_derivative_without_cutoff_is_the_difference_quotient_and_resets():
+    derivative = FilteredDerivative(0.0)  # MPC_VELD_LP = 0: no low-pass
+    derivative.update(np.array([1.0, 2.0, 3.0]), 0.01)
+    assert derivative.update(np.array([1.5, 1.0, 3.0]), 0.01) == pytest.approx([50, -100, 0])
+    derivative.reset()
+    assert derivative.update(np.array([9.0, 9.0, 9.0]), 0.01) == pytest.approx(np.zeros(3))
+    assert derivative.update(np.array([9.0, 9.0, 9.1]), 0.01) == pytest.approx([0, 0, 10])
+
+
+def _gyro_gain(angular: AngularVelocityFilter, frequency_hz: float, rate_hz: float,
+               start_us: int) -> tuple[float, float]:  # fmt: skip
+    """Steady-state amplitude of the filtered rate and angular acceleration for a unit sine
+    sampled at ``rate_hz`` from ``start_us`` on (the last second of four)."""
+    period_us = round(1e6 / rate_hz)
+    rates, accels = [], []
+    for k in range(4 * round(rate_hz)):
+        time_us = start_us + k * period_us
+        angular.update(np.full(3, math.sin(2 * math.pi * frequency_hz * time_us * 1e-6)), time_us)
+        rates.append(angular.rates_radps[0])
+        accels.append(angular.angular_accel_radps2[0])
+    last = round(rate_hz)
+    return max(np.abs(rates[-last:])), max(np.abs(accels[-last:]))
+
+
+@pytest.mark.parametrize("rate_hz", [250, 1000])
+def test_gyro_filters_are_designed_for_the_measured_imu_rate(rate_hz):
+    """At its cutoff a 2nd-order Butterworth passes 1/√2 of a sine, at the IMU rate the
+    timestamps show (the first frame at one period, as in a lockstep run: no earlier time to
+    measure from). Designed for 1 kHz but run at 250 Hz, the 40 Hz gyro cutoff would act at
+    10 Hz, pass 0.06 of a 40 Hz sine, and its lag made the rate loop limit-cycle."""
+    params = Parameters()
+    angular = AngularVelocityFilter(params)
+    period_us = 1_000_000 // rate_hz
+    cutoff_hz = params["IMU_GYRO_CUTOFF"]
+    gain, _ = _gyro_gain(angular, cutoff_hz, rate_hz, start_us=period_us)
+    assert angular.sample_rate_hz == rate_hz
+    # the sine's peak falls between samples: up to 1 − cos(π·f/fs) = 3 % low at 250 Hz
+    assert gain == pytest.approx(1 / math.sqrt(2), rel=0.04)
+    # the D-term's angular acceleration: a sine of ω rad/s² at IMU_DGYRO_CUTOFF, through the
+    # same Butterworth, after the difference quotient's own gain sin(πf/fs)/(πf/fs)
+    dgyro_hz = params["IMU_DGYRO_CUTOFF"]
+    angular = AngularVelocityFilter(params)
+    _, accel_gain = _gyro_gain(angular, dgyro_hz, rate_hz, start_us=period_us)
+    x = math.pi * dgyro_hz / rate_hz
+    assert accel_gain == pytest.approx(2 * math.pi * dgyro_hz / math.sqrt(2) * math.sin(x) / x,
+                                       rel=0.04)  # fmt: skip
+
+
+def test_gyro_filters_follow_a_changed_imu_rate_within_one_percent():
+    """PX4's CheckFilters: a first interval that misleads (1 ms, then 4 ms frames) is
+    corrected once a window of intervals shows the true rate; a 0.5 % drift is not."""
+    params = Parameters()
+    angular = AngularVelocityFilter(params)
+    angular.update(np.zeros(3), 1000)
+    angular.update(np.zeros(3), 2000)
+    assert angular.sample_rate_hz == 1000
+    gain, _ = _gyro_gain(angular, params["IMU_GYRO_CUTOFF"], 250, start_us=6000)
+    assert angular.sample_rate_hz == pytest.approx(250)
+    assert gain == pytest.approx(1 / math.sqrt(2), rel=0.04)
+    for k in range(300):  # after a 1 s gap, 4020 µs frames: 248.8 Hz, within 1 % of it
+        angular.update(np.zeros(3), 5_000_000 + k * 4020)
+    assert angular.sample_rate_hz == pytest.approx(250)
+    for k in range(1, 300):  # 4100 µs: 243.9 Hz, off by 2.4 %
+        angular.update(np.zeros(3), 7_000_000 + k * 4100)
+    assert angular.sample_rate_hz == pytest.approx(1e6 / 4100)
