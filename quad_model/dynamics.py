@@ -127,15 +127,24 @@ def air_density_kgpm3(params: np.ndarray, down_m: float) -> float:
 
 
 @njit(cache=True)
+def open_circuit_voltage(params: np.ndarray, charge_used_c: float) -> float:
+    """The pack's EMF: each cell linear in state of charge, full to empty (PX4's model).
+
+    :func:`quad_model.model.charge_used_for_voltage_c` is its inverse.
+    """
+    soc = min(1.0, max(0.0, 1.0 - charge_used_c / params[P_CAPACITY_C]))
+    cell = params[P_CELL_EMPTY] + (params[P_CELL_FULL] - params[P_CELL_EMPTY]) * soc
+    return params[P_CELLS] * cell
+
+
+@njit(cache=True)
 def battery_terminal(params: np.ndarray, charge_used_c: float, load_w: float) -> tuple:
     """Terminal voltage and current of the pack delivering ``load_w``.
 
     V = E - R·I with I = P/V gives V² - E·V + R·P = 0; the upper root is the operating
     point. Past the pack's maximum power (E²/4R) the voltage collapses to E/2.
     """
-    soc = min(1.0, max(0.0, 1.0 - charge_used_c / params[P_CAPACITY_C]))
-    cell = params[P_CELL_EMPTY] + (params[P_CELL_FULL] - params[P_CELL_EMPTY]) * soc
-    emf = params[P_CELLS] * cell
+    emf = open_circuit_voltage(params, charge_used_c)
     disc = emf * emf - 4.0 * params[P_R_INTERNAL] * load_w
     voltage = 0.5 * (emf + math.sqrt(max(disc, 0.0)))
     return voltage, load_w / voltage

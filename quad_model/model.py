@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from quad_model import dynamics as dyn
 from quad_model.environment import Environment
 from quad_model.frames import STANDARD_GRAVITY_MPS2
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from quad_model.vehicle import ROTOR_COUNT, BatteryParams, Vehicle
 
 DEFAULT_PHYSICS_RATE_HZ = 5000.0
 #: Above this many vehicles the batch runs on all cores (thread start-up costs ~10 µs).
@@ -141,6 +141,25 @@ class VehicleTruth:
         return bool(self._state[dyn.X_ON_GROUND] > 0.0)
 
 
+def charge_used_for_voltage_c(battery: BatteryParams, voltage_v: float) -> float:
+    """Charge already drawn (C) from a pack whose open-circuit voltage is ``voltage_v``.
+
+    The inverse of :func:`quad_model.dynamics.open_circuit_voltage`, so a model can start
+    from a measured resting voltage instead of full. Raises :class:`ModelInputError` when
+    the voltage lies outside the pack's empty..full range.
+    """
+    empty_v = battery.cell_count * battery.cell_empty_v
+    full_v = battery.cell_count * battery.cell_full_v
+    if not empty_v <= voltage_v <= full_v:  # also refuses NaN
+        raise ModelInputError(
+            f"battery_voltage_v={voltage_v:g} V is outside the pack's open-circuit range "
+            f"{empty_v:g}..{full_v:g} V ({battery.cell_count} cells × "
+            f"{battery.cell_empty_v:g}..{battery.cell_full_v:g} V)"
+        )
+    state_of_charge = (voltage_v - empty_v) / (full_v - empty_v)
+    return (1.0 - state_of_charge) * battery.capacity_ah * 3600.0
+
+
 def pack_params(vehicle: Vehicle, environment: Environment, mount: Mount) -> NDArray[np.float64]:
     """One row of kernel parameters (layout in :mod:`quad_model.dynamics`)."""
     body, prop, bat = vehicle.body, vehicle.propulsion, vehicle.battery
@@ -235,8 +254,13 @@ class QuadBatch:
         angular_rate_frd_radps: ArrayLike = (0.0, 0.0, 0.0),
         rotor_speed_radps: ArrayLike = (0.0, 0.0, 0.0, 0.0),
         time_s: float = 0.0,
+        battery_voltage_v: ArrayLike | None = None,
     ) -> None:
-        """Put every vehicle in the given state (each argument broadcasts over vehicles)."""
+        """Put every vehicle in the given state (each argument broadcasts over vehicles).
+
+        ``battery_voltage_v`` is each pack's open-circuit voltage at the start (None: full),
+        e.g. a real flight's resting voltage before arming.
+        """
         n = self.count
         s = self.states
         s[:] = 0.0
@@ -253,6 +277,12 @@ class QuadBatch:
             raise ModelInputError(f"rotor_speed_radps={rotor_speed_radps} must be >= 0")
         s[:, dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + ROTOR_COUNT] = speeds
         s[:, dyn.X_TIME] = time_s
+        if battery_voltage_v is not None:
+            voltages = np.broadcast_to(np.asarray(battery_voltage_v, dtype=float), (n,))
+            s[:, dyn.X_CHARGE_USED] = [
+                charge_used_for_voltage_c(vehicle.battery, float(voltage))
+                for vehicle, voltage in zip(self.vehicles, voltages, strict=True)
+            ]
         if not np.all(np.isfinite(s)):
             raise ModelInputError("reset state has a non-finite value")
         if self.mount == Mount.FREE:

@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 from quad_model import Environment, ModelInputError, Mount, QuadBatch, QuadModel, Wind
+from quad_model import dynamics as dyn
 from quad_model.environment import isa_density_kgpm3
 from quad_model.frames import STANDARD_GRAVITY_MPS2, euler_from_quat, quat_from_euler, quat_to_dcm
+from quad_model.model import charge_used_for_voltage_c, pack_params
 
 G = STANDARD_GRAVITY_MPS2
 HOME_ALT_M = Environment().home.alt_amsl_m
@@ -160,6 +162,51 @@ def test_battery_sags_with_current_and_limits_speed(f450, rng):
     )
     np.testing.assert_allclose(full.rotor_speed_radps, full_speed, rtol=1e-4)
     assert full.battery_charge_used_c > 0.0
+
+
+def test_open_circuit_voltage_law_round_trips_through_charge_used(x500, f450):
+    # X500 pack: 4S, 3.5..4.2 V/cell, 5 Ah. 15.2 V is SoC (15.2 - 14.0)/(16.8 - 14.0) = 3/7,
+    # so 4/7 of 18 000 C is already drawn.
+    assert charge_used_for_voltage_c(x500.battery, 15.2) == pytest.approx(18000 * 4 / 7, rel=1e-12)
+    for vehicle in (x500, f450):
+        battery = vehicle.battery
+        params = pack_params(vehicle, Environment(), Mount.FREE)
+        empty_v, full_v = (
+            battery.cell_count * v for v in (battery.cell_empty_v, battery.cell_full_v)
+        )
+        for voltage in np.linspace(empty_v, full_v, 7):
+            charge = charge_used_for_voltage_c(battery, float(voltage))
+            assert dyn.open_circuit_voltage(params, charge) == pytest.approx(voltage, rel=1e-12)
+        assert charge_used_for_voltage_c(battery, full_v) == 0.0
+        assert charge_used_for_voltage_c(battery, empty_v) == pytest.approx(
+            battery.capacity_ah * 3600.0, rel=1e-12
+        )
+
+
+def test_model_starts_from_a_given_battery_voltage(x500, rng):
+    model = QuadModel(x500, rng, mount=Mount.THRUST_STAND)
+    full_hover = model.hover_throttle()
+    model.reset(battery_voltage_v=15.2)
+    model.advance([0.0] * 4, 0.01)
+    battery = x500.battery
+    # At rest only the avionics load: V = E - R·P/V, E = 15.2 V (the upper root).
+    emf, resistance = 15.2, battery.internal_resistance_ohm
+    rest_v = 0.5 * (emf + math.sqrt(emf**2 - 4 * resistance * battery.avionics_power_w))
+    assert model.truth.battery_voltage_v == pytest.approx(rest_v, rel=1e-6)
+    assert model.truth.battery_charge_used_c == pytest.approx(18000 * 4 / 7, rel=1e-6)
+    # A lower pack needs more throttle for the same hover speed: the ESC curve scales with V.
+    assert model.hover_throttle() > full_hover
+
+
+@pytest.mark.parametrize("voltage", [13.9, 16.9, math.nan])
+def test_battery_voltage_outside_the_pack_range_is_refused(x500, rng, voltage):
+    model = QuadModel(x500, rng)
+    with pytest.raises(ModelInputError) as error:
+        model.reset(battery_voltage_v=voltage)
+    assert str(error.value) == (
+        f"battery_voltage_v={voltage:g} V is outside the pack's open-circuit range "
+        "14..16.8 V (4 cells × 3.5..4.2 V)"
+    )
 
 
 def test_ground_contact_holds_and_landing_does_not_bounce(f450, rng):
