@@ -8,6 +8,7 @@ readable (exit 130).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -105,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace, console: Console) -> RunResult:
     """``rig run`` and ``rig hil-sim``."""
     scenario = load_scenario(HIL_SIM_SCENARIO if args.command == "hil-sim" else args.scenario)
+    if args.vehicle is not None:
+        scenario = dataclasses.replace(scenario, vehicle=args.vehicle)
     options = _run_options(args)
     _announce(console, scenario.name, scenario.description,
               options.sensor_layer or scenario.sensor_layer, options)  # fmt: skip
@@ -164,6 +167,8 @@ def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) 
                             help="reference (rig starts it) or px4 (you start PX4)")  # fmt: skip
         parser.add_argument("--duration", type=float, default=None,
                             help="simulated seconds (default: the scenario's)")  # fmt: skip
+        parser.add_argument("--vehicle", default=None, metavar="NAME|PATH",
+                            help="vehicle file instead of the scenario's")  # fmt: skip
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="reference-autopilot parameter (repeatable)")  # fmt: skip
     parser.add_argument("--connect-timeout", type=float, default=60.0,
