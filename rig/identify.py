@@ -54,13 +54,13 @@ from scipy.ndimage import uniform_filter1d
 from credibility.errors import CredibilityError
 from credibility.indices import coherence_weight
 from credibility.spectral import default_windows, estimate_response, log_grid
-from quad_model.frames import PWM_MAX_US, PWM_MIN_US, STANDARD_GRAVITY_MPS2, pwm_to_throttle
+from quad_model.frames import STANDARD_GRAVITY_MPS2, pwm_to_throttle
 from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
 from rig.autopilot.control import ControlAllocator
 from rig.autopilot.params import Parameters
 from rig.errors import RigError
-from rig.replay import AIRFRAMES
+from rig.replay import AIRFRAMES, motor_pwm_range
 
 #: Hover: airborne, RMS over HOVER_SMOOTH_S of |v| and of each body rate below these, for at
 #: least MIN_HOVER_S (a position-hold hover with a pilot's small corrections qualifies).
@@ -98,8 +98,6 @@ DELAY_BOUNDS_S = (0.0, 0.2)
 TORQUE_STEP = 0.05
 #: Thrust-stand settling time in motor time constants (e^-20: settled to 2e-9).
 SETTLE_TIME_CONSTANTS = 20.0
-#: PX4 output functions Motor 1..4 (``PWM_MAIN_FUNCn`` / ``PWM_AUX_FUNCn``).
-_MOTOR_FUNCTIONS = (101, 102, 103, 104)
 _GEOMETRY_PARAM = re.compile(rf"CA_ROTOR[0-{ROTOR_COUNT - 1}]_(PX|PY|KM)")
 _AXES = ("roll", "pitch", "yaw")
 _TOPICS = (
@@ -254,7 +252,7 @@ def identify_vehicle(
     log = _read_log(Path(log_path))
     sample_rate_hz = _sample_rate_hz(log)
     gyro_cutoff_hz = float(log.params.get("IMU_GYRO_CUTOFF", 0.0))
-    pwm_range = _motor_pwm_range(log.params)
+    pwm_range = motor_pwm_range(log.params, log.path)
     airborne = _airborne_span(log)
     window = excitation_window_s or airborne
     if not (airborne[0] <= window[0] < window[1] <= airborne[1]):
@@ -331,24 +329,6 @@ def _sample_rate_hz(log: _Log) -> float:
             f"{log.path}: vehicle_angular_velocity has only {time_s.size} samples"
         )
     return float((time_s.size - 1) / (time_s[-1] - time_s[0]))
-
-
-def _motor_pwm_range(params: Mapping[str, float]) -> tuple[float, float]:
-    """PWM (µs) at motor command 0 and 1: the log's ``PWM_*_MINn/MAXn`` of the outputs
-    assigned to Motor 1..4, PX4's defaults 1000/2000 when the log has none (PX4 SITL, the
-    rig's autopilot, whose commands go out as 1000..2000 µs, ``rig.pwm``)."""
-    ranges = set()
-    for key, function in params.items():
-        if key.startswith(("PWM_MAIN_FUNC", "PWM_AUX_FUNC")) and function in _MOTOR_FUNCTIONS:
-            prefix, channel = key.split("_FUNC")
-            ranges.add(
-                (float(params[f"{prefix}_MIN{channel}"]), float(params[f"{prefix}_MAX{channel}"]))
-            )
-    if not ranges:
-        return PWM_MIN_US, PWM_MAX_US
-    if len(ranges) > 1:
-        raise IdentificationError(f"motor outputs have different PWM ranges {sorted(ranges)}")
-    return ranges.pop()
 
 
 def _airborne_span(log: _Log) -> tuple[float, float]:

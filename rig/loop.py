@@ -254,6 +254,7 @@ class _Loop:
         self.model.reset(
             position_ned_m=start.position_ned_m,
             attitude_quat=_yaw_quat(math.radians(start.yaw_deg)),
+            battery_voltage_v=scenario.initial_battery_voltage_v,
         )
         self.sensors = SensorSuite(
             vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
@@ -262,7 +263,7 @@ class _Loop:
         self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event)
         self.layer = _make_sensor_layer(self.sensor_layer_name, self.rates)
         self._closers.append(self.layer.close)
-        self.pwm = PwmOutput(4, self.rates.pwm_hz)
+        self.pwm = PwmOutput(4, self.rates.pwm_hz, scenario.motor_pwm_range_us)
         self.throttle = np.zeros(4)
         self._capture: tuple[tuple[float, ...], tuple[bool, ...]] | None = None
         self.ports = Ports(options.instance)

@@ -2,8 +2,10 @@
 
 The autopilot side (:class:`PwmOutput`) behaves as PX4's ``pwm_out`` with its default
 output functions: every ``1/pwm_hz`` a pulse starts whose width was latched from the
-latest actuator controls, 1000 µs (``PWM_MAIN_DIS``/``PWM_MAIN_MIN``) to 2000 µs
-(``PWM_MAIN_MAX``), 1000 µs while disarmed. So a new command reaches the motors only at the
+latest actuator controls, mapped linearly from 0..1 onto the motor outputs' range
+(``PWM_MAIN_MIN``/``MAX``, PX4's defaults 1000..2000 µs; a real airframe often has e.g.
+1100..1900 µs, so the armed motors idle at command 0), 1000 µs (``PWM_MAIN_DIS``) while
+disarmed. So a new command reaches the motors only at the
 next PWM period (up to 2.5 ms later at 400 Hz), as on the real rig. A dropped-out channel
 emits no pulse at all. The pulses go to the PWM capture core (RTL) or its model (TLM), and
 the captured widths, not the commands, drive the motors; a channel whose capture timed out
@@ -21,10 +23,12 @@ import numpy as np
 
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS
-from quad_model.frames import PWM_MIN_US, pwm_to_throttle, throttle_to_pwm
+from quad_model.frames import PWM_MAX_US, PWM_MIN_US, pwm_to_throttle
 
 #: PX4 PWM_MAIN_DISn default: the pulse an ESC sees while the vehicle is disarmed.
 PWM_DISARMED_US = PWM_MIN_US
+#: PX4's PWM_MAIN_MINn/MAXn defaults: the pulses for actuator command 0 and 1.
+DEFAULT_MOTOR_PWM_RANGE_US = (PWM_MIN_US, PWM_MAX_US)
 #: Quad-X: the first four outputs drive the motors (PX4 MOTOR_ORDER).
 MOTOR_CHANNELS = 4
 #: The capture core's tick: 1 µs, the unit PX4 uses for PWM (fpga_hdl.pwm_capture).
@@ -46,9 +50,20 @@ class Pulse:
 class PwmOutput:
     """The autopilot's PWM outputs: pulses at ``pwm_hz``, widths latched at each period."""
 
-    def __init__(self, channels: int, pwm_hz: int) -> None:
+    def __init__(
+        self,
+        channels: int,
+        pwm_hz: int,
+        range_us: tuple[float, float] = DEFAULT_MOTOR_PWM_RANGE_US,
+    ) -> None:
         if not 50 <= pwm_hz <= 490:
             raise ValueError(f"pwm_hz must be within 50..490 Hz (standard ESC PWM), got {pwm_hz}")
+        if not PWM_MIN_US <= range_us[0] < range_us[1] <= PWM_MAX_US:
+            raise ValueError(
+                f"range_us must satisfy {PWM_MIN_US:g} <= min < max <= {PWM_MAX_US:g} µs "
+                f"(what the ESC input spans), got {range_us}"
+            )
+        self.range_us = range_us
         self.channels = channels
         self.period_us = round(1e6 / pwm_hz)
         self._disarmed_us = [round(PWM_DISARMED_US)] * channels
@@ -79,7 +94,12 @@ class PwmOutput:
         if self._latest is not None:
             motors, armed = self._latest
             self._latest = None
-            widths = throttle_to_pwm(motors) if armed else self._disarmed_us
+            low_us, high_us = self.range_us
+            widths = (
+                low_us + np.clip(motors, 0.0, 1.0) * (high_us - low_us)
+                if armed
+                else self._disarmed_us
+            )
             self._widths_us = [round(float(width)) for width in widths]
         return self._widths_us
 

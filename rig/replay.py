@@ -3,9 +3,11 @@
 :func:`plan_replay` reads the log and configures the run from it, without flying: the
 vehicle from ``SYS_AUTOSTART`` (``--vehicle`` wins), the battery's cell count, every
 parameter the reference autopilot knows, the start heading, the home position, the real
-arm/disarm times and the setpoint tracks of the chosen drive. :func:`run_replay` flies the
-plan and leaves ``rig.ulg``, ``autopilot.ulg``, the derived ``vehicle.toml`` and
-``replay.json`` (what was applied, skipped and assumed) in the run folder.
+arm/disarm times and the setpoint tracks of the chosen drive, the motor outputs' PWM
+range (so the armed motors idle at command 0 as the real ones did) and the battery's
+resting voltage at the start (the pack is rarely full, and the ESC speed follows it).
+:func:`run_replay` flies the plan and leaves ``rig.ulg``, ``autopilot.ulg``, the derived
+``vehicle.toml`` and ``replay.json`` (what was applied, skipped and assumed) in the run folder.
 
 The autopilot's clock starts at the real log's first timestamp, so the replayed logs share
 the real log's time axis (ULog boot seconds) and one credibility plan scores both.
@@ -28,7 +30,7 @@ import io
 import json
 import math
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -41,11 +43,13 @@ from pyulog import ULog
 from pyulog.core import ULogException
 
 from quad_model.environment import GeoPoint, MagneticField
+from quad_model.model import ModelInputError, charge_used_for_voltage_c
 from quad_model.toml_file import read_toml_file
-from quad_model.vehicle import VEHICLES_DIR, VehicleFileError, vehicle_from_dict
+from quad_model.vehicle import VEHICLES_DIR, BatteryParams, VehicleFileError, vehicle_from_dict
 from rig.autopilot.params import PARAMETERS, ParameterError, Parameters
 from rig.errors import RigError, ScenarioError
 from rig.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
+from rig.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PwmOutput
 from rig.scenario import SENSOR_LAYERS, Command, Scenario, scenario_from_dict
 from rig.script import SetpointTrack
 
@@ -61,6 +65,9 @@ RIG_OWNED_PARAMETERS = frozenset({"MAV_SYS_ID"})
 #: The autopilot looks declination up in the WMM at this epoch (flight_controller), so the
 #: simulated field is taken at the same one: the two then agree on north.
 WMM_EPOCH_YEAR = 2026.0
+#: PX4 output functions Motor 1..4, the values of ``PWM_MAIN_FUNCn`` / ``PWM_AUX_FUNCn``
+#: (PX4-Autopilot src/lib/mixer_module/output_functions.yaml: Motor start 101).
+MOTOR_OUTPUT_FUNCTIONS = (101, 102, 103, 104)
 #: PX4 vehicle_status.arming_state ARMED (msg/VehicleStatus.msg).
 ARMING_STATE_ARMED = 2
 #: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
@@ -114,6 +121,8 @@ class Replay:
     vehicle_reason: str
     vehicle_document: dict[str, Any]
     cell_count: int | None
+    motor_pwm_range_us: tuple[float, float]  # pulse at motor command 0 and 1
+    initial_battery_voltage_v: float | None  # open-circuit at the start; None: full
     parameters: dict[str, float | int]  # applied, as the log has them
     skipped: tuple[SkippedParameter, ...]
     unknown_parameter_count: int
@@ -148,6 +157,8 @@ class Replay:
                     f"{self.real_arm_s:.3f} s (the autopilot's start-up)",
                 )
             )
+        if self.initial_battery_voltage_v is None:
+            notes.append(("warn", "replay: the battery starts full (no battery_status in the log)"))
         notes.append(("info", "replay: wind is zero (the real wind is unknown)"))
         return tuple(notes)
 
@@ -182,7 +193,13 @@ class Replay:
             scenario = scenario_from_dict(document, str(self.log_path))
         except ScenarioError as error:  # e.g. an IMU rate the model cannot step
             raise ReplayError(str(error).replace("key 'rates.imu_hz'", "--imu-hz")) from None
-        return replace(scenario, commands=self.commands, clock_start_s=self.start_s)
+        return replace(
+            scenario,
+            commands=self.commands,
+            clock_start_s=self.start_s,
+            motor_pwm_range_us=self.motor_pwm_range_us,
+            initial_battery_voltage_v=self.initial_battery_voltage_v,
+        )
 
     def summary(self) -> dict[str, Any]:
         """``replay.json``: everything the replay took from the log, skipped or assumed."""
@@ -195,6 +212,8 @@ class Replay:
             "vehicle": self.vehicle,
             "vehicle_reason": self.vehicle_reason,
             "cell_count": self.cell_count,
+            "motor_pwm_range_us": list(self.motor_pwm_range_us),
+            "initial_battery_voltage_v": self.initial_battery_voltage_v,
             "parameters_applied": self.parameters,
             "parameters_skipped_out_of_range": [
                 {"name": s.name, "value": s.value, "reason": s.reason} for s in self.skipped
@@ -249,7 +268,20 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             "(vehicle_land_detected.landed = 0); start while it is landed"
         )
     vehicle, reason = _vehicle_choice(path, log, options.vehicle)
-    vehicle_document, cell_count = _vehicle_document(vehicle, log)
+    vehicle_document, cell_count, battery = _vehicle_document(vehicle, log)
+    pwm_range_us = motor_pwm_range(log.parameters, path)
+    try:
+        PwmOutput(1, 400, pwm_range_us)  # the rig's outputs span what the ESC input does
+    except ValueError as error:
+        raise ReplayError(f"{path}: motor outputs' PWM_*_MIN/MAXn: {error}") from None
+    battery_voltage_v = log.battery_voltage_v(start_s)
+    if battery_voltage_v is not None:
+        try:
+            charge_used_for_voltage_c(battery, battery_voltage_v)
+        except ModelInputError as error:
+            raise ReplayError(
+                f"{path}: battery_status.voltage_v at --start {start_s:g} s: {error}"
+            ) from None
     parameters, skipped, unknown = _parameters(log.parameters)
     real_arm_s, disarm_s = log.arming(start_s, end_s)
     arm_s = None if real_arm_s is None else max(real_arm_s, start_s + AUTOPILOT_READY_S)
@@ -271,6 +303,8 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         vehicle_reason=reason,
         vehicle_document=vehicle_document,
         cell_count=cell_count,
+        motor_pwm_range_us=pwm_range_us,
+        initial_battery_voltage_v=battery_voltage_v,
         parameters=parameters,
         skipped=skipped,
         unknown_parameter_count=unknown,
@@ -366,6 +400,14 @@ class _FlightLog:
 
     def landed_at(self, time_s: float) -> bool:
         return bool(self._at("vehicle_land_detected", "landed", time_s, "landed at --start"))
+
+    def battery_voltage_v(self, time_s: float) -> float | None:
+        """The pack's voltage at ``time_s`` (None: no battery_status). The replay starts
+        landed and disarmed, where only the avionics load the pack: ≈ its open-circuit
+        voltage (R·I is mV)."""
+        if "battery_status" not in self.topics:
+            return None
+        return self._at("battery_status", "voltage_v", time_s, "the starting battery voltage")
 
     def heading_at(self, time_s: float) -> float:
         heading = self._at("vehicle_local_position", "heading", time_s, "the start heading")
@@ -497,8 +539,11 @@ def _vehicle_choice(path: Path, log: _FlightLog, vehicle: str | None) -> tuple[s
     return AIRFRAMES[int(autostart)], f"SYS_AUTOSTART = {int(autostart)}"
 
 
-def _vehicle_document(vehicle: str, log: _FlightLog) -> tuple[dict[str, Any], int | None]:
-    """The vehicle file with the log's battery cell count (BAT1_N_CELLS, else BAT_N_CELLS)."""
+def _vehicle_document(
+    vehicle: str, log: _FlightLog
+) -> tuple[dict[str, Any], int | None, BatteryParams]:
+    """The vehicle file with the log's battery cell count (BAT1_N_CELLS, else BAT_N_CELLS),
+    the count and the resulting battery."""
     try:
         document, source = read_toml_file(
             vehicle, VEHICLES_DIR, kind="vehicle", error=VehicleFileError
@@ -509,10 +554,33 @@ def _vehicle_document(vehicle: str, log: _FlightLog) -> tuple[dict[str, Any], in
     if cells is not None and int(cells) > 0 and isinstance(document.get("battery"), dict):
         document["battery"]["cell_count"] = int(cells)
     try:
-        vehicle_from_dict(document, str(source))
+        battery = vehicle_from_dict(document, str(source)).battery
     except VehicleFileError as error:
         raise ReplayError(f"--vehicle: {error}") from None
-    return document, None if cells is None else int(cells)
+    return document, None if cells is None else int(cells), battery
+
+
+def motor_pwm_range(params: Mapping[str, float], source: str | Path) -> tuple[float, float]:
+    """PWM (µs) at motor command 0 and 1: the log's ``PWM_*_MINn/MAXn`` of the outputs
+    assigned to Motor 1..4, PX4's defaults 1000/2000 when the log has none (PX4 SITL, the
+    rig's autopilot)."""
+    ranges = set()
+    for key, function in params.items():
+        if key.startswith(("PWM_MAIN_FUNC", "PWM_AUX_FUNC")) and function in MOTOR_OUTPUT_FUNCTIONS:
+            prefix, channel = key.split("_FUNC")
+            limits = (f"{prefix}_MIN{channel}", f"{prefix}_MAX{channel}")
+            for name in limits:
+                if name not in params:
+                    raise ReplayError(
+                        f"{source}: parameter {name} is not in the log "
+                        f"({key} = {int(function)} is a motor output)"
+                    )
+            ranges.add((float(params[limits[0]]), float(params[limits[1]])))
+    if not ranges:
+        return DEFAULT_MOTOR_PWM_RANGE_US
+    if len(ranges) > 1:
+        raise ReplayError(f"{source}: the motor outputs have different PWM ranges {sorted(ranges)}")
+    return ranges.pop()
 
 
 def _parameters(

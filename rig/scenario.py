@@ -24,7 +24,7 @@ from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
 from quad_model.environment import Environment, GeoPoint, MagneticField, Wind
 from quad_model.toml_file import read_toml_file
 from rig.errors import ScenarioError
-from rig.pwm import PWM_TICK_HZ
+from rig.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PWM_TICK_HZ
 
 SCENARIOS_DIR = Path(__file__).parent / "scenarios"
 SENSOR_LAYERS = ("tlm", "rtl")
@@ -144,6 +144,10 @@ class Scenario:
     faults: tuple[FaultSpec, ...]
     #: The autopilot's clock at the start of the run (s); set by code, not by the file.
     clock_start_s: float = 0.0
+    #: Pulse widths (µs) for motor command 0 and 1 (PWM_*_MIN/MAXn); set by code (a replay).
+    motor_pwm_range_us: tuple[float, float] = DEFAULT_MOTOR_PWM_RANGE_US
+    #: The pack's open-circuit voltage at the start, None: full; set by code (a replay).
+    initial_battery_voltage_v: float | None = None
 
 
 _TOP_KEYS = {

@@ -15,6 +15,7 @@ import pyulog
 
 from rig.cli import main
 from rig.loop import RunOptions
+from rig.pwm import PwmOutput
 from rig.px4_sim_api import free_instance as find_free_instance
 from rig.replay import ReplayError, ReplayOptions, plan_replay, run_replay
 from rig.ulog import ULogWriter
@@ -42,7 +43,7 @@ def x500_path() -> Path:
 def real_log(x500_path):
     return pyulog.ULog(str(x500_path), [
         "vehicle_local_position", "vehicle_local_position_setpoint", "vehicle_rates_setpoint",
-        "vehicle_attitude_setpoint",
+        "vehicle_attitude_setpoint", "vehicle_thrust_setpoint",
     ])  # fmt: skip
 
 
@@ -92,6 +93,59 @@ def test_plan_reads_the_x500_configuration_from_its_log(x500_path):
     (warning,) = plan.log_warnings
     assert "no subscription found for message id 32812" in warning
     assert ("warn", f"replay: {warning}") in plan.notes
+    # the motor outputs PWM_AUX_FUNC1..4 = 101..104 span PWM_AUX_MIN/MAX = 1100..1900 µs
+    assert plan.motor_pwm_range_us == (1100.0, 1900.0)
+    assert plan.scenario(Path("x500_v2")).motor_pwm_range_us == (1100.0, 1900.0)
+    # the pack at rest before arming: battery_status.voltage_v = 15.19 V (not full 16.8 V)
+    assert plan.initial_battery_voltage_v == pytest.approx(15.2, abs=0.2)
+    assert plan.scenario(Path("x500_v2")).initial_battery_voltage_v == (
+        plan.initial_battery_voltage_v
+    )
+    summary = plan.summary()
+    assert summary["motor_pwm_range_us"] == [1100.0, 1900.0]
+    assert summary["initial_battery_voltage_v"] == plan.initial_battery_voltage_v
+
+
+def test_pwm_output_maps_commands_onto_the_motor_range():
+    out = PwmOutput(2, 400, (1100.0, 1900.0))
+    out.command([0.0, 0.5], armed=True)
+    assert [p.width_us for p in out.pulses(1)] == [1100, 1500]  # idle at command 0
+    out.command([1.0, 1.2], armed=True)  # clamped, as pwm_out does
+    assert [p.width_us for p in out.pulses(2501)] == [1900, 1900]
+    out.command([0.7, 0.7], armed=False)
+    assert [p.width_us for p in out.pulses(5001)] == [1000, 1000]  # PWM_*_DISn
+    with pytest.raises(ValueError, match=r"range_us must satisfy 1000 <= min < max <= 2000"):
+        PwmOutput(1, 400, (1900.0, 1100.0))
+
+
+def test_log_without_battery_or_motor_outputs_keeps_the_defaults(tmp_path):
+    plan = plan_replay(_synthetic_log(tmp_path / "d.ulg", {"SYS_AUTOSTART": 4019}))
+    assert plan.motor_pwm_range_us == (1000.0, 2000.0)  # PX4's PWM_MAIN_MIN/MAX defaults
+    assert plan.initial_battery_voltage_v is None
+    assert ("warn", "replay: the battery starts full (no battery_status in the log)") in (
+        plan.notes
+    )
+
+
+def test_bad_battery_and_pwm_configurations_fail_with_one_line(tmp_path):
+    flat = _synthetic_log(tmp_path / "b.ulg", {"SYS_AUTOSTART": 4019}, battery_v=12.1)
+    assert _error(flat) == (
+        f"{flat}: battery_status.voltage_v at --start 100 s: battery_voltage_v=12.1 V is "
+        "outside the pack's open-circuit range 14..16.8 V (4 cells × 3.5..4.2 V)"
+    )
+    motors = {"SYS_AUTOSTART": 4019, "PWM_AUX_FUNC1": 101, "PWM_AUX_FUNC2": 102,
+              "PWM_AUX_MIN1": 1100, "PWM_AUX_MAX1": 1900}  # fmt: skip
+    missing = _synthetic_log(tmp_path / "m.ulg", motors)
+    assert _error(missing) == (
+        f"{missing}: parameter PWM_AUX_MIN2 is not in the log (PWM_AUX_FUNC2 = 102 is a "
+        "motor output)"
+    )
+    mixed = _synthetic_log(
+        tmp_path / "x.ulg", {**motors, "PWM_AUX_MIN2": 1000, "PWM_AUX_MAX2": 1900}
+    )
+    assert _error(mixed) == (
+        f"{mixed}: the motor outputs have different PWM ranges [(1000.0, 1900.0), (1100.0, 1900.0)]"
+    )
 
 
 def test_plan_window_switches_drives_and_back(x500_path):
@@ -121,7 +175,7 @@ def test_vehicle_option_wins_and_keeps_the_log_cell_count(x500_path, tmp_path):
 
 
 def _synthetic_log(path: Path, parameters: dict, *, landed: bool = True,
-                   setpoints: bool = True) -> Path:  # fmt: skip
+                   setpoints: bool = True, battery_v: float | None = None) -> Path:  # fmt: skip
     """A small ULog with what a replay reads, 100-110 s, at rest."""
     topics = {
         "vehicle_status": [("uint64_t", "armed_time"), ("uint8_t", "arming_state")],
@@ -134,12 +188,16 @@ def _synthetic_log(path: Path, parameters: dict, *, landed: bool = True,
             ("float", "yaw"),
         ],
     }
+    if battery_v is not None:
+        topics["battery_status"] = [("float", "voltage_v")]
     with ULogWriter(path, topics, info={"sys_name": "PX4"}, parameters=parameters) as log:
         for k in range(11):
             t_us = 100_000_000 + k * 1_000_000
             log.write("vehicle_status", t_us, armed_time=101_000_000, arming_state=2)
             log.write("vehicle_land_detected", t_us, landed=landed)
             log.write("vehicle_local_position", t_us, heading=0.5)
+            if battery_v is not None:
+                log.write("battery_status", t_us, voltage_v=battery_v)
             if setpoints:
                 log.write("vehicle_local_position_setpoint", t_us, vx=0.0, vy=0.0, vz=0.0,
                           yaw=0.5)  # fmt: skip
@@ -272,6 +330,29 @@ def test_replay_runs_on_the_real_logs_clock_and_takes_off_with_it(takeoff, real_
     assert float(truth["vz"][leveled].mean()) == pytest.approx(-0.3, abs=0.2)
     events = [m.message for m in autopilot.logged_messages]
     assert events[:2] == ["Armed by external command", "Takeoff detected"]
+
+
+def test_armed_motors_idle_and_the_hover_thrust_matches_the_real_one(takeoff, real_log):
+    out, rig, autopilot = takeoff
+    summary = json.loads((out / "replay.json").read_text())
+    assert summary["motor_pwm_range_us"] == [1100.0, 1900.0]
+    assert summary["initial_battery_voltage_v"] == pytest.approx(15.2, abs=0.2)
+    # armed at 408.9 s, lift-off ≈ 412.6 s: command 0 is 1100 µs, the props spin at idle
+    propulsion = rig.get_dataset("rig_propulsion_groundtruth").data
+    t_s = propulsion["timestamp"] / 1e6
+    armed_idle = (t_s > X500_ARMED_S + 0.5) & (t_s < 412.0)
+    for rotor in range(4):
+        assert propulsion[f"rotor_speed_radps[{rotor}]"][armed_idle].min() > 100.0
+
+    # the hover after the climb (419-420 s): thrust setpoint vs the real log's ≈ 0.52
+    def mean_thrust(log: pyulog.ULog) -> float:
+        data = log.get_dataset("vehicle_thrust_setpoint").data
+        times_s = data["timestamp"] / 1e6
+        return float(-data["xyz[2]"][(times_s > 419.0) & (times_s < 420.0)].mean())
+
+    real = mean_thrust(real_log)
+    assert real == pytest.approx(0.52, abs=0.02)
+    assert mean_thrust(autopilot) == pytest.approx(real, abs=0.06)
 
 
 def test_autopilot_logs_topics_at_least_at_the_real_rates(takeoff):
