@@ -53,7 +53,7 @@ from quad_model import QuadModel, SensorSuite, load_vehicle
 from quad_model.frames import ned_to_geodetic
 from quad_model.model import Mount, VehicleTruth
 from quad_model.sensors import SensorReadings
-from quad_model.vehicle import Vehicle, VehicleFileError
+from quad_model.vehicle import VehicleFileError
 from rig.errors import RigError, ScenarioError
 from rig.faults import FaultInjector
 from rig.ground import GroundLink
@@ -220,7 +220,6 @@ class _Loop:
             vehicle = load_vehicle(scenario.vehicle)
         except VehicleFileError as error:
             raise ScenarioError(f"{scenario.source}: key 'vehicle': {error}") from None
-        self.vehicle = vehicle
         environment = scenario.environment
         home = environment.home
         self.log = RigLog(
@@ -455,10 +454,10 @@ class _Loop:
 
     def _start_reference_autopilot(self) -> None:
         log_path = self.run_dir / "autopilot.ulg"
-        params = reference_autopilot_params(self.vehicle, self.options.autopilot_params)
         argv = self.options.autopilot_argv or (
             sys.executable, "-m", "rig.autopilot", "--instance", str(self.ports.instance),
-            "--log", str(log_path), *(arg for param in params for arg in ("--param", param)),
+            "--log", str(log_path),
+            *(arg for param in self.options.autopilot_params for arg in ("--param", param)),
         )  # fmt: skip
         self._process = subprocess.Popen(list(argv), start_new_session=True)
         self._closers.append(self._stop_autopilot)
@@ -532,28 +531,6 @@ class _Loop:
                    spent["logging"])  # fmt: skip
         return FrameBudget(*(part_s / frames * 1e6 for part_s in parts_s),
                            other_us=(wall_s - sum(parts_s)) / frames * 1e6)  # fmt: skip
-
-
-def reference_autopilot_params(vehicle: Vehicle, explicit: tuple[str, ...]) -> tuple[str, ...]:
-    """The reference autopilot's ``--param NAME=VALUE`` list: the vehicle's rotor geometry,
-    as its PX4 airframe file would set it, then ``explicit`` (the user's; a replay's carries
-    the log's own geometry), which wins name by name.
-
-    Geometry is ``CA_ROTORi_PX/PY/KM`` per rotor (PX4 order, FRD hub positions); without it
-    the autopilot allocates for airframe 10016's. ``KM`` is the rotor's torque/thrust ratio,
-    positive for a CCW rotor (PX4 control_allocator module docs); the hub height does not
-    enter a planar quad's allocation, so there is no ``PZ``.
-    """
-    propulsion = vehicle.propulsion
-    ratio = propulsion.torque_coefficient_nm_per_radps2 / propulsion.thrust_coefficient_n_per_radps2
-    geometry = []
-    for i, ((x, y, _), spin) in enumerate(
-        zip(propulsion.position_frd_m, propulsion.spin_direction, strict=True)
-    ):
-        geometry += [f"CA_ROTOR{i}_PX={x!r}", f"CA_ROTOR{i}_PY={y!r}",
-                     f"CA_ROTOR{i}_KM={spin * ratio!r}"]  # fmt: skip
-    named = {text.partition("=")[0] for text in explicit}
-    return (*(text for text in geometry if text.partition("=")[0] not in named), *explicit)
 
 
 def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:

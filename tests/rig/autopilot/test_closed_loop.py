@@ -18,8 +18,6 @@ from quad_model import QuadModel, SensorReadings, SensorSuite, VehicleTruth, loa
 from quad_model.frames import euler_from_quat, quat_to_dcm
 from rig.autopilot import FlightController, GpsFix, Parameters, SensorFrame
 from rig.autopilot.navigator import NavState
-from rig.autopilot.params import parse_assignment
-from rig.loop import reference_autopilot_params
 
 #: Gazebo's and PX4's default IMU rate; 1 kHz changes nothing these bounds test.
 IMU_RATE_HZ = 250
@@ -77,9 +75,7 @@ class Flight:
         model_rng, sensor_rng = np.random.default_rng(seed).spawn(2)
         model = QuadModel(vehicle, model_rng)
         sensors = SensorSuite(vehicle, model.environment, sensor_rng, IMU_RATE_HZ)
-        # the vehicle's rotor geometry, as the rig starts the reference autopilot
-        params = dict(map(parse_assignment, reference_autopilot_params(vehicle, ())))
-        return cls(model, sensors, FlightController(Parameters(params)), np.zeros(4))
+        return cls(model, sensors, FlightController(Parameters()), np.zeros(4))
 
     @property
     def truth(self) -> VehicleTruth:
