@@ -144,10 +144,3 @@ def pwm_to_throttle(pwm_us: ArrayLike) -> NDArray[np.float64]:
     """Normalized ESC throttle 0..1 from a pulse width in µs (clamped to the PWM range)."""
     pwm = np.asarray(pwm_us, dtype=float)
     return np.clip((pwm - PWM_MIN_US) / (PWM_MAX_US - PWM_MIN_US), 0.0, 1.0)
-
-
-def throttle_to_pwm(throttle: ArrayLike) -> NDArray[np.float64]:
-    """Pulse width in µs for a normalized throttle 0..1 (clamped)."""
-    return PWM_MIN_US + np.clip(np.asarray(throttle, dtype=float), 0.0, 1.0) * (
-        PWM_MAX_US - PWM_MIN_US
-    )

@@ -62,4 +62,3 @@ def test_pwm_throttle_mapping():
     np.testing.assert_allclose(
         frames.pwm_to_throttle([900, 1000, 1530, 2000, 2100]), [0, 0, 0.53, 1, 1]
     )
-    np.testing.assert_allclose(frames.throttle_to_pwm([0.0, 0.53, 1.0]), [1000, 1530, 2000])

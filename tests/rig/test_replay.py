@@ -317,11 +317,10 @@ def test_replay_runs_on_the_real_logs_clock_and_takes_off_with_it(takeoff, real_
     assert real_liftoff_s == pytest.approx(413.0, abs=0.5)  # SOURCES.md: the climb from 413
     assert sim_liftoff_s == pytest.approx(real_liftoff_s, abs=1.0)
     # the climb tracks the real vz_sp step (−1.5 m/s from 413.5 to 417.2 s; the log's vz_sp
-    # already holds PX4's smooth-takeoff ramp). The x500_v2 model hovers at a collective
-    # thrust of ≈ 0.385 (its thrust setpoint at zero vertical acceleration) where the real
-    # one needed 0.52-0.55, and the autopilot assumes MPC_THR_HOVER = 0.5 (PX4 estimates it
-    # in flight, the reference autopilot does not), so the velocity integrator needs ~3 s
-    # to take the surplus out: the climb first overshoots, then settles on the setpoint.
+    # already holds PX4's smooth-takeoff ramp). The autopilot assumes MPC_THR_HOVER = 0.5
+    # (PX4 estimates it in flight, the reference autopilot does not) while the model hovers
+    # a little below it, so the velocity integrator needs a few seconds to take the surplus
+    # out: the climb first overshoots, then settles on the setpoint.
     climb = (truth_s > 413.8) & (truth_s < 417.2)
     assert float(truth["vz"][climb].min()) > -1.5 - 0.8
     assert float(truth["vz"][climb].mean()) == pytest.approx(-1.5, abs=0.6)
