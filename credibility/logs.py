@@ -13,6 +13,7 @@ import hashlib
 import io
 import re
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -139,21 +140,33 @@ def open_log(path: Path) -> LogFile:
     return LogFile(path, sha256_of(path), fmt, topics, warnings)
 
 
-def _read_ulog(path: Path) -> tuple[dict, tuple[str, ...]]:
+def read_ulog(path: Path, topics: Sequence[str] | None = None) -> tuple[ULog, tuple[str, ...]]:
+    """Parse a ULog (only ``topics`` if given) → (ULog, pyulog's warnings as lines).
+
+    The one place the project opens a ULog it did not write: a damaged file is a one-line
+    :class:`CredibilityError`, never a traceback. The caller checks that the file exists.
+    """
     # pyulog reports corruption with print(); capture it and surface it as warning lines.
     captured = io.StringIO()
     try:
         # pyulog leaves its own file handle open when parsing fails; pass it ours.
         with path.open("rb") as stream, contextlib.redirect_stdout(captured):
-            ulog = ULog(stream)
-    # A damaged file can fail anywhere in pyulog's parser; each of these means "not readable".
-    except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError) as exc:
+            ulog = ULog(stream, None if topics is None else list(topics))
+    # A damaged file can fail anywhere in pyulog's parser; each of these means "not readable"
+    # (OSError: a bogus length makes pyulog seek before the file's start).
+    except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError,
+            OSError) as exc:  # fmt: skip
         raise CredibilityError(f"{path}: not a readable ULog file ({exc})") from None
     warnings = tuple(
         f"{path.name}: {line.strip()}" for line in captured.getvalue().splitlines() if line.strip()
     )
     if ulog.file_corruption and not warnings:
         warnings = (f"{path.name}: pyulog flagged the file as corrupt; damaged messages skipped",)
+    return ulog, warnings
+
+
+def _read_ulog(path: Path) -> tuple[dict, tuple[str, ...]]:
+    ulog, warnings = read_ulog(path)
     topics = {}
     for dataset in ulog.data_list:
         fields = dict(dataset.data)

@@ -34,25 +34,21 @@ Methods, each reported with its data window and an uncertainty:
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 import re
-import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from pyulog import ULog
-from pyulog.core import ULogException
 from rich.table import Table
 from scipy import optimize, signal
 from scipy.ndimage import uniform_filter1d
 
 from credibility.errors import CredibilityError
 from credibility.indices import coherence_weight
+from credibility.logs import read_ulog
 from credibility.spectral import default_windows, estimate_response, log_grid
 from quad_model.frames import STANDARD_GRAVITY_MPS2, pwm_to_throttle
 from quad_model.model import Mount, QuadModel
@@ -220,11 +216,9 @@ def _read_log(path: Path) -> _Log:
     if not path.is_file():
         raise IdentificationError(f"{path}: log file not found")
     try:
-        # pyulog prints corruption warnings (the X500 log has one bad message id): keep quiet.
-        with contextlib.redirect_stdout(io.StringIO()), path.open("rb") as stream:
-            ulog = ULog(stream, list(_TOPICS))
-    except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError) as exc:
-        raise IdentificationError(f"{path}: not a readable ULog file ({exc})") from None
+        ulog, _ = read_ulog(path, _TOPICS)  # its warnings (a skipped damaged message) don't matter
+    except CredibilityError as error:
+        raise IdentificationError(str(error)) from None
     topics = {}
     for dataset in ulog.data_list:
         if dataset.multi_id == 0:

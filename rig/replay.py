@@ -25,11 +25,8 @@ the window and takes over again after it.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
-import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
@@ -39,9 +36,9 @@ from typing import Any
 import numpy as np
 import tomli_w
 from numpy.typing import NDArray
-from pyulog import ULog
-from pyulog.core import ULogException
 
+from credibility.errors import CredibilityError
+from credibility.logs import read_ulog
 from quad_model.environment import GeoPoint, MagneticField
 from quad_model.model import ModelInputError, charge_used_for_voltage_c
 from quad_model.toml_file import read_toml_file
@@ -366,18 +363,10 @@ class _FlightLog:
         self.path = path
         if not path.is_file():
             raise ReplayError(f"{path}: flight log not found")
-        captured = io.StringIO()  # pyulog prints its corruption warnings: keep them as notes
         try:
-            with path.open("rb") as stream, contextlib.redirect_stdout(captured):
-                ulog = ULog(stream)
-        # A damaged file can fail anywhere in pyulog's parser; each of these means "unreadable"
-        # (OSError: a bogus length makes pyulog seek before the file's start).
-        except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError,
-                OSError) as error:  # fmt: skip
-            raise ReplayError(f"{path}: not a readable ULog file ({error})") from None
-        self.warnings = tuple(
-            f"{path.name}: {line.strip()}" for line in captured.getvalue().splitlines() if line
-        )
+            ulog, self.warnings = read_ulog(path)  # pyulog's warnings become the run's notes
+        except CredibilityError as error:
+            raise ReplayError(str(error)) from None
         self.topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
         if not self.topics:
             raise ReplayError(f"{path}: the ULog holds no logged data")
