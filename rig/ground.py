@@ -1,9 +1,11 @@
-"""The scenario's ground station: MAVLink commands on the autopilot's API link.
+"""The scenario's ground station: MAVLink commands on the autopilot's onboard link.
 
-The rig plays the part MAVSDK plays against PX4 SITL: it binds UDP 127.0.0.1:14540+i and
-talks to the autopilot at 14580+i (``Ports``). Each scenario action is a *conversation*:
-a generator that yields :class:`Expect` (messages to send, and which answer completes
-the step) and finally returns a one-line result. Two drivers run the same conversation:
+The rig plays the part a companion computer plays against PX4 SITL: it binds UDP
+127.0.0.1:14030+i and talks to the autopilot's onboard payload link at 14280+i (``Ports``),
+so a user's MAVSDK (14540+i) and ground station (14550) connect beside it. Each scenario
+action is a *conversation*: a generator that yields :class:`Expect` (messages to send, and
+which answer completes the step) and finally returns a one-line result. Two drivers run the
+same conversation:
 
 - :meth:`GroundLink.converse_now` (reference autopilot): the autopilot handles ground
   messages as they arrive, between sensor frames, so the rig waits here (bounded in wall
@@ -102,15 +104,14 @@ class GroundLink:
         self.mav.robust_parsing = True
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            self._sock.bind(("127.0.0.1", self.ports.api_remote_udp))
+            self._sock.bind(("127.0.0.1", self.ports.onboard_remote_udp))
         except OSError as error:
             self._sock.close()
             raise GroundLinkError(
-                f"cannot bind the API link UDP 127.0.0.1:{self.ports.api_remote_udp} "
-                f"({error.strerror}); is another client (MAVSDK, a rig) using instance "
-                f"{self.ports.instance}?"
+                f"cannot bind the onboard link UDP 127.0.0.1:{self.ports.onboard_remote_udp} "
+                f"({error.strerror}); is another rig using instance {self.ports.instance}?"
             ) from None
-        self._target = ("127.0.0.1", self.ports.api_local_udp)
+        self._target = ("127.0.0.1", self.ports.onboard_local_udp)
         self._pending: _Pending | None = None
 
     # -- drivers ---------------------------------------------------------------------------

@@ -84,7 +84,19 @@ class Ports:
 
     @property
     def api_remote_udp(self) -> int:
+        """MAVSDK and scripts listen here; the rig never binds it."""
         return 14540 + self.instance
+
+    @property
+    def onboard_local_udp(self) -> int:
+        """The autopilot binds this for PX4's onboard payload link (``px4-rc.mavlink``)."""
+        return 14280 + self.instance
+
+    @property
+    def onboard_remote_udp(self) -> int:
+        """The rig binds this: its scenario commands go out as a companion computer's do,
+        so MAVSDK (14540+i) and QGroundControl (14550) stay free for the user."""
+        return 14030 + self.instance
 
     @property
     def system_id(self) -> int:
@@ -93,7 +105,7 @@ class Ports:
 
 def free_instance(first: int, count: int, index: int = 0) -> int:
     """The first instance from ``first + index % count`` on (wrapping within the range)
-    whose simulator TCP and API UDP ports are free right now, so concurrent runs given
+    whose simulator TCP and onboard UDP ports are free right now, so concurrent runs given
     consecutive indices start on different instances and a port held by anyone else is
     skipped. Raises ``OSError`` when every instance in the range is busy."""
     for step in range(count):
@@ -102,7 +114,7 @@ def free_instance(first: int, count: int, index: int = 0) -> int:
         tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             tcp.bind(("127.0.0.1", ports.simulator_tcp))
-            udp.bind(("127.0.0.1", ports.api_remote_udp))
+            udp.bind(("127.0.0.1", ports.onboard_remote_udp))
         except OSError:
             continue
         finally:

@@ -1,9 +1,11 @@
 """The ground-station side: MAVLink over UDP as PX4 SITL serves it.
 
-Two links per instance (``Ports``): the GCS link binds 18570+i and talks to 14550
-(QGroundControl, MAVProxy), the API link binds 14580+i and talks to 14540+i (MAVSDK, the
-rig's scenarios). Each answers whoever last talked to it. Telemetry is paced by simulated
-time (the autopilot's only clock), so a run's messages do not depend on the wall clock.
+Three links per instance (``Ports``), as PX4 SITL opens them: the GCS link binds 18570+i
+and talks to 14550 (QGroundControl, MAVProxy), the API link binds 14580+i and talks to
+14540+i (MAVSDK, scripts), the onboard link binds 14280+i and talks to 14030+i (the rig's
+scenario commands, as a companion computer's). Each answers whoever last talked to it.
+Telemetry is paced by simulated time (the autopilot's only clock), so a run's messages do
+not depend on the wall clock.
 
 Protocols follow PX4's ``mavlink`` module and MAVLink's ``common.xml``: commands with
 COMMAND_ACK, the mission protocol (upload and download, MISSION_CURRENT and

@@ -123,6 +123,9 @@ class Autopilot:
         self.links = [
             MavlinkLink("gcs", self.ports.gcs_local_udp, self.ports.gcs_remote_udp, sysid),
             MavlinkLink("api", self.ports.api_local_udp, self.ports.api_remote_udp, sysid),
+            MavlinkLink(
+                "onboard", self.ports.onboard_local_udp, self.ports.onboard_remote_udp, sysid
+            ),
         ]
         self.ground = GroundStation(self.fc, self.links)
         self.sim_mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)

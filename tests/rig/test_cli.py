@@ -9,6 +9,7 @@ import pytest
 import pyulog
 
 from rig.cli import main
+from rig.px4_sim_api import free_instance as find_free_instance
 
 
 def test_missing_scenario_is_one_line_on_stderr(capsys, tmp_path):
@@ -59,3 +60,47 @@ def test_ctrl_c_stops_cleanly_with_readable_logs(tmp_path, free_instance):
     assert len(rig_log.get_dataset("sensor_combined").data["timestamp"]) > 500  # ≥ 0.5 s flown
     autopilot_log = pyulog.ULog(str(out / "autopilot.ulg"))  # closed on SIGINT, readable
     assert len(autopilot_log.get_dataset("vehicle_attitude").data["timestamp"]) > 10
+
+
+@pytest.mark.closed_loop
+def test_two_rigs_fly_side_by_side_with_mavsdks_port_free(tmp_path, free_instance):
+    """``--instance i`` and ``--instance j`` fly at once on one machine, each with its own
+    autopilot; neither rig binds 14540+i, where a user's MAVSDK listens."""
+    import socket
+
+    first = free_instance()
+    second = find_free_instance(first + 1, 99 - first)
+    mavsdk = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
+    for sock, instance in zip(mavsdk, (first, second), strict=True):
+        sock.bind(("127.0.0.1", 14540 + instance))
+    try:
+        rigs = [
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "rig.cli",
+                    "run",
+                    "takeoff_hover_land",
+                    "--duration",
+                    "6",
+                    "--instance",
+                    str(instance),
+                    "--out",
+                    str(tmp_path / f"i{instance}"),
+                ],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            for instance in (first, second)
+        ]
+        errors = [rig.communicate(timeout=300)[1] for rig in rigs]
+    finally:
+        for sock in mavsdk:
+            sock.close()
+    assert [rig.returncode for rig in rigs] == [0, 0], errors
+    for instance in (first, second):
+        log = pyulog.ULog(str(tmp_path / f"i{instance}" / "rig.ulg"))
+        truth = log.get_dataset("vehicle_local_position_groundtruth").data
+        assert truth["z"].min() < -1.0  # each took off

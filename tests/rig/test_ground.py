@@ -29,7 +29,7 @@ class ScriptedAutopilot(threading.Thread):
         self.received = []
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            self.sock.bind(("127.0.0.1", ports.api_local_udp))
+            self.sock.bind(("127.0.0.1", ports.onboard_local_udp))
         except OSError:
             self.sock.close()
             raise

@@ -16,17 +16,17 @@ def test_fields_updated_masks_are_px4s():
 
 
 @pytest.mark.parametrize(
-    ("instance", "sim", "gcs", "api_local", "api_remote", "sysid"),
-    [(0, 4560, 18570, 14580, 14540, 1), (3, 4563, 18573, 14583, 14543, 4)],
-)
-def test_ports_per_instance(instance, sim, gcs, api_local, api_remote, sysid):
+    ("instance", "sim", "gcs", "api", "onboard", "sysid"),
+    [(0, 4560, 18570, (14580, 14540), (14280, 14030), 1),
+     (3, 4563, 18573, (14583, 14543), (14283, 14033), 4)],
+)  # fmt: skip
+def test_ports_per_instance(instance, sim, gcs, api, onboard, sysid):
+    """PX4's px4-rc.mavlink: GCS, API (MAVSDK) and onboard payload links, all +i."""
     ports = Ports(instance)
     assert (ports.simulator_tcp, ports.gcs_local_udp, ports.gcs_remote_udp) == (sim, gcs, 14550)
-    assert (ports.api_local_udp, ports.api_remote_udp, ports.system_id) == (
-        api_local,
-        api_remote,
-        sysid,
-    )
+    assert (ports.api_local_udp, ports.api_remote_udp) == api
+    assert (ports.onboard_local_udp, ports.onboard_remote_udp) == onboard
+    assert ports.system_id == sysid
 
 
 def test_bad_instance_is_rejected():
