@@ -84,6 +84,7 @@ class Rates:
     bundled ones), with its latency. ``pwm_tick_hz`` is the PWM capture core's tick, the
     resolution of the measured pulse widths; in the RTL layer its clock runs all the
     time, one simulated cycle per tick, so a coarser tick trades resolution for speed.
+    A file without ``model_hz`` gets :func:`model_rate_for` its IMU rate.
     """
 
     model_hz: int = 5000
@@ -308,6 +309,12 @@ def _vector3(value: Any) -> Any:
     return _BAD if None in numbers else tuple(numbers)
 
 
+def model_rate_for(imu_hz: int) -> int:
+    """The model's default rate: the least whole multiple of the IMU rate at or above 5 kHz
+    (the paper's model rate), so every frame holds whole physics steps (400 Hz → 5.2 kHz)."""
+    return imu_hz * -(-Rates.model_hz // imu_hz)
+
+
 def _rates(table: Mapping[str, Any], where: _Where) -> Rates:
     names = ("model_hz", "imu_hz", "mag_hz", "baro_hz", "pwm_hz", "pwm_tick_hz")
     where.no_unknown_keys(table, set(names), "rates.")
@@ -315,12 +322,13 @@ def _rates(table: Mapping[str, Any], where: _Where) -> Rates:
     values = {
         n: where.get(table, n, "rate", default=getattr(defaults, n), prefix="rates.") for n in names
     }
+    if "model_hz" not in table:
+        values["model_hz"] = model_rate_for(values["imu_hz"])
     rates = Rates(**values)
-    if rates.model_hz % rates.imu_hz or 1_000_000 % rates.imu_hz:
-        where.fail(
-            "rates.imu_hz", rates.imu_hz,
-            f"must divide rates.model_hz ({rates.model_hz}) and give a whole number of µs",
-        )  # fmt: skip
+    if 1_000_000 % rates.imu_hz:
+        where.fail("rates.imu_hz", rates.imu_hz, "must give a whole number of µs per frame")
+    if rates.model_hz % rates.imu_hz:
+        where.fail("rates.imu_hz", rates.imu_hz, f"must divide rates.model_hz ({rates.model_hz})")
     for name in ("mag_hz", "baro_hz"):
         if getattr(rates, name) > rates.imu_hz:
             where.fail(

@@ -38,6 +38,13 @@ def test_defaults_are_px4_sitl_home_and_the_contract_rates():
     assert scenario.constraint == "free"
 
 
+@pytest.mark.parametrize(("imu_hz", "model_hz"), [(250, 5000), (400, 5200), (500, 5000)])
+def test_model_rate_is_the_least_multiple_of_the_imu_rate_from_5khz(imu_hz, model_hz):
+    """Every lockstep frame holds whole physics steps, at the paper's 5 kHz or just above."""
+    scenario = scenario_from_dict({**MINIMAL, "rates": {"imu_hz": imu_hz}})
+    assert scenario.rates.model_hz == model_hz
+
+
 def test_full_document_is_converted():
     scenario = scenario_from_dict(
         MINIMAL
@@ -79,8 +86,10 @@ BAD = [
     ({"sensor_layer": "fpga"}, "key 'sensor_layer' = 'fpga': expected one of tlm, rtl"),
     ({"speed": 3}, "key 'speed' = 3: unknown key (known: commands, constraint, description, "
      "duration_s, environment, faults, name, rates, seed, sensor_layer, start, vehicle)"),
-    ({"rates": {"imu_hz": 300}}, "key 'rates.imu_hz' = 300: must divide rates.model_hz (5000) "
-     "and give a whole number of µs"),
+    ({"rates": {"imu_hz": 300}}, "key 'rates.imu_hz' = 300: must give a whole number of µs "
+     "per frame"),
+    ({"rates": {"imu_hz": 400, "model_hz": 5000}},
+     "key 'rates.imu_hz' = 400: must divide rates.model_hz (5000)"),
     ({"rates": {"mag_hz": 2000}}, "key 'rates.mag_hz' = 2000: exceeds rates.imu_hz (1000)"),
     ({"start": {"position_ned_m": [0, 0, 1]}}, "key 'start.position_ned_m' = [0.0, 0.0, 1.0]: "
      "starts below the ground (down > 0)"),
