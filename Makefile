@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 hil-sim: $(STAMP)
-	$(BIN)/rig hil-sim
+	$(BIN)/rig hil-sim $(if $(PX4_DIR),--autopilot px4 --px4 $(PX4_DIR))
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

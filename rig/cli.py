@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -25,6 +26,15 @@ from rig.replay import DRIVES, ReplayOptions, plan_replay, run_replay
 from rig.scenario import SENSOR_LAYERS, load_scenario
 
 HIL_SIM_SCENARIO = "hil_sim"
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised where the rig is, so every ``finally`` closes the logs and stops the
+    autopilot (PX4 runs in its own session: a killed rig would leave it spinning)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -85,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
         return _campaign(args, console)
     if args.command == "identify":
         return _identify(args)
+    signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         result = _replay(args, console) if args.command == "replay" else _run(args, console)
     except RigError as error:
@@ -93,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("rig: interrupted; the logs written so far are readable", file=sys.stderr)
         return 130
+    except Terminated:
+        print("rig: terminated (SIGTERM); the logs written so far are readable", file=sys.stderr)
+        return 143
     console.print(
         f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "
         f"(RTF {result.real_time_factor:.2f}x, {result.frames} frames)\n"
@@ -108,7 +122,12 @@ def _run(args: argparse.Namespace, console: Console) -> RunResult:
     scenario = load_scenario(HIL_SIM_SCENARIO if args.command == "hil-sim" else args.scenario)
     if args.vehicle is not None:
         scenario = dataclasses.replace(scenario, vehicle=args.vehicle)
-    options = _run_options(args)
+    options = dataclasses.replace(
+        _run_options(args),
+        on_waiting=lambda command: console.print(
+            f"waiting for PX4; start it with:\n  {command}", highlight=False, soft_wrap=True
+        ),
+    )
     _announce(console, scenario.name, scenario.description,
               options.sensor_layer or scenario.sensor_layer, options)  # fmt: skip
     return _run_with_progress(console, lambda p: run_scenario(scenario, options, p))
@@ -141,6 +160,7 @@ def _run_options(args: argparse.Namespace) -> RunOptions:
         duration_s=getattr(args, "duration", None),
         timeouts=LinkTimeouts(connect_s=args.connect_timeout),
         autopilot_params=tuple(args.param),
+        px4_dir=getattr(args, "px4", None),
     )
 
 
@@ -164,13 +184,16 @@ def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) 
                         help="run folder (default runs/<name>-<UTC time>)")  # fmt: skip
     if scenario:
         parser.add_argument("--autopilot", choices=AUTOPILOTS, default="reference",
-                            help="reference (rig starts it) or px4 (you start PX4)")  # fmt: skip
+                            help="reference (embedded) or px4 (PX4 SITL)")  # fmt: skip
+        parser.add_argument("--px4", type=Path, default=None, metavar="DIR",
+                            help="PX4 SITL build (bin/px4 + etc/) the rig starts; default "
+                                 "$PX4_DIR, else the rig waits for a PX4 you start")  # fmt: skip
         parser.add_argument("--duration", type=float, default=None,
                             help="simulated seconds (default: the scenario's)")  # fmt: skip
         parser.add_argument("--vehicle", default=None, metavar="NAME|PATH",
                             help="vehicle file instead of the scenario's")  # fmt: skip
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                        help="reference-autopilot parameter (repeatable)")  # fmt: skip
+                        help="autopilot parameter, PX4's names (repeatable)")  # fmt: skip
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to wait for the autopilot to connect")  # fmt: skip
 

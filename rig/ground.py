@@ -43,6 +43,8 @@ from rig.px4_sim_api import Ports, mavlink
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 245, mavlink.MAV_COMP_ID_MISSIONPLANNER
 #: PX4 custom main mode OFFBOARD (px4_custom_mode.h).
 PX4_MAIN_MODE_OFFBOARD = 6
+#: How many times an arm is asked again, a HEARTBEAT (1 s) apart, while PX4 is not ready.
+ARM_READY_RETRIES = 30
 #: Period of the offboard setpoint keep-alive: PX4 leaves offboard after COM_OF_LOSS_T (1 s).
 OFFBOARD_KEEPALIVE_S = 0.1
 
@@ -184,15 +186,21 @@ class GroundLink:
 
     def command(self, command: int, *params: float, what: str) -> Conversation:
         """COMMAND_LONG → COMMAND_ACK; anything but ACCEPTED is a refusal with the reason."""
+        ack = yield self._command_step(command, *params)
+        return self._accepted(ack, what)
+
+    def _command_step(self, command: int, *params: float) -> Expect:
         padded = [*params, *[0.0] * (7 - len(params))]
         message = self.mav.command_long_encode(
             self.ports.system_id, 1, command, 0, *padded
         )  # fmt: skip
-        ack = yield Expect(
+        return Expect(
             (message,),
             lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
             f"COMMAND_ACK for {_enum_name('MAV_CMD', command)}",
         )
+
+    def _accepted(self, ack: mavlink.MAVLink_message, what: str) -> str:
         if ack.result != mavlink.MAV_RESULT_ACCEPTED:
             reason = f" ({self.last_statustext})" if self.last_statustext else ""
             raise GroundLinkError(
@@ -212,6 +220,23 @@ class GroundLink:
         return self.command(
             mavlink.MAV_CMD_COMPONENT_ARM_DISARM, float(arm), what="arm" if arm else "disarm"
         )
+
+    def arm_when_ready(self) -> Conversation:
+        """Arm as a pilot arms PX4: while it answers TEMPORARILY_REJECTED (its pre-flight
+        checks have not passed yet: EKF2 still aligning, GPS not yet good enough), wait for
+        its next HEARTBEAT (1 s of its clock) and ask again, up to ARM_READY_RETRIES times.
+
+        Only where the rig keeps stepping while it waits (:meth:`poll`); the reference
+        autopilot's clock stands still in :meth:`converse_now`.
+        """
+        command = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+        for _ in range(ARM_READY_RETRIES):
+            ack = yield self._command_step(command, 1.0)
+            if ack.result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED:
+                break
+            yield Expect((), lambda m: m.get_type() == "HEARTBEAT",
+                         "HEARTBEAT (waiting until it is ready to arm)")  # fmt: skip
+        return self._accepted(ack, "arm")
 
     def takeoff(self, altitude_m: float) -> Conversation:
         """MAVSDK's way: MIS_TAKEOFF_ALT, then NAV_TAKEOFF with a NaN altitude.

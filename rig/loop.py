@@ -60,6 +60,7 @@ from rig.ground import GroundLink
 from rig.link import LinkStats, LinkTimeouts, SimulatorLink
 from rig.pwm import PwmOutput, throttle_from_capture
 from rig.px4_sim_api import Ports, mavlink
+from rig.px4_sitl import Px4Sitl, check_imu_rate, find_px4, px4_parameters
 from rig.rig_log import RigLog
 from rig.scenario import Rates, Scenario
 from rig.script import Action, CommandScript
@@ -89,8 +90,12 @@ class RunOptions:
     sensor_layer: str | None = None  # None: the scenario's
     duration_s: float | None = None  # None: the scenario's
     timeouts: LinkTimeouts = field(default_factory=LinkTimeouts)
-    #: Reference-autopilot parameters ``NAME=VALUE`` (``--param``).
+    #: Autopilot parameters ``NAME=VALUE`` (``--param``), for either autopilot.
     autopilot_params: tuple[str, ...] = ()
+    #: PX4 SITL build (``--px4``); None: ``$PX4_DIR``, else the user starts PX4 by hand.
+    px4_dir: Path | None = None
+    #: Told the command to run when the rig waits for a PX4 started by hand.
+    on_waiting: Callable[[str], None] | None = None
     #: Command that starts the autopilot instead of ``python -m rig.autopilot`` (tests).
     autopilot_argv: tuple[str, ...] | None = None
     #: ``(level, text)`` events for the start of ``rig.ulg`` (e.g. what a replay skipped).
@@ -167,6 +172,9 @@ def run_scenario(
     progress: Callable[[Progress], None] | None = None,
 ) -> RunResult:
     """Fly ``scenario`` closed-loop; returns where the logs are, raises :class:`RigError`."""
+    if options.autopilot == "px4":
+        check_imu_rate(scenario.rates.imu_hz)  # before anything starts
+        find_px4(options.px4_dir)  # a --px4 or $PX4_DIR that holds no PX4 fails here
     run_dir = options.out_dir or default_run_dir(scenario)
     run_dir.mkdir(parents=True, exist_ok=True)
     loop = _Loop(scenario, options, run_dir, progress)
@@ -211,6 +219,7 @@ class _Loop:
         self._wall_start = time.monotonic()
         self._wall_end: float | None = None
         self._process: subprocess.Popen[bytes] | None = None
+        self._px4: Px4Sitl | None = None
         self._closers: list[Callable[[], None]] = []
         #: Wall time of each part of the frames so far (s), for :class:`FrameBudget`.
         self._spent_s = dict.fromkeys(("model", "sensor physics", "chips", "messages", "logging"),
@@ -267,6 +276,10 @@ class _Loop:
         self.throttle = np.zeros(4)
         self._capture: tuple[tuple[float, ...], tuple[bool, ...]] | None = None
         self.ports = Ports(options.instance)
+        if options.autopilot == "px4":
+            params = px4_parameters(vehicle, self.model.hover_throttle(), self.rates.imu_hz,
+                                    options.autopilot_params)  # fmt: skip
+            self._px4 = Px4Sitl(find_px4(options.px4_dir), run_dir, options.instance, params)
 
     # -- run ---------------------------------------------------------------------------
 
@@ -285,11 +298,7 @@ class _Loop:
             self._start_reference_autopilot()
             link.accept("the reference autopilot (python -m rig.autopilot)")
         else:
-            self.log.event(self.time_us, f"waiting for PX4 SITL on {link.endpoint}")
-            link.accept(
-                f"PX4 SITL instance {self.ports.instance} (e.g. `PX4_SIM_MODEL=none_iris "
-                f"$PX4_DIR/build/px4_sitl_default/bin/px4 -i {self.ports.instance}`)"
-            )
+            self._accept_px4(link)
         self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")
         frames_total = round(self.duration_s * 1e6) // self.frame_us
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
@@ -452,6 +461,22 @@ class _Loop:
 
     # -- autopilot process ---------------------------------------------------------------
 
+    def _accept_px4(self, link: SimulatorLink) -> None:
+        """Start PX4 (or wait for the one the user starts) and accept its connection."""
+        px4 = self._px4
+        assert px4 is not None
+        self._closers.append(px4.stop)
+        if px4.build is not None:
+            px4.start()
+            self.log.event(self.time_us, f"started PX4: {px4.command()}")
+            link.accept(f"PX4 (its console: {px4.console_path})")
+            return
+        command = px4.command()
+        self.log.event(self.time_us, f"waiting for PX4 SITL on {link.endpoint}: {command}")
+        if self.options.on_waiting is not None:
+            self.options.on_waiting(command)
+        link.accept(f"PX4 SITL instance {self.ports.instance}: {command}")
+
     def _start_reference_autopilot(self) -> None:
         log_path = self.run_dir / "autopilot.ulg"
         argv = self.options.autopilot_argv or (
@@ -463,6 +488,8 @@ class _Loop:
         self._closers.append(self._stop_autopilot)
 
     def _autopilot_exit(self) -> str | None:
+        if self._px4 is not None:
+            return self._px4.exit_description()
         if self._process is None or self._process.poll() is None:
             return None
         code = self._process.returncode
@@ -511,7 +538,7 @@ class _Loop:
 
     def result(self) -> RunResult:
         wall_end = self._wall_end or time.monotonic()
-        autopilot_log = self.run_dir / "autopilot.ulg"
+        autopilot_log = self.run_dir / ("px4.ulg" if self._px4 is not None else "autopilot.ulg")
         return RunResult(
             run_dir=self.run_dir,
             rig_log=self.log.path,

@@ -121,7 +121,8 @@ class CommandScript:
             self._stream = _Stream(command, time_s, time_s, period)
             return
         conversations = {
-            "arm": lambda: g.arm(True),
+            # PX4 (not the barrier) is asked again until its pre-flight checks pass
+            "arm": lambda: g.arm(True) if self.barrier else g.arm_when_ready(),
             # a replay's disarm follows the real flight's and may find this one still flying
             "disarm": lambda: g.attempt(g.arm(False)) if p.get("may_refuse") else g.arm(False),
             "takeoff": lambda: g.takeoff(p["altitude_m"]),

@@ -212,16 +212,20 @@ def test_sensor_faults_and_gps_loss(tmp_path, free_instance):
     assert math.isclose(len(data(log, "sensor_gps")["timestamp"]), len(gps_times))
 
 
-def test_px4_mode_waits_for_the_connection_and_steps_until_the_ack(tmp_path, free_instance):
-    """``--autopilot px4``: the rig starts nothing and waits for PX4's connection; a
+def test_px4_mode_waits_for_the_connection_and_steps_until_the_ack(
+    tmp_path, free_instance, monkeypatch
+):
+    """``--autopilot px4`` with no PX4 build given: the rig prepares PX4's work dir and
+    parameters, says how to start PX4, and waits for its connection; a
     command is sent and the rig keeps stepping (PX4 acts only as its clock advances)
     until the COMMAND_ACK arrives. PX4 itself cannot be installed here: the peer is the
     PX4-side test double (boot delay, one answer per frame) plus a UDP thread that ACKs
     commands on the API link the way PX4's mavlink module does, 50 ms late."""
+    monkeypatch.delenv("PX4_DIR", raising=False)
     instance = free_instance()
     ports = Ports(instance)
     api = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    api.bind(("127.0.0.1", ports.api_local_udp))
+    api.bind(("127.0.0.1", ports.onboard_local_udp))
     api.settimeout(10)
     acked = []
 
@@ -253,6 +257,11 @@ def test_px4_mode_waits_for_the_connection_and_steps_until_the_ack(tmp_path, fre
     events = [(m.timestamp, m.message) for m in pyulog.ULog(str(result.rig_log)).logged_messages]
     texts = [text for _, text in events]
     assert texts[0].startswith("waiting for PX4 SITL on TCP 127.0.0.1:")
+    assert (
+        f"PX4_SYS_AUTOSTART=10016 $PX4_DIR/build/px4_sitl_default/bin/px4 -d -i {instance}"
+        in texts[0]
+    )
+    assert "param set IMU_INTEG_RATE 1000" in (tmp_path / "px4/px4/bin/px4-rc.params").read_text()
     (sent_at,) = [t for t, text in events if text == "arm at t=0.2 s: sent"]
     (acked_at,) = [t for t, text in events if text == "arm: accepted"]
     assert acked_at > sent_at  # the rig kept stepping while PX4 had not answered

@@ -1,0 +1,242 @@
+"""PX4 SITL as the rig's autopilot: find the user's build, give it the vehicle's airframe,
+start it in the run folder, keep its console and its ULog, stop it.
+
+Nothing of PX4 is vendored: the user's own ``build/px4_sitl_default``-shaped folder
+(``bin/px4`` + ``etc/``) is found through ``--px4 DIR`` or ``$PX4_DIR``. PX4 runs in a fresh
+work dir ``RUN/px4`` (its parameters, dataman and ``log/``), as airframe 10016, PX4's generic
+quad X that starts ``simulator_mavlink``, with the rig's parameters on top.
+
+The rig's parameters reach PX4 through PX4's own hook: ``rcS`` sources ``px4-rc.params``
+from ``PATH`` after the airframe file ("user defined params for instances"), so the rig
+writes one into ``RUN/px4/bin`` and puts that folder first in PX4's ``PATH``. The same
+folder holds the ``px4-<module>`` command links that ``rcS`` calls (a build copied without
+its symlinks has plain files there).
+
+Lockstep at any IMU rate (verified against PX4 v1.14's binary and source, README "Fly
+PX4"): PX4 answers a HIL_SENSOR with HIL_ACTUATOR_CONTROLS only when its rate controller
+ran for that sample and its lockstep components (the simulator and the logger, which
+waits for EKF2) have all progressed. So ``IMU_GYRO_RATEMAX`` and ``IMU_INTEG_RATE`` must
+both equal the simulator's IMU rate; ``IMU_INTEG_RATE`` stops at 1000 Hz.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import signal
+import subprocess
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from quad_model.vehicle import Vehicle
+from rig.errors import RigError
+
+#: The environment variable naming the user's PX4 build (or PX4-Autopilot checkout).
+PX4_DIR_ENV = "PX4_DIR"
+#: PX4's generic quad X SITL airframe (``etc/init.d-posix/airframes/10016_none_iris``): it
+#: starts ``simulator_mavlink`` on TCP 4560+i; the rig's parameters replace its geometry.
+AIRFRAME = 10016
+#: ``IMU_INTEG_RATE``'s range in PX4 v1.14 (``sensors/vehicle_imu/imu_parameters.c``).
+IMU_INTEG_RATE_RANGE_HZ = (100, 1000)
+#: Seconds PX4 gets to shut down (close its ULog) after SIGINT before it is killed.
+STOP_GRACE_S = 5.0
+
+
+class Px4NotFound(RigError):
+    """``--px4``/``$PX4_DIR`` names no PX4 SITL build."""
+
+
+@dataclass(frozen=True)
+class Px4Build:
+    """A ``build/px4_sitl_default``-shaped folder: ``bin/px4`` and ``etc/init.d-posix/rcS``."""
+
+    root: Path
+
+    @property
+    def binary(self) -> Path:
+        return self.root / "bin" / "px4"
+
+    @property
+    def etc(self) -> Path:
+        return self.root / "etc"
+
+
+def find_px4(explicit: Path | None = None) -> Px4Build | None:
+    """The build named by ``explicit`` (``--px4``), else by ``$PX4_DIR``, else None (the user
+    starts PX4 by hand). A PX4-Autopilot checkout is accepted for its
+    ``build/px4_sitl_default``. A folder that holds no PX4 fails in one line."""
+    given = explicit if explicit is not None else os.environ.get(PX4_DIR_ENV) or None
+    if given is None:
+        return None
+    source = "--px4" if explicit is not None else f"${PX4_DIR_ENV}"
+    folder = Path(given).expanduser()
+    for root in (folder, folder / "build" / "px4_sitl_default"):
+        build = Px4Build(root.resolve())
+        if os.access(build.binary, os.X_OK) and (build.etc / "init.d-posix" / "rcS").is_file():
+            return build
+    raise Px4NotFound(
+        f"{source} = {given}: no PX4 SITL build there (expected bin/px4 and "
+        "etc/init.d-posix/rcS, or build/px4_sitl_default/ holding them; build one with "
+        "`make px4_sitl` in PX4-Autopilot)"
+    )
+
+
+def check_imu_rate(imu_hz: int) -> None:
+    """Refuse, before the run, an IMU rate at which PX4 v1.14 cannot keep lockstep."""
+    low, high = IMU_INTEG_RATE_RANGE_HZ
+    if not low <= imu_hz <= high:
+        nearest = min(max(imu_hz, low), high)
+        raise RigError(
+            f"rates.imu_hz = {imu_hz}: PX4 answers every lockstep frame only when "
+            f"IMU_INTEG_RATE equals the IMU rate, and PX4 v1.14 allows {low}..{high} Hz; "
+            f"the nearest rate that works is {nearest} Hz"
+        )
+
+
+def lockstep_parameters(imu_hz: int) -> dict[str, float]:
+    """PX4's rate controller and EKF2 run once per simulated IMU sample (see module doc)."""
+    check_imu_rate(imu_hz)
+    return {"IMU_GYRO_RATEMAX": imu_hz, "IMU_INTEG_RATE": imu_hz}
+
+
+def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, float]:
+    """What a PX4 airframe file for ``vehicle`` sets, as PX4's Gazebo airframes do for the
+    x500: rotor geometry (``CA_ROTORi_PX/PY/KM``, PX4 motor order, KM the torque/thrust
+    ratio, + for CCW), the hover thrust and the battery cells.
+
+    PX4 normalizes its allocation matrix, so KM's sign and the rotors' relative positions
+    shape the mixer, not KM's magnitude. ``hover_throttle`` is the model's ESC throttle at
+    hover, which is PX4's normalized motor output when the rig's PWM range maps 0..1 onto
+    the ESC's whole range.
+    """
+    propulsion = vehicle.propulsion
+    ratio = propulsion.torque_coefficient_nm_per_radps2 / propulsion.thrust_coefficient_n_per_radps2
+    params: dict[str, float] = {"CA_AIRFRAME": 0, "CA_ROTOR_COUNT": len(propulsion.position_frd_m)}
+    for i, ((x, y, _), spin) in enumerate(
+        zip(propulsion.position_frd_m, propulsion.spin_direction, strict=True)
+    ):
+        params |= {f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": spin * ratio}
+    params["MPC_THR_HOVER"] = round(hover_throttle, 3)
+    params["BAT1_N_CELLS"] = vehicle.battery.cell_count
+    return params
+
+
+#: Always set: no HITL (lockstep SITL), PX4's own simulated sensors off (the rig's chips
+#: are the sensors), and PX4's ULog from boot to shutdown so it covers the whole run.
+RIG_PARAMETERS: dict[str, float] = {
+    "SYS_HITL": 0,
+    "SENS_EN_GPSSIM": 0,
+    "SENS_EN_BAROSIM": 0,
+    "SENS_EN_MAGSIM": 0,
+    "SDLOG_MODE": 2,
+}
+
+
+def px4_parameters(vehicle: Vehicle, hover_throttle: float, imu_hz: int,
+                   explicit: tuple[str, ...]) -> dict[str, float]:  # fmt: skip
+    """Everything the rig sets in PX4: its own needs, lockstep, the vehicle's airframe, and
+    then the user's ``--param NAME=VALUE`` texts, which win name by name."""
+    airframe = airframe_parameters(vehicle, hover_throttle)
+    return RIG_PARAMETERS | lockstep_parameters(imu_hz) | airframe | parse_assignments(explicit)
+
+
+def parse_assignments(texts: tuple[str, ...]) -> dict[str, float]:
+    """``--param NAME=VALUE`` texts as a mapping; a malformed one fails in one line."""
+    params: dict[str, float] = {}
+    for text in texts:
+        name, sign, value = text.partition("=")
+        try:
+            if not sign or not name.strip():
+                raise ValueError
+            params[name.strip()] = float(value)
+        except ValueError:
+            raise RigError(f"--param {text!r}: expected NAME=VALUE with a number") from None
+    return params
+
+
+class Px4Sitl:
+    """One PX4 process for one run: its work dir, parameters, console and ULog.
+
+    ``build`` None prepares the work dir and parameters only; :meth:`command` then tells
+    the user how to start PX4 by hand.
+    """
+
+    def __init__(self, build: Px4Build | None, run_dir: Path, instance: int,
+                 params: Mapping[str, float]) -> None:  # fmt: skip
+        self.build = build
+        self.instance = instance
+        self.work_dir = run_dir / "px4"
+        self.bin_dir = self.work_dir / "bin"
+        self.console_path = run_dir / "px4.log"
+        self.ulog_path = run_dir / "px4.ulg"
+        self._process: subprocess.Popen[bytes] | None = None
+        self.bin_dir.mkdir(parents=True, exist_ok=True)
+        lines = ["#!/bin/sh", "# Written by the rig: sourced by PX4's rcS after the airframe."]
+        lines += [f"param set {name} {_px4_number(value)}" for name, value in params.items()]
+        (self.bin_dir / "px4-rc.params").write_text("\n".join(lines) + "\n")
+        if build is not None:
+            self._link_commands(build)
+
+    def _link_commands(self, build: Px4Build) -> None:
+        """``bin/px4`` and a ``px4-<module>`` link to it for every module the build has."""
+        for source in sorted(build.binary.parent.glob("px4*")):
+            link = self.bin_dir / source.name
+            if link.is_symlink() or link.exists():
+                link.unlink()
+            target = source if source.name in ("px4", "px4-alias.sh") else Path("px4")
+            link.symlink_to(target)
+
+    def command(self, px4_root: str = "$PX4_DIR/build/px4_sitl_default") -> str:
+        """The shell command that starts this PX4 (printed for a PX4 started by hand)."""
+        root = str(self.build.root) if self.build is not None else px4_root
+        return (
+            f"PATH={shlex.quote(str(self.bin_dir.resolve()))}:$PATH "
+            f"PX4_SYS_AUTOSTART={AIRFRAME} {root}/bin/px4 -d -i {self.instance} "
+            f"-w {shlex.quote(str(self.work_dir.resolve()))} {root}/etc"
+        )
+
+    def start(self) -> None:
+        """Start PX4 in its own session, console to ``px4.log``."""
+        assert self.build is not None, "a hand-started PX4 is not the rig's to start"
+        search_path = f"{self.bin_dir.resolve()}:{os.environ.get('PATH', '')}"
+        environment = dict(os.environ, PX4_SYS_AUTOSTART=str(AIRFRAME), PATH=search_path)
+        with self.console_path.open("wb") as console:
+            self._process = subprocess.Popen(
+                [str(self.bin_dir.resolve() / "px4"), "-d", "-i", str(self.instance),
+                 "-w", str(self.work_dir.resolve()), str(self.build.etc)],
+                cwd=self.work_dir, env=environment, stdin=subprocess.DEVNULL,
+                stdout=console, stderr=subprocess.STDOUT, start_new_session=True,
+            )  # fmt: skip
+
+    def exit_description(self) -> str | None:
+        """How PX4 ended (naming its console log), None while it runs or when not started."""
+        if self._process is None or self._process.poll() is None:
+            return None
+        code = self._process.returncode
+        how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+        return f"PX4 {how}; its console is in {self.console_path}"
+
+    def stop(self) -> None:
+        """SIGINT (PX4 shuts down and closes its ULog), SIGKILL if it hangs; then keep the
+        ULog beside ``rig.ulg``."""
+        process = self._process
+        if process is not None and process.poll() is None:
+            os.killpg(process.pid, signal.SIGINT)
+            try:
+                process.wait(timeout=STOP_GRACE_S)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+        self._keep_ulog()
+
+    def _keep_ulog(self) -> None:
+        logs = sorted((self.work_dir / "log").glob("*/*.ulg"), key=lambda p: p.stat().st_mtime)
+        if logs:
+            shutil.copyfile(logs[-1], self.ulog_path)
+
+
+def _px4_number(value: float) -> str:
+    """PX4's ``param set`` text: integers without a decimal point (INT32 parameters)."""
+    return str(int(value)) if float(value).is_integer() else repr(float(value))

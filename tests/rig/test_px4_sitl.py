@@ -1,0 +1,298 @@
+"""The real PX4 SITL through the rig: the rig starts the user's build (``$PX4_DIR``; CI
+points it at ``../shared/px4_sitl``), keeps lockstep at every IMU rate, and PX4 flies.
+
+Every test that needs PX4 skips, with the reason, where no build is given. Numbers come
+from the rig's ground truth (``rig.ulg``) and PX4's own ULog (``px4.ulg``).
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import pyulog
+
+from rig.errors import RigError
+from rig.link import LinkTimeouts
+from rig.loop import RunOptions, run_scenario
+from rig.px4_sitl import PX4_DIR_ENV, airframe_parameters, find_px4
+from rig.scenario import scenario_from_dict
+
+pytestmark = pytest.mark.closed_loop
+
+
+@pytest.fixture(scope="module")
+def px4_dir() -> Path:
+    build = find_px4()
+    if build is None:
+        pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl)")
+    return build.root
+
+
+def fly_px4(tmp_path, free_instance, px4_dir, name, duration_s, commands=(), **scenario):
+    document = {"name": name, "vehicle": "f450_high_precision", "duration_s": duration_s,
+                "seed": scenario.pop("seed", 1), "sensor_layer": "tlm",
+                "commands": list(commands), **scenario}  # fmt: skip
+    options = RunOptions(
+        autopilot="px4", px4_dir=px4_dir, instance=free_instance(), out_dir=tmp_path / name,
+        timeouts=LinkTimeouts(connect_s=60, answer_s=30),
+    )  # fmt: skip
+    return run_scenario(scenario_from_dict(document), options)
+
+
+@pytest.mark.parametrize("imu_hz", [250, 400, 500, 1000])
+def test_lockstep_holds_at_every_imu_rate(tmp_path, free_instance, px4_dir, imu_hz):
+    """20 s simulated at each IMU rate with zero stalls: from PX4's first answer on, every
+    frame is answered by the HIL_ACTUATOR_CONTROLS stamped with its own time_usec."""
+    result = fly_px4(tmp_path, free_instance, px4_dir, f"lockstep_{imu_hz}", 20.0,
+                     rates={"imu_hz": imu_hz})  # fmt: skip
+    link = result.link
+    assert result.frames == 20 * imu_hz
+    assert link.freewheel_frames < imu_hz  # PX4 boots within 1 s of simulated time
+    assert link.answers == result.frames - link.freewheel_frames + 1
+    assert link.malformed == 0
+    assert (result.run_dir / "px4.log").is_file()
+    px4_log = pyulog.ULog(str(result.autopilot_log))
+    assert px4_log.initial_parameters["IMU_INTEG_RATE"] == imu_hz
+    assert px4_log.initial_parameters["IMU_GYRO_RATEMAX"] == imu_hz
+
+
+def test_imu_rate_px4_cannot_follow_is_refused_before_the_run(tmp_path):
+    """Above IMU_INTEG_RATE's 1000 Hz PX4 cannot answer every frame: one line, the reason and
+    the nearest rate that works, before any folder or process exists."""
+    document = {"name": "fast", "vehicle": "f450_high_precision", "duration_s": 1.0, "seed": 1,
+                "rates": {"imu_hz": 2000}}  # fmt: skip
+    out = tmp_path / "never"
+    with pytest.raises(RigError, match=r"imu_hz = 2000: .*IMU_INTEG_RATE.*nearest rate that works "
+                                       r"is 1000 Hz"):  # fmt: skip
+        run_scenario(scenario_from_dict(document),
+                     RunOptions(autopilot="px4", px4_dir=tmp_path, out_dir=out))  # fmt: skip
+    assert not out.exists()
+
+
+def test_a_px4_dir_without_px4_fails_in_one_line(tmp_path, monkeypatch):
+    monkeypatch.setenv(PX4_DIR_ENV, str(tmp_path))
+    with pytest.raises(RigError, match=r"^\$PX4_DIR = .*: no PX4 SITL build there"):
+        find_px4()
+    with pytest.raises(RigError, match=r"^--px4 = .*: no PX4 SITL build there"):
+        find_px4(tmp_path / "missing")
+
+
+def test_no_px4_given_means_the_user_starts_it(monkeypatch):
+    monkeypatch.delenv(PX4_DIR_ENV, raising=False)
+    assert find_px4() is None
+
+
+def test_airframe_parameters_follow_the_vehicle_file():
+    """Rotor geometry in PX4's motor order with KM + for the CCW rotors, as PX4's airframe
+    files set CA_ROTORi_*; the hover thrust is the model's hover throttle."""
+    from quad_model import load_vehicle
+
+    vehicle = load_vehicle("f450_high_precision")
+    params = airframe_parameters(vehicle, 0.6094)
+    propulsion = vehicle.propulsion
+    ratio = propulsion.torque_coefficient_nm_per_radps2 / propulsion.thrust_coefficient_n_per_radps2
+    assert params["CA_ROTOR_COUNT"] == 4
+    for i, (x, y, _) in enumerate(propulsion.position_frd_m):
+        assert (params[f"CA_ROTOR{i}_PX"], params[f"CA_ROTOR{i}_PY"]) == (x, y)
+    assert [params[f"CA_ROTOR{i}_KM"] for i in range(4)] == pytest.approx(
+        [ratio, ratio, -ratio, -ratio]
+    )
+    assert params["MPC_THR_HOVER"] == 0.609
+    assert params["BAT1_N_CELLS"] == 3
+
+
+def test_ports_leave_mavsdk_and_the_ground_station_free(tmp_path, free_instance, px4_dir):
+    """While the rig flies PX4, a user's MAVSDK can bind UDP 14540+i (the rig never does)."""
+    import socket
+
+    instance = free_instance()
+    user = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    user.bind(("127.0.0.1", 14540 + instance))
+    try:
+        document = {"name": "ports", "vehicle": "f450_high_precision", "duration_s": 3.0, "seed": 1,
+                    "rates": {"imu_hz": 250}, "commands": []}  # fmt: skip
+        options = RunOptions(autopilot="px4", px4_dir=px4_dir, instance=instance,
+                             out_dir=tmp_path / "ports")  # fmt: skip
+        result = run_scenario(scenario_from_dict(document), options)
+    finally:
+        user.close()
+    assert result.frames == 750
+
+
+def _topic(log, name):
+    data = log.get_dataset(name).data
+    return data["timestamp"] / 1e6, data
+
+
+def _inside(t, window_s):
+    return (t > window_s[0]) & (t < window_s[1])
+
+
+def _ready_s(px4_log) -> float:
+    """When PX4's pre-flight checks first passed ("Ready for takeoff!")."""
+    t, status = _topic(px4_log, "vehicle_status")
+    passed = status["pre_flight_checks_pass"] > 0
+    assert passed.any(), "PX4 never passed its pre-flight checks"
+    return float(t[np.argmax(passed)])
+
+
+class Hover:
+    """PX4's estimate and setpoint against the rig's truth over a hover window.
+
+    PX4's local frame starts where EKF2 aligned with GPS, so its origin differs from the
+    truth's by the receiver's absolute error at that moment: that offset, taken on the
+    ground before arming, is removed. What remains is the error PX4 flies with.
+    """
+
+    def __init__(self, rig_log, px4_log, ground_s, window_s):
+        truth_t, truth = _topic(rig_log, "vehicle_local_position_groundtruth")
+        est_t, est = _topic(px4_log, "vehicle_local_position")
+        sp_t, sp = _topic(px4_log, "vehicle_local_position_setpoint")
+        on_ground, hovering = _inside(est_t, ground_s), _inside(truth_t, window_s)
+        t = truth_t[hovering]
+        self.estimate_error_m, offset = {}, {}
+        for axis in "xyz":
+            truth_at_estimate = np.interp(est_t, truth_t, truth[axis])
+            offset[axis] = np.mean(est[axis][on_ground] - truth_at_estimate[on_ground])
+            estimate = np.interp(t, est_t, est[axis]) - offset[axis]
+            self.estimate_error_m[axis] = estimate - truth[axis][hovering]
+        setpoint_z = np.interp(t, sp_t, sp["z"]) - offset["z"]
+        self.truth_minus_setpoint_m = truth["z"][hovering] - setpoint_z
+        after_ground = est_t > ground_s[1]
+        self.resets = {name: len(np.unique(est[name][after_ground])) - 1
+                       for name in ("xy_reset_counter", "z_reset_counter")}  # fmt: skip
+
+
+def _takeoff_hover_land(arm_s, land_s, altitude_m=2.5):
+    return [{"at_s": arm_s, "action": "arm"},
+            {"at_s": arm_s + 0.5, "action": "takeoff", "altitude_m": altitude_m},
+            {"at_s": land_s, "action": "land"}]  # fmt: skip
+
+
+@pytest.mark.cosim
+def test_takeoff_hover_land_through_the_rtl_chips_at_1khz(tmp_path, free_instance, px4_dir):
+    """PX4 on the RTL chips at IMU 1 kHz (1 µs PWM capture): ready for take-off within 10 s,
+    then over 8 s of hover its estimate stays within 0.2 m of the truth and the truth
+    within ±0.15 m of its setpoint, with no EKF2 reset in flight; it lands and disarms."""
+    result = fly_px4(tmp_path, free_instance, px4_dir, "rtl_1khz", 36.0,
+                     _takeoff_hover_land(10.0, 28.0), sensor_layer="rtl",
+                     rates={"imu_hz": 1000})  # fmt: skip
+    rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
+    assert _ready_s(px4_log) < 10.0
+    hover = Hover(rig_log, px4_log, ground_s=(7.0, 9.5), window_s=(19.5, 27.5))
+    for axis, error in hover.estimate_error_m.items():
+        assert np.abs(error).max() < 0.2, (
+            f"PX4's {axis} estimate off by {np.abs(error).max():.2f} m"
+        )
+    assert np.abs(hover.truth_minus_setpoint_m).max() < 0.15
+    assert hover.resets == {"xy_reset_counter": 0, "z_reset_counter": 0}
+    t, armed = _topic(px4_log, "actuator_armed")
+    assert armed["armed"][_inside(t, (20.0, 27.0))].all()
+    assert not armed["armed"][-1]
+    _, truth = _topic(rig_log, "vehicle_local_position_groundtruth")
+    assert abs(truth["z"][-1]) < 0.05  # back on the ground
+
+
+def test_gps_loss_px4_fails_safe_as_documented(tmp_path, free_instance, px4_dir):
+    """GPS lost in a hover (PX4 docs, "Position loss failsafe"): within 10 s PX4 declares
+    the failsafe and descends without position (Descend or Land), lands and disarms."""
+    loss_s = 22.0
+    commands = _takeoff_hover_land(10.0, 999.0)[:2]
+    result = fly_px4(tmp_path, free_instance, px4_dir, "gps_loss", 45.0, commands,
+                     rates={"imu_hz": 250},
+                     faults=[{"kind": "gps_loss", "start_s": loss_s}])  # fmt: skip
+    rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
+    t, status = _topic(px4_log, "vehicle_status")
+    assert not status["failsafe"][_inside(t, (15.0, loss_s))].any()
+    declared_s = t[np.argmax(status["failsafe"] > 0)]
+    assert loss_s < declared_s < loss_s + 10.0
+    armed = status["arming_state"] == 2  # ARMING_STATE_ARMED
+    failsafe_flight = (t >= declared_s) & armed
+    descending = {12, 18}  # NAVIGATION_STATE_DESCEND, NAVIGATION_STATE_AUTO_LAND
+    assert set(np.unique(status["nav_state"][failsafe_flight])) <= descending
+    assert not armed[-1]  # landed and disarmed
+    truth_t, truth = _topic(rig_log, "vehicle_local_position_groundtruth")
+    assert -truth["z"][_inside(truth_t, (loss_s - 2.0, loss_s))].min() > 1.0  # it was flying
+    assert abs(truth["z"][-1]) < 0.1  # and it came down
+
+
+def test_twenty_minutes_of_px4_flight_without_a_stall(tmp_path, free_instance, px4_dir):
+    """A 20-minute simulated PX4 flight (take-off, hover, land) keeps lockstep to the end."""
+    duration_s = 1200.0
+    result = fly_px4(tmp_path, free_instance, px4_dir, "twenty_minutes", duration_s,
+                     _takeoff_hover_land(10.0, duration_s - 30.0),
+                     rates={"imu_hz": 250})  # fmt: skip
+    link = result.link
+    assert result.frames == duration_s * 250
+    assert link.answers == result.frames - link.freewheel_frames + 1
+    px4_log = pyulog.ULog(str(result.autopilot_log))
+    t, armed = _topic(px4_log, "actuator_armed")
+    assert armed["armed"][_inside(t, (20.0, duration_s - 40.0))].all()
+    assert not armed["armed"][-1]
+
+
+def _start_rig_cli(px4_dir, instance, out):
+    return subprocess.Popen(
+        [sys.executable, "-m", "rig.cli", "run", "takeoff_hover_land", "--autopilot", "px4",
+         "--px4", str(px4_dir), "--instance", str(instance), "--out", str(out)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+
+
+def _px4_pids(out):
+    """PIDs of the PX4 processes running in ``out``'s work dir (from /proc)."""
+    work_dir = str((out / "px4").resolve()).encode()
+    pids = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and work_dir in (entry / "cmdline").read_bytes():
+                pids.append(int(entry.name))
+        except OSError:
+            continue
+    return pids
+
+
+def _wait_until_flying(rig, out):
+    deadline = time.monotonic() + 120
+    while not ((out / "rig.ulg").is_file() and (out / "rig.ulg").stat().st_size > 300_000):
+        if time.monotonic() > deadline or rig.poll() is not None:
+            rig.kill()
+            pytest.fail(f"the run never got under way: {rig.communicate()[1]}")
+        time.sleep(0.2)
+
+
+def test_sigterm_stops_px4_and_keeps_both_logs(tmp_path, free_instance, px4_dir):
+    out = tmp_path / "run"
+    rig = _start_rig_cli(px4_dir, free_instance(), out)
+    _wait_until_flying(rig, out)
+    assert _px4_pids(out)
+    rig.send_signal(signal.SIGTERM)
+    _, err = rig.communicate(timeout=60)
+    assert rig.returncode == 143
+    assert "rig: terminated (SIGTERM); the logs written so far are readable" in err
+    assert "Traceback" not in err
+    assert not _px4_pids(out)  # PX4 was stopped, not left spinning
+    assert len(pyulog.ULog(str(out / "rig.ulg")).get_dataset("sensor_combined").data) > 0
+    px4_log = pyulog.ULog(str(out / "px4.ulg"))  # PX4's own log, kept beside rig.ulg
+    assert px4_log.initial_parameters["SYS_AUTOSTART"] == 10016
+
+
+def test_px4_dying_mid_run_is_one_line_naming_its_console(tmp_path, free_instance, px4_dir):
+    out = tmp_path / "run"
+    rig = _start_rig_cli(px4_dir, free_instance(), out)
+    _wait_until_flying(rig, out)
+    for pid in _px4_pids(out):
+        os.kill(pid, signal.SIGKILL)
+    _, err = rig.communicate(timeout=60)
+    assert rig.returncode == 1
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("rig: error: ")
+    assert "PX4 killed by SIGKILL" in last
+    assert f"its console is in {out / 'px4.log'}" in last
+    assert "Traceback" not in err
+    pyulog.ULog(str(out / "rig.ulg"))  # readable up to that moment
