@@ -3,8 +3,10 @@
 
 Each case starts a fresh PX4 (the rig does), which arms and takes off to 2 m, and flies
 ``SIMULATED_S`` of simulated time; the RTF counts the lockstep frames only, not PX4's
-start-up. The anchor from the issue: PX4 + a bare Python simulator ran 16.7x real time at
-250 Hz on this machine kind; the goal for PX4 + rig with TLM chips is 80 % of that.
+start-up. ``bypass`` is the same rig with its sensor layer skipped (SI samples straight
+into HIL_SENSOR, commanded widths straight to the motors): what the chips cost. The
+anchor from the issue: PX4 + a bare Python simulator ran 16.7x real time at 250 Hz on this
+machine kind; the goal for PX4 + rig with TLM chips is 80 % of that.
 Figures only, no pass/fail.
 """
 
@@ -21,7 +23,7 @@ from rig.px4_sitl import PX4_DIR_ENV, find_px4
 from rig.scenario import scenario_from_dict
 
 INSTANCE = 92  # away from the instances tests and users pick first
-SIMULATED_S = {"tlm": 20.0, "rtl": 6.0}
+SIMULATED_S = {"bypass": 20.0, "tlm": 20.0, "rtl": 6.0}
 #: PX4 passes its pre-flight checks ~6.5 s after boot; the flight starts after that.
 ARM_S = 8.0
 BARE_SIMULATOR_RTF_250HZ = 16.7
@@ -31,7 +33,7 @@ def _case(build_root: Path, sensor_layer: str, imu_hz: int) -> None:
     label = f"px4 {sensor_layer} IMU {imu_hz:>4} Hz"
     document = {
         "name": "bench_px4", "vehicle": "f450_high_precision", "seed": 1,
-        "duration_s": ARM_S + SIMULATED_S[sensor_layer], "sensor_layer": sensor_layer,
+        "duration_s": ARM_S + SIMULATED_S[sensor_layer],
         "rates": {"imu_hz": imu_hz},
         "commands": [{"at_s": ARM_S, "action": "arm"},
                      {"at_s": ARM_S + 0.5, "action": "takeoff", "altitude_m": 2.0}],
@@ -39,14 +41,14 @@ def _case(build_root: Path, sensor_layer: str, imu_hz: int) -> None:
     try:
         with tempfile.TemporaryDirectory() as folder:
             options = RunOptions(autopilot="px4", px4_dir=build_root, instance=INSTANCE,
-                                 out_dir=Path(folder),
+                                 out_dir=Path(folder), sensor_layer=sensor_layer,
                                  timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
             result = run_scenario(scenario_from_dict(document), options)
     except RigError as error:
         print(f"{label:<27}  failed: {error}", flush=True)
         return
     share = ""
-    if imu_hz == 250 and sensor_layer == "tlm":
+    if imu_hz == 250 and sensor_layer != "rtl":
         share = f"  ({result.real_time_factor / BARE_SIMULATOR_RTF_250HZ:.0%} of the anchor)"
     print(f"{label:<27}{result.real_time_factor:7.2f}x{result.frames / result.wall_s:10.0f}"
           f"  {' ' * 9}{_budget_row(result.budget)}{share}", flush=True)  # fmt: skip
@@ -64,8 +66,8 @@ def main() -> None:
     print(f"PX4 build: {build.root}; anchor: PX4 + bare Python simulator "
           f"{BARE_SIMULATOR_RTF_250HZ}x at 250 Hz")  # fmt: skip
     print(_budget_heading())
-    for sensor_layer in ("tlm", "rtl"):
-        for imu_hz in (250, 1000):
+    for imu_hz in (250, 1000):
+        for sensor_layer in ("bypass", "tlm", "rtl"):
             _case(build.root, sensor_layer, imu_hz)
 
 

@@ -64,10 +64,12 @@ from rig.px4_sitl import Px4Sitl, check_imu_rate, find_px4, px4_parameters
 from rig.rig_log import RigLog
 from rig.scenario import Rates, Scenario
 from rig.script import Action, CommandScript
-from rig.sensor_layer import ChipFrame, ChipReadout, SensorLayer, TlmSensorLayer
+from rig.sensor_layer import BypassSensorLayer, ChipFrame, ChipReadout, SensorLayer, TlmSensorLayer
 from rig.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
 
 AUTOPILOTS = ("reference", "px4")
+#: ``RunOptions.sensor_layer`` that skips the chips (benchmarks only, not a scenario's).
+BYPASS = "bypass"
 #: Where runs land unless ``--out`` says otherwise (ignored by git).
 RUNS_DIR = Path("runs")
 #: Ground truth is logged at this rate (PX4 SITL logs its groundtruth topics at ~100 Hz).
@@ -385,6 +387,7 @@ class _Loop:
             read_mag=mag is not None,
             faults=self.faults.chip_faults(),
             pulses=tuple(pulses),
+            si=readings,
         )
         out = self.layer.frame(chip_frame)
         for chip, error in out.bus_errors:
@@ -563,6 +566,8 @@ class _Loop:
 def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:
     if name == "tlm":
         return TlmSensorLayer(pwm_tick_hz=rates.pwm_tick_hz)
+    if name == BYPASS:
+        return BypassSensorLayer()
     from rig.cosim import RtlSensorLayer  # imported on demand: it starts a simulator
 
     return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)

@@ -35,6 +35,7 @@ from fpga_hdl.mpu6000.model import Mpu6000Model
 from fpga_hdl.ms5611 import regs as ms_regs
 from fpga_hdl.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
 from fpga_hdl.ms5611.model import Ms5611Model
+from quad_model.sensors import SensorReadings
 from rig.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
 
 CHIPS = ("mpu6000", "ms5611", "ist8310")
@@ -69,6 +70,8 @@ class ChipFrame:
     faults: Mapping[str, ChipFault] = field(default_factory=dict)
     #: PWM pulses that started since the previous frame (the autopilot's outputs).
     pulses: tuple[Pulse, ...] = ()
+    #: The SI samples the words came from; only :class:`BypassSensorLayer` reads them.
+    si: SensorReadings | None = None
 
 
 @dataclass(frozen=True)
@@ -251,3 +254,36 @@ class TlmSensorLayer:
 
     def close(self) -> None:
         """Nothing to release: the models live in this process."""
+
+
+class BypassSensorLayer:
+    """No chips: the SI samples go straight into HIL_SENSOR and the commanded pulse widths
+    straight to the motors, as a bare simulator (Gazebo's) feeds PX4. For measuring what
+    the chips cost (``make bench``); the credible rig is ``tlm`` or ``rtl``."""
+
+    def __init__(self) -> None:
+        self._widths_us = [0.0] * MOTOR_CHANNELS
+
+    def start(self) -> None:
+        """Nothing to bring up."""
+
+    def frame(self, frame: ChipFrame) -> ChipReadout:
+        readings = frame.si
+        assert readings is not None, "the loop passes the samples"
+        assert readings.imu is not None, "the IMU is due every frame"
+        for pulse in frame.pulses:
+            if pulse.channel < MOTOR_CHANNELS:
+                self._widths_us[pulse.channel] = float(pulse.width_us)
+        imu, mag, baro = readings.imu, readings.mag, readings.baro
+        return ChipReadout(
+            accel_mps2=tuple(map(float, imu.accel_mps2)),
+            gyro_radps=tuple(map(float, imu.gyro_radps)),
+            imu_temperature_degc=imu.temperature_degc,
+            mag_gauss=None if mag is None else tuple(map(float, mag.field_gauss)),
+            baro_pa_degc=None if baro is None else (baro.pressure_pa, baro.temperature_degc),
+            pwm_widths_us=tuple(self._widths_us),
+            pwm_timed_out=(False,) * MOTOR_CHANNELS,
+        )
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -168,3 +168,23 @@ def test_a_pulse_off_the_pwm_period_is_a_one_line_error(rtl_layer):
 def test_a_request_out_of_protocol_is_a_one_line_error(rtl_layer):
     with pytest.raises(CosimError, match=r"^the RTL co-simulation failed: unknown request kind 9$"):
         rtl_layer._request(bytes([9]))
+
+
+def test_bypass_layer_passes_the_si_samples_and_commanded_widths():
+    """The benchmark's no-chips layer: what the sensor models made, as they made it."""
+    from quad_model.sensors import BaroSample, ImuSample, MagSample, SensorReadings
+    from rig.sensor_layer import BypassSensorLayer
+
+    imu = ImuSample(0.001, np.array([0.1, -0.2, -9.8]), np.array([0.01, 0.0, -0.02]), 30.0)
+    readings = SensorReadings(imu, MagSample(0.001, np.array([0.2, 0.0, 0.4])),
+                              BaroSample(0.001, 95_500.0, 20.0), None)  # fmt: skip
+    pulses = tuple(Pulse(channel, 0, 1500 + channel) for channel in range(MOTOR_CHANNELS))
+    frame = ChipFrame(now_us=1000, imu=None, mag=None, baro_d1_d2=None, read_mag=True,
+                      pulses=pulses, si=readings)  # fmt: skip
+    out = BypassSensorLayer().frame(frame)
+    assert out.accel_mps2 == (0.1, -0.2, -9.8)
+    assert out.gyro_radps == (0.01, 0.0, -0.02)
+    assert out.mag_gauss == (0.2, 0.0, 0.4)
+    assert out.baro_pa_degc == (95_500.0, 20.0)
+    assert out.pwm_widths_us == (1500.0, 1501.0, 1502.0, 1503.0)
+    assert out.pwm_timed_out == (False,) * MOTOR_CHANNELS
