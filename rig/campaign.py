@@ -22,7 +22,6 @@ import hashlib
 import itertools
 import json
 import os
-import signal
 import sqlite3
 import subprocess
 import sys
@@ -40,6 +39,7 @@ from credibility import CredibilityError, load_plan
 from quad_model.toml_file import read_toml_file
 from quad_model.vehicle import VEHICLES_DIR, VehicleFileError, vehicle_from_dict
 from rig.errors import RigError
+from rig.processes import stop_process_group
 from rig.scenario import FAULT_KINDS, SCENARIOS_DIR, SENSOR_LAYERS, scenario_from_dict
 
 CAMPAIGNS_DIR = Path(__file__).parent / "campaigns"
@@ -585,9 +585,9 @@ def run_case(spec: CaseSpec) -> CaseResult:
             hung = False
         except subprocess.TimeoutExpired:
             hung = True
-            _stop(process)
+            stop_process_group(process, STOP_GRACE_S)
         except BaseException:  # Ctrl-C or a cancelled worker: never leave the case running
-            _stop(process)
+            stop_process_group(process, STOP_GRACE_S)
             raise
     wall_s = time.monotonic() - started
     outcome = _read_outcome(run_dir)
@@ -623,18 +623,6 @@ def run_case(spec: CaseSpec) -> CaseResult:
         rig_log=logs.get("rig"),
         autopilot_log=logs.get("autopilot"),
     )
-
-
-def _stop(process: subprocess.Popen[bytes]) -> None:
-    """SIGINT first, so the run closes its logs and stops its autopilot; then SIGKILL."""
-    if process.poll() is not None:
-        return
-    os.killpg(process.pid, signal.SIGINT)
-    try:
-        process.wait(timeout=STOP_GRACE_S)
-    except subprocess.TimeoutExpired:
-        os.killpg(process.pid, signal.SIGKILL)
-        process.wait()
 
 
 def _read_outcome(run_dir: Path) -> dict[str, Any] | None:

@@ -34,8 +34,6 @@ and the error propagates as one line.
 from __future__ import annotations
 
 import math
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -58,6 +56,7 @@ from rig.errors import RigError, ScenarioError
 from rig.faults import FaultInjector
 from rig.ground import GroundLink
 from rig.link import LinkStats, LinkTimeouts, SimulatorLink
+from rig.processes import exit_description, stop_process_group
 from rig.pwm import PwmOutput, throttle_from_capture
 from rig.px4_sim_api import Ports, mavlink
 from rig.px4_sitl import Px4Sitl, check_imu_rate, find_px4, px4_parameters
@@ -70,6 +69,8 @@ from rig.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
 AUTOPILOTS = ("reference", "px4")
 #: ``RunOptions.sensor_layer`` that skips the chips (benchmarks only, not a scenario's).
 BYPASS = "bypass"
+#: Seconds the reference autopilot gets to close its log after SIGINT.
+AUTOPILOT_STOP_GRACE_S = 5.0
 #: Where runs land unless ``--out`` says otherwise (ignored by git).
 RUNS_DIR = Path("runs")
 #: Ground truth is logged at this rate (PX4 SITL logs its groundtruth topics at ~100 Hz).
@@ -493,24 +494,12 @@ class _Loop:
     def _autopilot_exit(self) -> str | None:
         if self._px4 is not None:
             return self._px4.exit_description()
-        if self._process is None or self._process.poll() is None:
-            return None
-        code = self._process.returncode
-        if code < 0:
-            return f"killed by {signal.Signals(-code).name}"
-        return f"exit code {code}"
+        return None if self._process is None else exit_description(self._process)
 
     def _stop_autopilot(self) -> None:
         """SIGINT first, so the autopilot closes its log; then SIGKILL if it hangs."""
-        process = self._process
-        if process is None or process.poll() is not None:
-            return
-        os.killpg(process.pid, signal.SIGINT)
-        try:
-            process.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
+        if self._process is not None:
+            stop_process_group(self._process, AUTOPILOT_STOP_GRACE_S)
 
     # -- reporting -------------------------------------------------------------------------
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 import os
 import shlex
 import shutil
-import signal
 import subprocess
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from pathlib import Path
 
 from quad_model.vehicle import Vehicle
 from rig.errors import RigError
+from rig.processes import exit_description, stop_process_group
 
 #: The environment variable naming the user's PX4 build (or PX4-Autopilot checkout).
 PX4_DIR_ENV = "PX4_DIR"
@@ -212,23 +212,14 @@ class Px4Sitl:
 
     def exit_description(self) -> str | None:
         """How PX4 ended (naming its console log), None while it runs or when not started."""
-        if self._process is None or self._process.poll() is None:
-            return None
-        code = self._process.returncode
-        how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
-        return f"PX4 {how}; its console is in {self.console_path}"
+        how = None if self._process is None else exit_description(self._process)
+        return None if how is None else f"PX4 {how}; its console is in {self.console_path}"
 
     def stop(self) -> None:
         """SIGINT (PX4 shuts down and closes its ULog), SIGKILL if it hangs; then keep the
         ULog beside ``rig.ulg``."""
-        process = self._process
-        if process is not None and process.poll() is None:
-            os.killpg(process.pid, signal.SIGINT)
-            try:
-                process.wait(timeout=STOP_GRACE_S)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
+        if self._process is not None:
+            stop_process_group(self._process, STOP_GRACE_S)
         self._keep_ulog()
 
     def _keep_ulog(self) -> None:
