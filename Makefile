@@ -59,6 +59,7 @@ $(STUDY)/%/.complete: $(X500_LOG) | $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/lint-imports
 
 clean:
 	rm -rf build runs .pytest_cache

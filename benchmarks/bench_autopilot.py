@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from quad_model.frames import ned_to_geodetic
-from rig.autopilot import FlightController, GpsFix, Parameters, SensorFrame
-from rig.autopilot.flight_log import open_flight_log
+from rig.autopilots.reference import FlightController, GpsFix, Parameters, SensorFrame
+from rig.autopilots.reference.flight_log import open_flight_log
 
 HOME = (47.397742, 8.545594, 488.0)
 IMU_RATE_HZ = 1000

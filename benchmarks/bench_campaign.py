@@ -18,7 +18,7 @@ from pathlib import Path
 
 from dask.distributed import LocalCluster
 
-from rig.campaign import campaign_executor, campaign_from_dict, run_campaign
+from rig.apps.campaign import campaign_executor, campaign_from_dict, run_campaign
 
 DEFAULT_CASES = 4
 

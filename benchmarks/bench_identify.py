@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 from quad_model.vehicle import load_vehicle
-from rig.identify import identify_vehicle
+from rig.apps.identify import identify_vehicle
 
 LOG = (
     Path(__file__).resolve().parent.parent

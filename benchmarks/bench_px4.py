@@ -16,11 +16,11 @@ import tempfile
 from pathlib import Path
 
 from benchmarks.bench_rig import _budget_heading, _budget_row
+from rig.autopilots.px4 import PX4_DIR_ENV, find_px4
 from rig.errors import RigError
-from rig.link import LinkTimeouts
-from rig.loop import RunOptions, run_scenario
-from rig.px4_sitl import PX4_DIR_ENV, find_px4
-from rig.scenario import scenario_from_dict
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
 
 INSTANCE = 92  # away from the instances tests and users pick first
 SIMULATED_S = {"bypass": 20.0, "tlm": 20.0, "rtl": 6.0}

@@ -13,9 +13,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from rig.loop import RunOptions
-from rig.px4_sim_api import free_instance
-from rig.replay import ReplayOptions, plan_replay, run_replay
+from rig.apps.replay import ReplayOptions, plan_replay, run_replay
+from rig.lockstep.loop import RunOptions
+from rig.mavlink.px4_api import free_instance
 
 X500_LOG = (
     Path(__file__).resolve().parent.parent

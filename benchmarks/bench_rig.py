@@ -7,7 +7,7 @@ physics, chips and PX4's drivers, HIL encoding, lockstep over TCP, PWM capture, 
 Two autopilots: the reference autopilot (the product's loop), and the PX4-side test double
 of ``tests/rig`` (answers each frame at a fixed throttle, doing almost no work), which
 shows the rig's own cost. The budget splits each frame's wall time (µs) into the parts of
-:class:`rig.loop.FrameBudget`. The lockstep is sequential, so the autopilot's compute
+:class:`rig.lockstep.loop.FrameBudget`. The lockstep is sequential, so the autopilot's compute
 adds to the frame: it shows as ``wait`` (blocked on the answer beyond the model step,
 sensor sampling and logging the rig overlaps with it) and inside ``send`` (the send wakes
 the autopilot, which often runs on the sender's core before the send returns).
@@ -38,10 +38,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from rig.errors import RigError
-from rig.link import LinkTimeouts
-from rig.loop import FrameBudget, Progress, RunOptions, RunResult, run_scenario
-from rig.px4_sim_api import Ports
-from rig.scenario import Scenario, scenario_from_dict
+from rig.lockstep.loop import FrameBudget, Progress, RunOptions, RunResult, run_scenario
+from rig.mavlink.px4_api import Ports
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import Scenario, scenario_from_dict
 
 REPO = Path(__file__).resolve().parent.parent
 DOUBLE = REPO / "tests" / "rig" / "autopilot_double.py"
@@ -218,10 +218,10 @@ def rtl_pwm_tick_cases() -> None:
 
 def main() -> None:
     autopilots = ["double"]
-    if importlib.util.find_spec("rig.autopilot.__main__") is not None:
+    if importlib.util.find_spec("rig.autopilots.reference.__main__") is not None:
         autopilots.insert(0, "reference")
     else:
-        print("(reference autopilot not installed: `python -m rig.autopilot` is missing)")
+        print("(reference autopilot not installed: `rig.autopilots.reference` is missing)")
     print(_budget_heading())
     _print_before()
     for sensor_layer in ("tlm", "rtl"):

@@ -31,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
+import subprocess
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -159,15 +160,24 @@ def build_simulation(
     key = hashlib.sha256("\n".join([*map(str, sources), *build_args]).encode()).hexdigest()[:16]
     build_dir = BUILD_DIR / "cocotb" / simulator / f"{toplevel}-{key}"
     if not (build_dir / _BUILD_DONE).is_file():
-        runner = get_runner(simulator)
-        runner.build(
-            sources=sources,
-            hdl_toplevel=toplevel,
-            build_dir=build_dir,
-            build_args=build_args,
-            timescale=TIMESCALE,
-            always=True,
-        )
+        # The compiler's hundreds of lines go to a file, not between a benchmark's figures.
+        build_dir.mkdir(parents=True, exist_ok=True)
+        log_file = build_dir / "build.log"
+        try:
+            get_runner(simulator).build(
+                sources=sources,
+                hdl_toplevel=toplevel,
+                build_dir=build_dir,
+                build_args=build_args,
+                timescale=TIMESCALE,
+                always=True,
+                log_file=log_file,
+            )
+        except (SystemExit, subprocess.CalledProcessError) as error:
+            tail = log_file.read_text(errors="replace")[-4000:] if log_file.is_file() else ""
+            raise RuntimeError(
+                f"{simulator} build of {toplevel} failed; log {log_file}\n{tail}"
+            ) from error
         (build_dir / _BUILD_DONE).write_text(f"{generated.path}\n")
     return generated, build_dir
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from rig.errors import AutopilotNotConnected
-from rig.link import LinkTimeouts, SimulatorLink
-from rig.px4_sim_api import Ports
-from rig.px4_sim_api import free_instance as find_free_instance
+from rig.mavlink.px4_api import Ports
+from rig.mavlink.px4_api import free_instance as find_free_instance
+from rig.mavlink.simulator_link import LinkTimeouts, SimulatorLink
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 #: Short bounds so a broken test fails in seconds, not minutes.

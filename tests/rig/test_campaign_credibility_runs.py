@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from rig.campaign import (
+from rig.apps.campaign import (
     CampaignError,
     campaign_executor,
     campaign_from_dict,
@@ -15,7 +15,7 @@ from rig.campaign import (
     read_results,
     run_campaign,
 )
-from rig.campaign_report import write_report
+from rig.apps.campaign_report import write_report
 
 pytestmark = pytest.mark.closed_loop
 

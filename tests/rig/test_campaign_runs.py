@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from dask.distributed import LocalCluster
 
-from rig.campaign import campaign_executor, campaign_from_dict, read_results, run_campaign
-from rig.campaign_report import write_report
+from rig.apps.campaign import campaign_executor, campaign_from_dict, read_results, run_campaign
+from rig.apps.campaign_report import write_report
 
 pytestmark = pytest.mark.closed_loop
 
@@ -76,7 +76,7 @@ class Saboteur:
                     cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
                 except OSError:
                     continue
-                if "rig.autopilot" not in cmdline or out_dir not in cmdline:
+                if "rig.autopilots.reference" not in cmdline or out_dir not in cmdline:
                     continue
                 for prefix, sig in self.targets.items():
                     if prefix in cmdline and prefix not in self.done:

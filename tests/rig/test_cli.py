@@ -8,8 +8,8 @@ import time
 import pytest
 import pyulog
 
-from rig.cli import main
-from rig.px4_sim_api import free_instance as find_free_instance
+from rig.apps.cli import main
+from rig.mavlink.px4_api import free_instance as find_free_instance
 
 
 def test_missing_scenario_is_one_line_on_stderr(capsys, tmp_path):
@@ -40,7 +40,7 @@ def test_unknown_vehicle_is_a_scenario_error(capsys, tmp_path):
 def test_ctrl_c_stops_cleanly_with_readable_logs(tmp_path, free_instance):
     out = tmp_path / "run"
     process = subprocess.Popen(
-        [sys.executable, "-m", "rig.cli", "run", "takeoff_hover_land", "--instance",
+        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--instance",
          str(free_instance()), "--out", str(out)],
         stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
@@ -79,7 +79,7 @@ def test_two_rigs_fly_side_by_side_with_mavsdks_port_free(tmp_path, free_instanc
                 [
                     sys.executable,
                     "-m",
-                    "rig.cli",
+                    "rig.apps.cli",
                     "run",
                     "takeoff_hover_land",
                     "--duration",

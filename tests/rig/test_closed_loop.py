@@ -1,4 +1,4 @@
-"""Flights with the reference autopilot process (``python -m rig.autopilot``) in the loop.
+"""Flights with the reference autopilot process (``python -m rig.autopilots.reference``).
 
 Short scenarios with stated bounds; every number checked comes from the rig's ground
 truth (rig.ulg) or the autopilot's own log, never from the code under test.
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import pyulog
 
-from rig.link import LinkTimeouts
-from rig.loop import RunOptions, run_scenario
-from rig.scenario import scenario_from_dict
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
 
 pytestmark = pytest.mark.closed_loop
 

@@ -12,7 +12,7 @@ import pytest
 from fpga_hdl.ist8310.driver import sample_from_field_gauss
 from fpga_hdl.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.ms5611.model import raw_from_si
-from rig.cosim_channel import (
+from rig.chips.channel import (
     decode_frame,
     decode_readout,
     decode_start,
@@ -20,9 +20,9 @@ from rig.cosim_channel import (
     encode_readout,
     encode_start,
 )
+from rig.chips.layer import ChipFault, ChipFrame, ChipReadout, TlmSensorLayer
+from rig.chips.pwm import MOTOR_CHANNELS, Pulse, PwmOutput
 from rig.errors import CosimError
-from rig.pwm import MOTOR_CHANNELS, Pulse, PwmOutput
-from rig.sensor_layer import ChipFault, ChipFrame, ChipReadout, TlmSensorLayer
 
 PWM_HZ = 400
 #: Motor 2's output stops for this span of frames: longer than the capture's 0.1 s
@@ -91,7 +91,7 @@ def _started(layer):
 
 @pytest.fixture(scope="module")
 def rtl_layer():
-    from rig.cosim import RtlSensorLayer  # builds the harness once (cached under build/)
+    from rig.chips.rtl import RtlSensorLayer  # builds the harness once (cached under build/)
 
     layer = _started(RtlSensorLayer(pwm_hz=PWM_HZ))
     yield layer
@@ -140,7 +140,7 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer):
 def test_a_coarser_pwm_tick_is_the_same_on_both_layers():
     """``rates.pwm_tick_hz`` = 250 kHz (4 µs) reaches SensorTop and the TLM model alike:
     widths come in whole 4 µs ticks, identical on both layers at 250 Hz frames."""
-    from rig.cosim import RtlSensorLayer
+    from rig.chips.rtl import RtlSensorLayer
 
     rtl = _started(RtlSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
     tlm = _started(TlmSensorLayer(pwm_tick_hz=250e3))
@@ -173,7 +173,7 @@ def test_a_request_out_of_protocol_is_a_one_line_error(rtl_layer):
 def test_bypass_layer_passes_the_si_samples_and_commanded_widths():
     """The benchmark's no-chips layer: what the sensor models made, as they made it."""
     from quad_model.sensors import BaroSample, ImuSample, MagSample, SensorReadings
-    from rig.sensor_layer import BypassSensorLayer
+    from rig.chips.layer import BypassSensorLayer
 
     imu = ImuSample(0.001, np.array([0.1, -0.2, -9.8]), np.array([0.01, 0.0, -0.02]), 30.0)
     readings = SensorReadings(imu, MagSample(0.001, np.array([0.2, 0.0, 0.4])),

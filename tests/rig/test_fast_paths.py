@@ -16,15 +16,15 @@ import pytest
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS as HOST_LATENCY
 from quad_model.sensors import ImuSample, SensorReadings
+from rig.chips.layer import ChipFault
+from rig.chips.pwm import PWM_TIMEOUT_S, PwmCapture, PwmOutput
 from rig.errors import AutopilotProtocolError
-from rig.faults import FaultInjector
-from rig.link import LinkTimeouts
-from rig.loop import RunOptions, run_scenario
-from rig.pwm import PWM_TIMEOUT_S, PwmCapture, PwmOutput
-from rig.px4_sim_api import ActuatorMode, Ports, mavlink
-from rig.scenario import FaultSpec, scenario_from_dict
-from rig.sensor_layer import ChipFault
-from rig.sim_messages import decode_actuator_controls
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.px4_api import ActuatorMode, Ports, mavlink
+from rig.mavlink.sim_messages import decode_actuator_controls
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.faults import FaultInjector
+from rig.scenarios.scenario import FaultSpec, scenario_from_dict
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from quad_model.sensors import BaroSample, ImuSample, SensorReadings
-from rig.faults import FaultInjector
-from rig.scenario import FaultSpec
-from rig.sensor_layer import ChipFault
+from rig.chips.layer import ChipFault
+from rig.scenarios.faults import FaultInjector
+from rig.scenarios.scenario import FaultSpec
 
 
 class RecordingModel:

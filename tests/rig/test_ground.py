@@ -14,8 +14,8 @@ import pytest
 from quad_model.environment import PX4_DEFAULT_HOME
 from quad_model.frames import euler_from_quat, geodetic_to_ned
 from rig.errors import GroundLinkError
-from rig.ground import PX4_MAIN_MODE_OFFBOARD, GroundLink, sweep_pitch_rad
-from rig.px4_sim_api import Ports, mavlink
+from rig.mavlink.ground_link import PX4_MAIN_MODE_OFFBOARD, GroundLink, sweep_pitch_rad
+from rig.mavlink.px4_api import Ports, mavlink
 
 
 class ScriptedAutopilot(threading.Thread):

@@ -1,6 +1,6 @@
-"""rig.identify: known inertia, motor lag and hover throttle recovered from a rig flight (at the
-autopilot's own 250 Hz and resampled to the real log's 50 Hz), the real X500 log against the
-vehicle files, and one-line errors."""
+"""rig.apps.identify: known inertia, motor lag and hover throttle recovered from a rig flight
+(at the autopilot's own 250 Hz and resampled to the real log's 50 Hz), the real X500 log
+against the vehicle files, and one-line errors."""
 
 import re
 import tomllib
@@ -14,19 +14,19 @@ from pyulog import ULog
 from quad_model.environment import PX4_DEFAULT_HOME, isa_density_kgpm3
 from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import VEHICLES_DIR, load_vehicle
-from rig import cli
-from rig.autopilot.flight_log import TOPICS as AUTOPILOT_TOPICS
-from rig.identify import (
+from rig.apps import cli
+from rig.apps.identify import (
     ALIASING_BIAS,
     IdentificationError,
     identification_toml,
     identify_vehicle,
 )
-from rig.link import LinkTimeouts
-from rig.loop import RunOptions, run_scenario
-from rig.px4_sim_api import free_instance
-from rig.scenario import scenario_from_dict
-from rig.ulog import ULogWriter
+from rig.autopilots.reference.flight_log import TOPICS as AUTOPILOT_TOPICS
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.logs.ulog_writer import ULogWriter
+from rig.mavlink.px4_api import free_instance
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
 
 #: Real flight logs carried with the project (the x500_log fixture's folder; a module-scoped
 #: fixture cannot use the function-scoped one).

@@ -12,9 +12,9 @@ import re
 import pytest
 
 from rig.errors import AutopilotNotConnected, AutopilotProtocolError, AutopilotStalled
-from rig.link import LinkTimeouts
-from rig.px4_sim_api import mavlink
-from rig.sim_messages import hil_sensor
+from rig.mavlink.px4_api import mavlink
+from rig.mavlink.sim_messages import hil_sensor
+from rig.mavlink.simulator_link import LinkTimeouts
 
 FRAME_US = 1000
 

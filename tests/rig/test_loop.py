@@ -20,10 +20,10 @@ import pytest
 import pyulog
 
 from rig.errors import AutopilotStalled
-from rig.link import LinkTimeouts
-from rig.loop import RunOptions, run_scenario
-from rig.px4_sim_api import HilSensorFields, Ports, mavlink
-from rig.scenario import scenario_from_dict
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.px4_api import HilSensorFields, Ports, mavlink
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 F450_HOVER_THROTTLE = 0.55  # quad_model's hover_throttle() for the F450 at 488 m, rounded

@@ -5,7 +5,7 @@ import pytest
 
 from fpga_hdl.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS as HOST_LATENCY
-from rig.pwm import PWM_TIMEOUT_S, Pulse, PwmCapture, PwmOutput, throttle_from_capture
+from rig.chips.pwm import PWM_TIMEOUT_S, Pulse, PwmCapture, PwmOutput, throttle_from_capture
 
 
 def test_pulses_at_400_hz_with_widths_latched_at_each_period():

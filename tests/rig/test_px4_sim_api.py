@@ -4,7 +4,7 @@ import socket
 
 import pytest
 
-from rig.px4_sim_api import HilSensorFields, Ports, free_instance, mavlink
+from rig.mavlink.px4_api import HilSensorFields, Ports, free_instance, mavlink
 
 
 def test_fields_updated_masks_are_px4s():

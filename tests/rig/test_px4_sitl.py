@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 import pyulog
 
+from rig.autopilots.px4 import PX4_DIR_ENV, airframe_parameters, find_px4
 from rig.errors import RigError
-from rig.link import LinkTimeouts
-from rig.loop import RunOptions, run_scenario
-from rig.px4_sitl import PX4_DIR_ENV, airframe_parameters, find_px4
-from rig.scenario import scenario_from_dict
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
 
 pytestmark = pytest.mark.closed_loop
 
@@ -238,7 +238,7 @@ def test_twenty_minutes_of_px4_flight_without_a_stall(tmp_path, free_instance, p
 
 def _start_rig_cli(px4_dir, instance, out):
     return subprocess.Popen(
-        [sys.executable, "-m", "rig.cli", "run", "takeoff_hover_land", "--autopilot", "px4",
+        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--autopilot", "px4",
          "--px4", str(px4_dir), "--instance", str(instance), "--out", str(out)],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip

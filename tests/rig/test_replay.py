@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 import pyulog
 
-from rig.cli import main
-from rig.loop import RunOptions
-from rig.pwm import PwmOutput
-from rig.px4_sim_api import free_instance as find_free_instance
-from rig.replay import ReplayError, ReplayOptions, plan_replay, run_replay
-from rig.ulog import ULogWriter
+from rig.apps.cli import main
+from rig.apps.replay import ReplayError, ReplayOptions, plan_replay, run_replay
+from rig.chips.pwm import PwmOutput
+from rig.lockstep.loop import RunOptions
+from rig.logs.ulog_writer import ULogWriter
+from rig.mavlink.px4_api import free_instance as find_free_instance
 
 #: The X500 log's first timestamp (a stale config_overrides sample the logger wrote first).
 X500_FIRST_S = 407.404345

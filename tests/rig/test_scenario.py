@@ -6,7 +6,7 @@ import pytest
 
 from quad_model.environment import PX4_DEFAULT_HOME
 from rig.errors import ScenarioError
-from rig.scenario import SCENARIOS_DIR, load_scenario, scenario_from_dict
+from rig.scenarios.scenario import SCENARIOS_DIR, load_scenario, scenario_from_dict
 
 BUNDLED = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 MINIMAL = {"name": "t", "vehicle": "v", "duration_s": 2.0, "seed": 0}

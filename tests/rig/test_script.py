@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from rig.scenario import Command
-from rig.script import CommandScript, SetpointTrack
+from rig.scenarios.scenario import Command
+from rig.scenarios.script import CommandScript, SetpointTrack
 
 
 class RecordingGround:

@@ -10,8 +10,8 @@ import math
 import pytest
 
 from rig.errors import AutopilotProtocolError
-from rig.px4_sim_api import ActuatorMode, HilSensorFields, mavlink
-from rig.sim_messages import (
+from rig.mavlink.px4_api import ActuatorMode, HilSensorFields, mavlink
+from rig.mavlink.sim_messages import (
     ACCEL_FIFO_SCALE_MPS2,
     COG_UNKNOWN,
     GYRO_FIFO_SCALE_RADPS,

@@ -16,9 +16,9 @@ import pytest
 
 from credibility.assess import Assessment, TimeResult, assess
 from credibility.plan import load_plan
-from rig.loop import RunOptions
-from rig.px4_sim_api import free_instance
-from rig.replay import ReplayOptions, plan_replay, run_replay
+from rig.apps.replay import ReplayOptions, plan_replay, run_replay
+from rig.lockstep.loop import RunOptions
+from rig.mavlink.px4_api import free_instance
 
 REPO = Path(__file__).resolve().parents[2]
 STUDY_PLAN = REPO / "credibility/plans/x500_validation.toml"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from pyulog import ULog
 
-from rig.ulog import ULogWriteError, ULogWriter
+from rig.logs.ulog_writer import ULogWriteError, ULogWriter
 
 TOPICS = {
     "vehicle_attitude": [("float[4]", "q"), ("float", "yawspeed")],
@@ -62,7 +62,7 @@ def test_killed_writer_leaves_a_readable_log(tmp_path):
     path = tmp_path / "killed.ulg"
     script = textwrap.dedent(f"""
         import sys, time
-        from rig.ulog import ULogWriter
+        from rig.logs.ulog_writer import ULogWriter
         log = ULogWriter({str(path)!r}, {{"vehicle_air_data": [("float", "baro_alt_meter")]}},
                          flush_interval_s=0.0)
         for i in range(200):

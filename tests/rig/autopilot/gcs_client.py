@@ -11,7 +11,7 @@ import socket
 import time
 from collections.abc import Callable
 
-from rig.px4_sim_api import mavlink
+from rig.mavlink.px4_api import mavlink
 
 WAIT_S = 10.0
 

@@ -2,8 +2,9 @@
 not MAVLink on PX4's simulator link while the autopilot flies.
 
 It serves quad_model's F450 and its sensor physics (SI samples, no chips) behind PX4's
-simulator API on TCP, and runs the real process (``python -m rig.autopilot``). Everything a
-well-behaved simulator does is tested through the rig itself (``test_end_to_end.py``).
+simulator API on TCP, and runs the real process (``python -m rig.autopilots.reference``).
+Everything a well-behaved simulator does is tested through the rig itself
+(``test_end_to_end.py``).
 """
 
 from __future__ import annotations
@@ -18,14 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from quad_model import QuadModel, SensorSuite, load_vehicle
-from rig.px4_sim_api import ActuatorMode, Ports, mavlink
-from rig.sim_messages import hil_gps, hil_sensor
+from rig.mavlink.px4_api import ActuatorMode, Ports, mavlink
+from rig.mavlink.sim_messages import hil_gps, hil_sensor
 
 WAIT_S = 10.0
 
 
 class MiniRig:
-    """Runs ``python -m rig.autopilot --instance I`` against the F450 model."""
+    """Runs ``python -m rig.autopilots.reference --instance I`` against the F450 model."""
 
     def __init__(self, instance: int, seed: int, log_path: Path, imu_rate_hz: int = 250) -> None:
         vehicle = load_vehicle("f450_high_precision")
@@ -42,7 +43,7 @@ class MiniRig:
         self.listener.listen(1)
         self.listener.settimeout(30.0)
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "rig.autopilot", "--instance", str(instance), "--log",
+            [sys.executable, "-m", "rig.autopilots.reference", "--instance", str(instance), "--log",
              str(log_path)],
         )  # fmt: skip
         self.sim, _ = self.listener.accept()

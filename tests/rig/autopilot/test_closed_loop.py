@@ -16,8 +16,8 @@ import pytest
 
 from quad_model import QuadModel, SensorReadings, SensorSuite, VehicleTruth, load_vehicle
 from quad_model.frames import euler_from_quat, quat_to_dcm
-from rig.autopilot import FlightController, GpsFix, Parameters, SensorFrame
-from rig.autopilot.navigator import NavState
+from rig.autopilots.reference import FlightController, GpsFix, Parameters, SensorFrame
+from rig.autopilots.reference.navigator import NavState
 
 #: Gazebo's and PX4's default IMU rate; 1 kHz changes nothing these bounds test.
 IMU_RATE_HZ = 250

@@ -8,7 +8,7 @@ import pytest
 from scipy import signal
 
 from quad_model.frames import STANDARD_GRAVITY_MPS2, quat_from_euler, quat_to_dcm
-from rig.autopilot.control import (
+from rig.autopilots.reference.control import (
     AngularVelocityFilter,
     AttitudeController,
     ControlAllocator,
@@ -18,7 +18,7 @@ from rig.autopilot.control import (
     RateController,
     thrust_to_attitude,
 )
-from rig.autopilot.params import Parameters
+from rig.autopilots.reference.params import Parameters
 
 
 def test_allocation_is_the_inverse_of_the_effectiveness():

@@ -16,12 +16,12 @@ import pyulog
 
 from quad_model.environment import Environment
 from quad_model.frames import ned_to_geodetic
-from rig.autopilot.navigator import Px4AutoMode, Px4MainMode
+from rig.autopilots.reference.navigator import Px4AutoMode, Px4MainMode
 from rig.errors import RigError
-from rig.link import LinkTimeouts
-from rig.loop import Progress, RunOptions, run_scenario
-from rig.px4_sim_api import Ports, mavlink
-from rig.scenario import scenario_from_dict
+from rig.lockstep.loop import Progress, RunOptions, run_scenario
+from rig.mavlink.px4_api import Ports, mavlink
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
 from tests.rig.autopilot.gcs_client import GcsClient
 
 pytestmark = pytest.mark.closed_loop

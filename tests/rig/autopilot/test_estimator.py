@@ -6,8 +6,12 @@ import numpy as np
 import pytest
 
 from quad_model.frames import STANDARD_GRAVITY_MPS2, quat_from_euler, quat_to_dcm
-from rig.autopilot.estimator import AttitudeEstimator, PositionEstimator, pressure_altitude_m
-from rig.autopilot.params import Parameters
+from rig.autopilots.reference.estimator import (
+    AttitudeEstimator,
+    PositionEstimator,
+    pressure_altitude_m,
+)
+from rig.autopilots.reference.params import Parameters
 
 MAG_NED = np.array([0.215, 0.0133, 0.4329])
 GRAVITY_NED = np.array([0.0, 0.0, STANDARD_GRAVITY_MPS2])

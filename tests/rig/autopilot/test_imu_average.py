@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from rig.autopilot.flight_log import ImuAverage
+from rig.autopilots.reference.flight_log import ImuAverage
 
 IMU_HZ = 1000
 FRAME_US = 1_000_000 // IMU_HZ

@@ -2,8 +2,8 @@
 
 import pytest
 
-from rig.autopilot.land_detector import Hysteresis, LandDetector
-from rig.autopilot.params import Parameters
+from rig.autopilots.reference.land_detector import Hysteresis, LandDetector
+from rig.autopilots.reference.params import Parameters
 
 FRAME_US = 4_000
 #: MPC_THR_MIN + 0.1·(MPC_THR_HOVER − MPC_THR_MIN) with PX4's defaults 0.12 and 0.5.

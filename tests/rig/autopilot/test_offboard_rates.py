@@ -6,8 +6,8 @@ from collections import deque
 import numpy as np
 import pytest
 
-from rig.autopilot.gcs import GroundStation
-from rig.px4_sim_api import mavlink
+from rig.autopilots.reference.gcs import GroundStation
+from rig.mavlink.px4_api import mavlink
 
 ATTITUDE_IGNORE = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 RATES_IGNORE = (

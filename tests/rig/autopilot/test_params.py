@@ -2,7 +2,7 @@
 
 import pytest
 
-from rig.autopilot.params import PARAMETERS, ParameterError, Parameters, parse_assignment
+from rig.autopilots.reference.params import PARAMETERS, ParameterError, Parameters, parse_assignment
 
 
 def test_names_fit_mavlink_param_id_and_are_unique():

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from rig.autopilot.process import gps_fix, sensor_frame
-from rig.px4_sim_api import Ports, mavlink
-from rig.sim_messages import hil_gps, hil_sensor
+from rig.autopilots.reference.process import gps_fix, sensor_frame
+from rig.mavlink.px4_api import Ports, mavlink
+from rig.mavlink.sim_messages import hil_gps, hil_sensor
 from tests.rig.autopilot.gcs_client import GcsClient
 from tests.rig.autopilot.mini_rig import MiniRig
 

@@ -1,0 +1,280 @@
+"""``rig``: run scenarios closed-loop (``rig run``), the demo flight (``rig hil-sim``),
+replays of real flights (``rig replay``) and campaigns of many runs (``rig campaign``).
+
+Errors are one line on stderr (exit 1); Ctrl-C stops the run cleanly with the logs
+readable (exit 130).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import signal
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from rich.console import Console
+from rich.live import Live
+from rich.text import Text
+
+from rig.apps.replay import DRIVES, ReplayOptions, plan_replay, run_replay
+from rig.errors import RigError
+from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
+from rig.mavlink.px4_api import Ports
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import SENSOR_LAYERS, load_scenario
+
+HIL_SIM_SCENARIO = "hil_sim"
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised where the rig is, so every ``finally`` closes the logs and stops the
+    autopilot (PX4 runs in its own session: a killed rig would leave it spinning)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="rig", description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True)
+    run = commands.add_parser("run", help="fly a scenario file (or a bundled scenario name)")
+    run.add_argument("scenario", help="path to a scenario TOML, or a name in rig/scenarios/")
+    _add_run_options(run)
+    demo = commands.add_parser(
+        "hil-sim", help="take off, hover, step, land with RTL sensors and the reference autopilot"
+    )
+    _add_run_options(demo)
+    replay = commands.add_parser(
+        "replay", help="fly a real PX4 flight log's own setpoints through the rig"
+    )
+    replay.add_argument("log", type=Path, help="the real flight's ULog")
+    replay.add_argument("--drive", choices=DRIVES, default="velocity",
+                        help="which of the log's setpoints drive the autopilot")  # fmt: skip
+    replay.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), default=None,
+                        help="boot seconds where --drive attitude|rates acts")  # fmt: skip
+    replay.add_argument("--start", type=float, default=None,
+                        help="boot seconds, landed (default: log start)")  # fmt: skip
+    replay.add_argument("--end", type=float, default=None,
+                        help="boot seconds (default: the log's last timestamp)")  # fmt: skip
+    replay.add_argument("--vehicle", default=None, metavar="NAME|PATH",
+                        help="vehicle file (default: from the log's SYS_AUTOSTART)")  # fmt: skip
+    replay.add_argument("--seed", type=int, default=0, help="seed of every random source")
+    replay.add_argument("--imu-hz", type=int, default=1000, help="IMU rate = lockstep rate")
+    _add_run_options(replay, scenario=False)
+    campaign = commands.add_parser(
+        "campaign", help="run a campaign file (resumable), or `campaign report DIR`"
+    )
+    campaign.add_argument("campaign", help="campaign TOML (or bundled name), or 'report'")
+    campaign.add_argument("folder", nargs="?", type=Path, help="with 'report': the results folder")
+    campaign.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="results folder (default runs/campaign-<name>; reruns resume)",
+    )
+    campaign.add_argument("--workers", type=int, default=None,
+                          help="local processes (default: the cores given)")  # fmt: skip
+    campaign.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
+                          help="run on this Dask cluster instead of local processes")  # fmt: skip
+    identify = commands.add_parser(
+        "identify", help="identify hover, roll/pitch plant and inertia from a flight log"
+    )
+    identify.add_argument("log", type=Path, help="PX4-style ULog (real flight, SITL or rig)")
+    identify.add_argument("--vehicle", default=None, metavar="NAME|PATH",
+                          help="vehicle file (default: from the log's SYS_AUTOSTART)")  # fmt: skip
+    identify.add_argument("--window", type=float, nargs=2, metavar=("START", "END"),
+                          help="boot seconds of the rate-loop fit (default: airborne)")  # fmt: skip
+    identify.add_argument("--toml", action="store_true",
+                          help="print [body]/[propulsion] lines for the vehicle file")  # fmt: skip
+    args = parser.parse_args(argv)
+    console = Console(stderr=True)
+    if args.command == "campaign":
+        return _campaign(args, console)
+    if args.command == "identify":
+        return _identify(args)
+    signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        result = _replay(args, console) if args.command == "replay" else _run(args, console)
+    except RigError as error:
+        print(f"rig: error: {error}", file=sys.stderr)  # one line, never wrapped
+        return 1
+    except KeyboardInterrupt:
+        print("rig: interrupted; the logs written so far are readable", file=sys.stderr)
+        return 130
+    except Terminated:
+        print("rig: terminated (SIGTERM); the logs written so far are readable", file=sys.stderr)
+        return 143
+    console.print(
+        f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "
+        f"(RTF {result.real_time_factor:.2f}x, {result.frames} frames)\n"
+        f"rig log:       {result.rig_log}\n"
+        f"autopilot log: {result.autopilot_log or '(written by the autopilot, e.g. PX4)'}",
+        highlight=False,
+    )
+    return 0
+
+
+def _run(args: argparse.Namespace, console: Console) -> RunResult:
+    """``rig run`` and ``rig hil-sim``."""
+    scenario = load_scenario(HIL_SIM_SCENARIO if args.command == "hil-sim" else args.scenario)
+    if args.vehicle is not None:
+        scenario = dataclasses.replace(scenario, vehicle=args.vehicle)
+    options = dataclasses.replace(
+        _run_options(args),
+        on_waiting=lambda command: console.print(
+            f"waiting for PX4; start it with:\n  {command}", highlight=False, soft_wrap=True
+        ),
+    )
+    _announce(console, scenario.name, scenario.description,
+              options.sensor_layer or scenario.sensor_layer, options)  # fmt: skip
+    return _run_with_progress(console, lambda p: run_scenario(scenario, options, p))
+
+
+def _replay(args: argparse.Namespace, console: Console) -> RunResult:
+    """``rig replay``: the plan first (a bad log fails before anything starts), then the run."""
+    replay_options = ReplayOptions(
+        drive=args.drive, window_s=tuple(args.window) if args.window else None,
+        start_s=args.start, end_s=args.end, vehicle=args.vehicle, seed=args.seed,
+        sensor_layer=args.sensor_layer or "tlm", imu_hz=args.imu_hz,
+    )  # fmt: skip
+    plan = plan_replay(args.log, replay_options)
+    options = _run_options(args)
+    _announce(console, f"replay of {plan.log_path.name}",
+              f"{plan.drive} drive, {plan.start_s:.3f}-{plan.end_s:.3f} s, vehicle "
+              f"{plan.vehicle} ({plan.vehicle_reason}), {len(plan.parameters)} parameters "
+              f"from the log", replay_options.sensor_layer, options)  # fmt: skip
+    for level, text in plan.notes:
+        console.print(f"{level}: {text}", highlight=False)
+    return _run_with_progress(console, lambda p: run_replay(plan, options, p))
+
+
+def _run_options(args: argparse.Namespace) -> RunOptions:
+    return RunOptions(
+        autopilot=getattr(args, "autopilot", "reference"),
+        instance=args.instance,
+        out_dir=args.out,
+        sensor_layer=args.sensor_layer,
+        duration_s=getattr(args, "duration", None),
+        timeouts=LinkTimeouts(connect_s=args.connect_timeout),
+        autopilot_params=tuple(args.param),
+        px4_dir=getattr(args, "px4", None),
+    )
+
+
+def _announce(console: Console, name: str, description: str, sensor_layer: str,
+              options: RunOptions) -> None:  # fmt: skip
+    ports = Ports(options.instance)
+    console.print(
+        f"[bold]{name}[/]: {description}\n"
+        f"sensor layer {sensor_layer}, autopilot {options.autopilot}, simulator link TCP "
+        f"{ports.simulator_tcp}; a ground station can watch on UDP {ports.gcs_remote_udp} "
+        "(QGroundControl, MAVProxy)"
+    )
+
+
+def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) -> None:
+    """Options of every closed-loop run; ``scenario``: also those a replay takes from the log."""
+    parser.add_argument("--sensor-layer", choices=SENSOR_LAYERS, default=None,
+                        help="default: the scenario's (tlm for a replay)")  # fmt: skip
+    parser.add_argument("--instance", type=int, default=0, help="SITL instance i: ports +i")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="run folder (default runs/<name>-<UTC time>)")  # fmt: skip
+    if scenario:
+        parser.add_argument("--autopilot", choices=AUTOPILOTS, default="reference",
+                            help="reference (embedded) or px4 (PX4 SITL)")  # fmt: skip
+        parser.add_argument("--px4", type=Path, default=None, metavar="DIR",
+                            help="PX4 SITL build (bin/px4 + etc/) the rig starts; default "
+                                 "$PX4_DIR, else the rig waits for a PX4 you start")  # fmt: skip
+        parser.add_argument("--duration", type=float, default=None,
+                            help="simulated seconds (default: the scenario's)")  # fmt: skip
+        parser.add_argument("--vehicle", default=None, metavar="NAME|PATH",
+                            help="vehicle file instead of the scenario's")  # fmt: skip
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="autopilot parameter, PX4's names (repeatable)")  # fmt: skip
+    parser.add_argument("--connect-timeout", type=float, default=60.0,
+                        help="seconds to wait for the autopilot to connect")  # fmt: skip
+
+
+def _campaign(args: argparse.Namespace, console: Console) -> int:
+    from rig.apps.campaign import campaign_executor, load_campaign, run_campaign  # on demand
+    from rig.apps.campaign_report import write_report
+
+    try:
+        if args.campaign == "report":
+            if args.folder is None:
+                raise RigError("campaign report: give the results folder (rig campaign report DIR)")
+            console.print(f"report: {write_report(args.folder)}", highlight=False)
+            return 0
+        campaign = load_campaign(args.campaign)
+        out = args.out or RUNS_DIR / f"campaign-{campaign.name}"
+        console.print(f"[bold]{campaign.name}[/]: {campaign.description}\nresults in {out}")
+        with campaign_executor(args.scheduler, args.workers) as executor:
+            run_campaign(campaign, out, executor, lambda r: console.print(
+                f"case {r.index:4d} {r.status:8s} {r.wall_s:6.1f} s  {r.reason}",
+                highlight=False, soft_wrap=True,
+            ))  # fmt: skip
+        console.print(f"report: {write_report(out)}", highlight=False)
+    except RigError as error:
+        print(f"rig: error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("rig: interrupted; finished cases are saved, rerun to resume", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _identify(args: argparse.Namespace) -> int:
+    """``rig identify``: the table (or ``--toml`` lines) on stdout, errors as one line."""
+    from quad_model.vehicle import VehicleFileError, load_vehicle  # on demand
+    from rig.apps import identify
+
+    try:
+        vehicle = load_vehicle(args.vehicle or identify.vehicle_name_for_log(args.log))
+        window = tuple(args.window) if args.window else None
+        result = identify.identify_vehicle(args.log, vehicle, window)
+    except (RigError, VehicleFileError) as error:
+        print(f"rig: error: {error}", file=sys.stderr)
+        return 1
+    if args.toml:
+        print(identify.identification_toml(result, vehicle), end="")
+    else:
+        Console(width=160).print(identify.identification_table(result))
+    return 0
+
+
+#: Without a terminal (a pipe, a CI log) progress is a plain line this often, in simulated s.
+LOG_PROGRESS_EVERY_S = 10.0
+
+
+def _status(progress: Progress) -> str:
+    return (
+        f"t = {progress.time_s:6.1f} / {progress.duration_s:.0f} s  "
+        f"RTF {progress.real_time_factor:5.2f}x  alt {progress.altitude_m:6.2f} m  "
+        f"{'ARMED' if progress.armed else 'disarmed'}  {progress.last_event[:60]}"
+    )
+
+
+def _run_with_progress(
+    console: Console, run: Callable[[Callable[[Progress], None]], RunResult]
+) -> RunResult:
+    """Run with a live status line (simulated time, RTF, altitude, mode) on a terminal,
+    and one plain line every LOG_PROGRESS_EVERY_S of simulated time otherwise."""
+    if not console.is_terminal:
+        next_line_s = 0.0
+
+        def log_line(progress: Progress) -> None:
+            nonlocal next_line_s
+            if progress.time_s >= next_line_s:
+                console.print(_status(progress), highlight=False)
+                next_line_s += LOG_PROGRESS_EVERY_S
+
+        return run(log_line)
+    with Live(console=console, refresh_per_second=4, transient=False) as live:
+        return run(lambda p: live.update(Text(_status(p))))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

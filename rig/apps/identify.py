@@ -1,0 +1,767 @@
+"""Vehicle parameters identified from a flight log (``rig identify LOG``): hover throttle and
+the speed curve, roll/pitch control effectiveness, motor lag and delay, and the inertia.
+
+The paper's high-precision model has "all model parameters accurately measured or obtained
+by system identification"; this module is the identification half, for any PX4-style ULog
+(a real flight, PX4 SITL, or the rig's reference autopilot) at any logging rate.
+
+Methods, each reported with its data window and an uncertainty:
+
+- **Hover**: steady windows found automatically (airborne, small velocity and body rates).
+  The ESC throttle there is ``actuator_motors`` mapped through the log's PWM range
+  (``PWM_MAIN/AUX_MINn/MAXn`` of the motor outputs) onto the model's 1000-2000 µs throttle
+  (:func:`quad_model.frames.pwm_to_throttle`). The vehicle's hover rotor speed
+  ω_h = √(mg/4k_T) (at the log's air density) must sit at that throttle on the speed curve;
+  the curve's full-throttle point (the KV estimate) is kept and its offset solved for.
+- **Rate-loop plant** per axis: the frequency response torque set-point → body rate, fitted
+  to ``B·e^{−sd}/(s(τ_m s+1))`` times the log's gyro low-pass (``IMU_GYRO_CUTOFF``,
+  PX4's 2nd-order Butterworth), so the filter's phase is not blamed on the motors. The data
+  are closed-loop: where the loop's own noise dominates (above a few Hz in hover), the plain
+  H1 estimate torque→rate tends to −1/C(s), the inverse of the rate controller, not the plant
+  (on the X500 log: phase ≈ +170°, |H| flat from 3 to 20 Hz). So the response is the
+  joint input-output estimate with the rate set-point as instrument,
+  G = Ĥ(rate_sp→rate) / Ĥ(rate_sp→torque_sp) (Ljung, *System Identification*, §13.5), each
+  leg from :func:`credibility.spectral.estimate_response` and both gated on coherence.
+- **Inertia**: I = (body torque per unit normalized torque at hover) / B. The numerator is
+  computed through the real parts: the reference autopilot's mixer
+  (:class:`rig.autopilots.reference.control.ControlAllocator` with the log's ``CA_ROTOR*`` geometry)
+  turns a torque set-point into motor commands, and the vehicle model on its thrust stand
+  (:class:`quad_model.model.QuadModel`, ``Mount.THRUST_STAND``), fed from a bench supply at
+  the log's hover voltage, turns them into a moment.
+- **Yaw** is not identified: its reaction-torque path (rotor drag plus spin-up torque) is not
+  the rate model above, and ordinary flying excites it little; the result says so.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+from rich.table import Table
+from scipy import optimize, signal
+from scipy.ndimage import uniform_filter1d
+
+from credibility.errors import CredibilityError
+from credibility.indices import coherence_weight
+from credibility.logs import read_ulog
+from credibility.spectral import default_windows, estimate_response, log_grid
+from quad_model.frames import STANDARD_GRAVITY_MPS2, pwm_to_throttle
+from quad_model.model import Mount, QuadModel
+from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from rig.apps.replay import AIRFRAMES, motor_pwm_range
+from rig.autopilots.reference.control import ControlAllocator
+from rig.autopilots.reference.params import Parameters
+from rig.errors import RigError
+
+#: Hover: airborne, RMS over HOVER_SMOOTH_S of |v| and of each body rate below these, for at
+#: least MIN_HOVER_S (a position-hold hover with a pilot's small corrections qualifies).
+HOVER_SMOOTH_S = 1.0
+HOVER_MAX_SPEED_MPS = 0.6
+HOVER_MAX_RATE_RADPS = 0.25
+MIN_HOVER_S = 3.0
+#: Both legs of the joint input-output estimate must reach this coherence (γ²) at a
+#: frequency for it to enter the fit: below ≈ 0.4 the random error of one leg exceeds
+#: ≈ 30 % with the segment counts of a one-minute log (Bendat & Piersol ε_r).
+COHERENCE_MIN = 0.4
+#: At least this many gated grid points (of GRID_POINTS) per axis, or the axis is reported
+#: as not identifiable: three parameters need a margin of degrees of freedom.
+MIN_FIT_POINTS = 6
+GRID_POINTS = 40
+#: Upper end of the analysis band as a fraction of the log's sample rate (10 Hz at 50 Hz
+#: logging): nearer the Nyquist frequency the folded torque noise turns the phase (-30° at
+#: 15 Hz on a rig flight logged at 50 Hz).
+BAND_TOP_FRACTION = 0.2
+#: Below this log rate the rate loop's torque noise (D term) folds into the analysis band and
+#: biases B low, by how much depends on that noise; ALIASING_BIAS bounds it (rig flights
+#: resampled to 50 Hz read B 1-20 % low, tests/rig/test_identify.py) and enters B's uncertainty.
+ALIASING_RATE_HZ = 100.0
+ALIASING_BIAS = 0.25
+#: Above this relative uncertainty of B an inertia is not called identified: the paper's
+#: low-precision inertias differ from the measured ones by 40-50 % (f450_low_precision.toml),
+#: so a looser estimate
+#: could not tell a high-precision model from a low-precision one.
+MAX_RELATIVE_UNCERTAINTY = 0.3
+#: Fit bounds: τ_m and d between 1 ms and 0.2 s cover hobby to heavy-lift propulsion.
+TAU_BOUNDS_S = (1e-3, 0.2)
+DELAY_BOUNDS_S = (0.0, 0.2)
+#: Torque set-point step for the numerical derivative through mixer and thrust stand
+#: (small: no motor saturates around hover).
+TORQUE_STEP = 0.05
+#: Thrust-stand settling time in motor time constants (e^-20: settled to 2e-9).
+SETTLE_TIME_CONSTANTS = 20.0
+_GEOMETRY_PARAM = re.compile(rf"CA_ROTOR[0-{ROTOR_COUNT - 1}]_(PX|PY|KM)")
+_AXES = ("roll", "pitch", "yaw")
+_TOPICS = (
+    "vehicle_torque_setpoint",
+    "vehicle_angular_velocity",
+    "vehicle_rates_setpoint",
+    "actuator_motors",
+    "vehicle_thrust_setpoint",
+    "hover_thrust_estimate",
+    "battery_status",
+    "vehicle_local_position",
+    "vehicle_land_detected",
+    "vehicle_air_data",
+)
+
+
+class IdentificationError(RigError):
+    """The log cannot give an identification (missing topic, no hover, ...); one line."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One identified number: value ± uncertainty (same unit), how, and from which data."""
+
+    value: float
+    uncertainty: float
+    method: str
+    window_s: tuple[float, float]
+
+    @property
+    def relative_uncertainty(self) -> float:
+        return abs(self.uncertainty / self.value) if self.value else math.inf
+
+
+@dataclass(frozen=True)
+class HoverIdentification:
+    """Hover throttle and the speed curve through it."""
+
+    windows_s: tuple[tuple[float, float], ...]
+    #: Mean ``actuator_motors`` per motor (PX4's normalized motor command, 0..1).
+    motor_command: tuple[float, ...]
+    #: ESC throttle (model convention, PWM 1000..2000 µs → 0..1), mean of the motors.
+    throttle: Estimate
+    thrust_setpoint: float
+    #: PX4's own estimate (``hover_thrust_estimate``), None when the log has none.
+    px4_hover_thrust: float | None
+    battery_voltage_v: float
+    air_density_kgpm3: float
+    rotor_speed_radps: float
+    speed_offset_radps: Estimate
+    speed_slope_radps: float
+
+
+@dataclass(frozen=True)
+class AxisIdentification:
+    """Rate-loop plant of one body axis.
+
+    ``identified`` False: no fit, the numbers are None. ``reliable`` False: fitted, but B (so
+    I) is not confirmed within MAX_RELATIVE_UNCERTAINTY by the whole-flight window; ``reason``
+    says why. τ_m counts only when ``motor_lag_identified``.
+    """
+
+    axis: str
+    identified: bool
+    reason: str
+    reliable: bool = False
+    band_hz: tuple[float, float] | None = None
+    fit_points: int = 0
+    control_effectiveness_radps2: Estimate | None = None
+    motor_time_constant_s: Estimate | None = None
+    motor_lag_identified: bool = False
+    delay_s: Estimate | None = None
+    torque_per_unit_nm: float | None = None
+    inertia_kgm2: Estimate | None = None
+    #: The same fit over the whole airborne span: an independent-window cross-check.
+    cross_check_inertia_kgm2: float | None = None
+
+
+@dataclass(frozen=True)
+class Identification:
+    """What one log says about one vehicle; ``notes`` are caveats to read with the numbers."""
+
+    log: Path
+    vehicle_name: str
+    sample_rate_hz: float
+    gyro_cutoff_hz: float
+    pwm_range_us: tuple[float, float]
+    hover: HoverIdentification
+    axes: tuple[AxisIdentification, ...]
+    notes: tuple[str, ...]
+
+    def axis(self, name: str) -> AxisIdentification:
+        return self.axes[_AXES.index(name)]
+
+
+# ------------------------------------------------------------------ reading the log
+@dataclass(frozen=True)
+class _Log:
+    path: Path
+    topics: Mapping[str, Mapping[str, NDArray[np.float64]]]
+    params: Mapping[str, float]
+
+    def topic(self, name: str, why: str) -> Mapping[str, NDArray[np.float64]]:
+        data = self.topics.get(name)
+        if data is None:
+            raise IdentificationError(f"{self.path}: no topic {name!r} ({why})")
+        return data
+
+    def series(self, name: str, field: str, why: str) -> tuple[NDArray, NDArray]:
+        """(time s, values) of one field, sorted, repeated stamps dropped."""
+        data = self.topic(name, why)
+        if field not in data:
+            raise IdentificationError(f"{self.path}: topic {name!r} has no field {field!r}")
+        time_s, values = data["t"], data[field].astype(float)
+        keep = np.concatenate(([True], np.diff(time_s) > 0))
+        return time_s[keep], values[keep]
+
+
+def _read_log(path: Path) -> _Log:
+    if not path.is_file():
+        raise IdentificationError(f"{path}: log file not found")
+    try:
+        ulog, _ = read_ulog(path, _TOPICS)  # its warnings (a skipped damaged message) don't matter
+    except CredibilityError as error:
+        raise IdentificationError(str(error)) from None
+    topics = {}
+    for dataset in ulog.data_list:
+        if dataset.multi_id == 0:
+            data = dict(dataset.data)
+            # the rates at their measurement time, so the fitted delay is physical
+            measured = dataset.name == "vehicle_angular_velocity" and "timestamp_sample" in data
+            stamp = data["timestamp_sample" if measured else "timestamp"]
+            order = np.argsort(stamp, kind="stable")
+            topics[dataset.name] = {k: np.asarray(v)[order] for k, v in data.items()}
+            topics[dataset.name]["t"] = stamp[order] * 1e-6
+    return _Log(path, topics, dict(ulog.initial_parameters))
+
+
+# ------------------------------------------------------------------ public entry point
+def identify_vehicle(
+    log_path: str | Path,
+    vehicle: Vehicle,
+    excitation_window_s: tuple[float, float] | None = None,
+) -> Identification:
+    """Identify hover, roll/pitch plant and inertia of ``vehicle`` from one flight log.
+
+    ``excitation_window_s`` is the span for the rate-loop fit (default: the whole airborne
+    span); the whole airborne span is always fitted too, as a cross-check.
+    """
+    log = _read_log(Path(log_path))
+    sample_rate_hz = _sample_rate_hz(log)
+    gyro_cutoff_hz = float(log.params.get("IMU_GYRO_CUTOFF", 0.0))
+    pwm_range = motor_pwm_range(log.params, log.path)
+    airborne = _airborne_span(log)
+    window = excitation_window_s or airborne
+    if not (airborne[0] <= window[0] < window[1] <= airborne[1]):
+        raise IdentificationError(
+            f"{log.path}: excitation window {window[0]:g}-{window[1]:g} s is not inside the "
+            f"airborne span {airborne[0]:.1f}-{airborne[1]:.1f} s"
+        )
+    hover = _identify_hover(log, vehicle, pwm_range)
+    identified_vehicle = replace(
+        vehicle,
+        propulsion=replace(
+            vehicle.propulsion,
+            speed_offset_radps=hover.speed_offset_radps.value,
+            speed_slope_radps=hover.speed_slope_radps,
+        ),
+    )
+    torque_per_unit = torque_per_unit_nm(
+        identified_vehicle,
+        log.params,
+        float(np.mean(hover.motor_command)),
+        pwm_range,
+        hover.battery_voltage_v,
+        hover.air_density_kgpm3,
+    )
+    axes = [
+        _identify_axis(
+            log, axis, window, airborne, sample_rate_hz, gyro_cutoff_hz, torque_per_unit[axis]
+        )
+        for axis in range(2)
+    ]
+    axes.append(
+        AxisIdentification(
+            "yaw",
+            identified=False,
+            reason="not identifiable: the yaw reaction torque (rotor drag + spin-up) is not "
+            "the B/(s(τs+1)) plant and flight excites it little; I_zz kept from the vehicle",
+        )
+    )
+    return Identification(
+        log=log.path,
+        vehicle_name=vehicle.name,
+        sample_rate_hz=sample_rate_hz,
+        gyro_cutoff_hz=gyro_cutoff_hz,
+        pwm_range_us=pwm_range,
+        hover=hover,
+        axes=tuple(axes),
+        notes=_notes(sample_rate_hz, log.params),
+    )
+
+
+def _notes(sample_rate_hz: float, params: Mapping[str, float]) -> tuple[str, ...]:
+    notes = []
+    if sample_rate_hz < ALIASING_RATE_HZ:
+        notes.append(
+            f"log rate {sample_rate_hz:.0f} Hz: the torque set-point's noise above "
+            f"{sample_rate_hz / 2:.0f} Hz (rate D-term) folds into the band, so B reads low and "
+            f"I high (≤ {ALIASING_BIAS:.0%}, in the uncertainty); log the rate topics at "
+            "≥ 200 Hz (SDLOG_PROFILE high rate) for a clean estimate"
+        )
+    if params.get("THR_MDL_FAC", 0.0) != 0.0:
+        # the mixer here allocates with a thrust linear in the motor command, as PX4 with
+        # THR_MDL_FAC = 0; a non-linear thrust model changes the torque per unit command
+        notes.append(
+            f"THR_MDL_FAC = {params['THR_MDL_FAC']:g}: the torque per unit assumes PX4's linear "
+            "thrust model (THR_MDL_FAC = 0), so I carries that error too"
+        )
+    return tuple(notes)
+
+
+def _sample_rate_hz(log: _Log) -> float:
+    time_s, _ = log.series("vehicle_angular_velocity", "xyz[0]", "body rates for the rate fit")
+    if time_s.size < 100:
+        raise IdentificationError(
+            f"{log.path}: vehicle_angular_velocity has only {time_s.size} samples"
+        )
+    return float((time_s.size - 1) / (time_s[-1] - time_s[0]))
+
+
+def _airborne_span(log: _Log) -> tuple[float, float]:
+    time_s, landed = log.series("vehicle_land_detected", "landed", "airborne span")
+    flying = time_s[landed < 0.5]
+    if flying.size == 0:
+        raise IdentificationError(f"{log.path}: the vehicle never left the ground")
+    return float(flying[0]), float(flying[-1])
+
+
+# ------------------------------------------------------------------ hover
+def hover_windows(log_path: str | Path) -> tuple[tuple[float, float], ...]:
+    """Steady-hover spans of a log: airborne, RMS |v| ≤ HOVER_MAX_SPEED_MPS and RMS of every
+    body rate ≤ HOVER_MAX_RATE_RADPS (over HOVER_SMOOTH_S), for at least MIN_HOVER_S."""
+    return _hover_windows(_read_log(Path(log_path)))
+
+
+def _hover_windows(log: _Log) -> tuple[tuple[float, float], ...]:
+    why = "velocity for hover detection"
+    time_s, vx = log.series("vehicle_local_position", "vx", why)
+    speed_sq = vx**2 + sum(
+        log.series("vehicle_local_position", f, why)[1] ** 2 for f in ("vy", "vz")
+    )
+    t_landed, landed = log.series("vehicle_land_detected", "landed", "airborne span")
+    landed_now = landed[np.clip(np.searchsorted(t_landed, time_s, "right") - 1, 0, None)]
+    # averaged over HOVER_SMOOTH_S: a pilot's small corrections are hover, a manoeuvre not
+    span = max(1, round(HOVER_SMOOTH_S / np.median(np.diff(time_s))))
+    steady = (landed_now < 0.5) & (np.sqrt(uniform_filter1d(speed_sq, span)) <= HOVER_MAX_SPEED_MPS)
+    for axis in range(3):
+        t_rate, rate = log.series("vehicle_angular_velocity", f"xyz[{axis}]", "hover detection")
+        rate_sq = np.interp(
+            time_s,
+            t_rate,
+            uniform_filter1d(rate**2, max(1, round(HOVER_SMOOTH_S / np.median(np.diff(t_rate))))),
+        )
+        steady &= np.sqrt(rate_sq) <= HOVER_MAX_RATE_RADPS
+    windows = []
+    start = None
+    for t, ok in zip(time_s, np.append(steady[:-1], False), strict=True):
+        if ok and start is None:
+            start = t
+        elif not ok and start is not None:
+            if t - start >= MIN_HOVER_S:
+                windows.append((float(start), float(t)))
+            start = None
+    return tuple(windows)
+
+
+def _mean_in(time_s: NDArray, values: NDArray, windows) -> NDArray:
+    mask = np.zeros(time_s.size, dtype=bool)
+    for a, b in windows:
+        mask |= (time_s >= a) & (time_s < b)
+    return values[mask]
+
+
+def _identify_hover(
+    log: _Log, vehicle: Vehicle, pwm_range: tuple[float, float]
+) -> HoverIdentification:
+    windows = _hover_windows(log)
+    if not windows:
+        raise IdentificationError(
+            f"{log.path}: no hover window found (airborne, RMS |v| ≤ {HOVER_MAX_SPEED_MPS} m/s "
+            f"and |rates| ≤ {HOVER_MAX_RATE_RADPS} rad/s for ≥ {MIN_HOVER_S:g} s)"
+        )
+    span = (windows[0][0], windows[-1][1])
+    commands = []
+    for motor in range(ROTOR_COUNT):
+        t, u = log.series("actuator_motors", f"control[{motor}]", "hover motor commands")
+        commands.append(_mean_in(t, u, windows))
+    commands = np.array(commands)  # motors × samples
+    pwm = pwm_range[0] + (pwm_range[1] - pwm_range[0]) * commands
+    throttle_samples = pwm_to_throttle(pwm).mean(axis=0)
+    throttle = float(throttle_samples.mean())
+    t, thrust_z = log.series("vehicle_thrust_setpoint", "xyz[2]", "hover thrust")
+    thrust_sp = -float(_mean_in(t, thrust_z, windows).mean())
+    px4_hover = None
+    if "hover_thrust_estimate" in log.topics:
+        t, h = log.series("hover_thrust_estimate", "hover_thrust", "")
+        in_hover = _mean_in(t, h, windows)
+        px4_hover = float(in_hover.mean()) if in_hover.size else None
+    t, volts = log.series("battery_status", "voltage_v", "the speed curve needs the voltage")
+    voltage = float(_mean_in(t, volts, windows).mean())
+    prop = vehicle.propulsion
+    if "vehicle_air_data" in log.topics:
+        t, rho = log.series("vehicle_air_data", "rho", "")
+        density = float(_mean_in(t, rho, windows).mean())
+        density_source = "vehicle_air_data.rho"
+    else:
+        density = prop.reference_air_density_kgpm3
+        density_source = "the vehicle's reference density (log has no vehicle_air_data)"
+    k_t = prop.thrust_coefficient_n_per_radps2 * density / prop.reference_air_density_kgpm3
+    speed = math.sqrt(vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * k_t))
+    # quad_model.dynamics: ω = (slope·σ + offset)·V/V_curve. Keep ω(σ=1) = slope + offset
+    # (the KV estimate at V_curve) and move the offset so that ω(σ_h) = ω_h at V_hover.
+    full = prop.speed_slope_radps + prop.speed_offset_radps
+    curve_speed = speed * prop.speed_curve_voltage_v / voltage
+    slope = (full - curve_speed) / (1.0 - throttle)
+    throttle_std = float(throttle_samples.std())
+    window = (span[0], span[1])
+    method_hover = f"{len(windows)} hover window(s), {throttle_samples.size} samples"
+    return HoverIdentification(
+        windows_s=windows,
+        motor_command=tuple(float(c.mean()) for c in commands),
+        throttle=Estimate(
+            throttle,
+            throttle_std,
+            f"actuator_motors → PWM {pwm_range[0]:g}-{pwm_range[1]:g} µs → "
+            f"throttle, {method_hover}, ± sample σ",
+            window,
+        ),
+        thrust_setpoint=thrust_sp,
+        px4_hover_thrust=px4_hover,
+        battery_voltage_v=voltage,
+        air_density_kgpm3=density,
+        rotor_speed_radps=speed,
+        speed_offset_radps=Estimate(
+            full - slope,
+            # d(offset)/dσ = −(full − curve_speed)/(1 − σ)²: the throttle spread carried over
+            (full - curve_speed) / (1.0 - throttle) ** 2 * throttle_std,
+            f"ω_h = √(mg/4k_T) = {speed:.0f} rad/s (ρ from {density_source}) at "
+            f"{voltage:.2f} V on the curve through σ_h and ω(1) = {full:.0f} rad/s kept",
+            window,
+        ),
+        speed_slope_radps=slope,
+    )
+
+
+# ------------------------------------------------------------------ torque per unit
+def torque_per_unit_nm(
+    vehicle: Vehicle,
+    log_params: Mapping[str, float],
+    hover_command: float,
+    pwm_range_us: tuple[float, float],
+    voltage_v: float,
+    air_density_kgpm3: float,
+) -> NDArray[np.float64]:
+    """Body moment (N·m, roll/pitch/yaw) per unit of PX4's normalized torque set-point at
+    hover, through the reference autopilot's mixer and the model on its thrust stand.
+
+    The stand is powered from an ideal supply at ``voltage_v`` (the log's hover voltage) so
+    the speed curve is evaluated where the hover was; the moment, which is ∝ ρ at fixed rotor
+    speeds, is scaled from the stand's air to ``air_density_kgpm3``.
+    """
+    # the log's quad geometry; the reference autopilot's defaults for what it lacks
+    overrides = {k: float(v) for k, v in log_params.items() if _GEOMETRY_PARAM.fullmatch(k)}
+    allocator = ControlAllocator(Parameters(overrides))
+    battery = vehicle.battery
+    bench = replace(
+        vehicle,
+        battery=replace(
+            battery,
+            cell_full_v=voltage_v / battery.cell_count,
+            cell_empty_v=min(battery.cell_empty_v, 0.5 * voltage_v / battery.cell_count),
+            internal_resistance_ohm=0.0,
+        ),
+    )
+    stand = QuadModel(bench, np.random.default_rng(0), mount=Mount.THRUST_STAND)
+    settle_s = SETTLE_TIME_CONSTANTS * vehicle.propulsion.motor_time_constant_s
+    per_unit = np.zeros(3)
+    for axis in range(3):
+        moments = []
+        for sign in (1.0, -1.0):
+            torque = np.zeros(3)
+            torque[axis] = sign * TORQUE_STEP
+            command = allocator.allocate(torque, hover_command)
+            pwm = pwm_range_us[0] + (pwm_range_us[1] - pwm_range_us[0]) * command
+            stand.reset()
+            stand.advance(pwm_to_throttle(pwm), settle_s)
+            moments.append(stand.truth.moment_frd_nm[axis])
+        density_ratio = air_density_kgpm3 / stand.truth.air_density_kgpm3
+        per_unit[axis] = (moments[0] - moments[1]) / (2 * TORQUE_STEP) * density_ratio
+    return per_unit
+
+
+# ------------------------------------------------------------------ rate-loop plant
+def plant_response(
+    freqs_hz: NDArray, gain_radps2: float, tau_s: float, delay_s: float, gyro_cutoff_hz: float
+) -> NDArray[np.complex128]:
+    """B·e^{−sd}/(s(τs+1)) times PX4's 2nd-order Butterworth gyro low-pass.
+
+    The low-pass is the analog prototype: PX4's ``LowPassFilter2p`` is its bilinear transform
+    pre-warped at the cutoff, so the two agree within a fraction of a degree below 25 Hz at
+    PX4's 400-1000 Hz gyro rates. A cutoff of 0 means no filter, as in PX4.
+    """
+    s = 2j * np.pi * np.asarray(freqs_hz)
+    response = gain_radps2 * np.exp(-s * delay_s) / (s * (tau_s * s + 1.0))
+    if gyro_cutoff_hz > 0:
+        b, a = signal.butter(2, 2 * np.pi * gyro_cutoff_hz, analog=True)
+        response = response * signal.freqs(b, a, 2 * np.pi * np.asarray(freqs_hz))[1]
+    return response
+
+
+@dataclass(frozen=True)
+class _PlantFit:
+    gain: float
+    tau: float
+    delay: float
+    std: NDArray[np.float64]  # of log(B), τ, d
+    band_hz: tuple[float, float]
+    points: int
+
+
+def _fit_plant(
+    log: _Log, axis: int, window: tuple[float, float], rate_hz: float, cutoff_hz: float
+) -> _PlantFit | str:
+    """Joint input-output response on ``window`` and its least-squares fit, or the reason
+    the axis cannot be fitted."""
+    grid = np.arange(window[0], window[1], 1.0 / rate_hz)
+    signals = {}
+    for name, topic, field in (
+        ("torque", "vehicle_torque_setpoint", f"xyz[{axis}]"),
+        ("rate", "vehicle_angular_velocity", f"xyz[{axis}]"),
+        ("rate_sp", "vehicle_rates_setpoint", _AXES[axis]),
+    ):
+        t, v = log.series(topic, field, "rate-loop fit")
+        signals[name] = np.interp(grid, t, v)
+    record_s = grid.size / rate_hz
+    # the longest of default_windows is record/5 and must hold 2 periods of f_a (+5 %)
+    band = (10.5 / record_s, BAND_TOP_FRACTION * rate_hz)
+    freqs = log_grid(band, GRID_POINTS)
+    windows = default_windows(record_s, band)
+    try:
+        instrument = signals["rate_sp"]
+        to_rate = estimate_response(instrument, signals["rate"], rate_hz, freqs, windows)
+        to_torque = estimate_response(instrument, signals["torque"], rate_hz, freqs, windows)
+    except CredibilityError as error:
+        return f"no response: {error}"
+    response = to_rate.complex_response / to_torque.complex_response
+    coherence = np.minimum(to_rate.coherence, to_torque.coherence)
+    keep = coherence >= COHERENCE_MIN
+    if keep.sum() < MIN_FIT_POINTS:
+        return (
+            f"only {keep.sum()} of {GRID_POINTS} frequencies reach coherence "
+            f"{COHERENCE_MIN} on both legs (need {MIN_FIT_POINTS})"
+        )
+    f, h = freqs[keep], response[keep]
+    weight = coherence_weight(coherence[keep])  # squared in the cost: CIFER's W_γ²
+
+    def residuals(p: NDArray) -> NDArray:
+        ratio = h / plant_response(f, math.exp(p[0]), p[1], p[2], cutoff_hz)
+        log_ratio = np.log(ratio)  # real part: log-magnitude error, imaginary: phase (rad)
+        return np.concatenate((weight * log_ratio.real, weight * log_ratio.imag))
+
+    # start: B from the lowest gated point as a pure integrator, mid-range lags
+    start = [math.log(abs(h[0]) * 2 * np.pi * f[0]), 0.02, 0.01]
+    bounds = (
+        [-np.inf, TAU_BOUNDS_S[0], DELAY_BOUNDS_S[0]],
+        [np.inf, TAU_BOUNDS_S[1], DELAY_BOUNDS_S[1]],
+    )
+    fit = optimize.least_squares(residuals, start, bounds=bounds)
+    dof = max(2 * f.size - 3, 1)
+    covariance = np.linalg.pinv(fit.jac.T @ fit.jac) * (2.0 * fit.cost / dof)
+    return _PlantFit(
+        math.exp(fit.x[0]),
+        float(fit.x[1]),
+        float(fit.x[2]),
+        np.sqrt(np.diag(covariance)),
+        (float(f[0]), float(f[-1])),
+        int(f.size),
+    )
+
+
+def _identify_axis(
+    log: _Log,
+    axis: int,
+    window: tuple[float, float],
+    airborne: tuple[float, float],
+    rate_hz: float,
+    cutoff_hz: float,
+    torque_per_unit: float,
+) -> AxisIdentification:
+    name = _AXES[axis]
+    fit = _fit_plant(log, axis, window, rate_hz, cutoff_hz)
+    if isinstance(fit, str):
+        return AxisIdentification(name, identified=False, reason=fit)
+    cross = _fit_plant(log, axis, airborne, rate_hz, cutoff_hz)
+    cross_gain = None if isinstance(cross, str) else cross.gain
+    # the larger of the fit's own σ and the disagreement with the whole-flight fit, and for a
+    # slow log the aliasing bias bound, in quadrature
+    random_spread = max(fit.gain * fit.std[0], abs(fit.gain - (cross_gain or fit.gain)))
+    aliasing = ALIASING_BIAS if rate_hz < ALIASING_RATE_HZ else 0.0
+    gain_spread = math.hypot(random_spread, aliasing * fit.gain)
+    method = (
+        f"rate_sp-instrumented torque_sp→rate fit, {fit.points} pts "
+        f"{fit.band_hz[0]:.2g}-{fit.band_hz[1]:.2g} Hz, ± max(fit σ, whole-flight Δ)"
+        + (f" ⊕ {aliasing:.0%} aliasing" if aliasing else "")
+    )
+    inertia = torque_per_unit / fit.gain
+    problems = []
+    if cross_gain is None:
+        problems.append(f"whole-flight cross-check failed ({cross})")
+    if gain_spread > MAX_RELATIVE_UNCERTAINTY * fit.gain:
+        problems.append(
+            f"B uncertain by {gain_spread / fit.gain:.0%} (> {MAX_RELATIVE_UNCERTAINTY:.0%})"
+        )
+    lag_identified = (
+        not problems and fit.std[1] < 0.5 * fit.tau and TAU_BOUNDS_S[0] < fit.tau < TAU_BOUNDS_S[1]
+    )
+    if not lag_identified:
+        problems.append("τ_m not identifiable (B unreliable, τ at its bound or σ > τ/2)")
+    lag_method = f"same fit, ± fit σ{'' if lag_identified else ' (NOT identifiable)'}"
+    return AxisIdentification(
+        name,
+        identified=True,
+        reliable=cross_gain is not None and gain_spread <= MAX_RELATIVE_UNCERTAINTY * fit.gain,
+        reason="; ".join(problems),
+        band_hz=fit.band_hz,
+        fit_points=fit.points,
+        control_effectiveness_radps2=Estimate(fit.gain, gain_spread, method, window),
+        motor_time_constant_s=Estimate(fit.tau, fit.std[1], lag_method, window),
+        motor_lag_identified=lag_identified,
+        delay_s=Estimate(fit.delay, fit.std[2], lag_method, window),
+        torque_per_unit_nm=float(torque_per_unit),
+        inertia_kgm2=Estimate(
+            inertia,
+            inertia * gain_spread / fit.gain,
+            f"I = {torque_per_unit:.3g} N·m/unit (mixer + thrust stand) / B; B: {method}",
+            window,
+        ),
+        cross_check_inertia_kgm2=None if cross_gain is None else torque_per_unit / cross_gain,
+    )
+
+
+# ------------------------------------------------------------------ presentation
+def vehicle_name_for_log(log_path: str | Path) -> str:
+    """The bundled vehicle of the log's airframe (``SYS_AUTOSTART``, as ``rig replay``)."""
+    log = _read_log(Path(log_path))
+    autostart = log.params.get("SYS_AUTOSTART")
+    if autostart is None or int(autostart) not in AIRFRAMES:
+        known = ", ".join(f"{k} {v}" for k, v in AIRFRAMES.items())
+        raise IdentificationError(
+            f"{log.path}: SYS_AUTOSTART = {autostart} has no bundled vehicle (known: {known}); "
+            "give --vehicle NAME|PATH"
+        )
+    return AIRFRAMES[int(autostart)]
+
+
+def _format(estimate: Estimate | None, scale: float = 1.0, digits: int = 4) -> str:
+    if estimate is None:
+        return "—"
+    value, sigma = estimate.value * scale, estimate.uncertainty * scale
+    return f"{value:.{digits}g} ± {sigma:.2g}"
+
+
+def identification_table(result: Identification) -> Table:
+    """The result as a rich table: quantity, value ± uncertainty, method, window."""
+    table = Table(title=f"{result.log.name}: {result.vehicle_name}", title_justify="left")
+    for column in ("quantity", "value", "method", "window"):
+        table.add_column(column, overflow="fold")
+    hover = result.hover
+
+    def add(name: str, estimate: Estimate | None, text: str | None = None) -> None:
+        window = f"{estimate.window_s[0]:.1f}-{estimate.window_s[1]:.1f} s" if estimate else ""
+        table.add_row(name, text or _format(estimate), estimate.method if estimate else "", window)
+
+    hover_spans = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in hover.windows_s)
+    table.add_row("hover windows", f"{hover_spans} s", "airborne, small |v| and rates", "")
+    table.add_row(
+        "motor commands",
+        " ".join(f"{u:.3f}" for u in hover.motor_command),
+        "mean actuator_motors per motor",
+        "",
+    )
+    add("hover throttle", hover.throttle)
+    px4 = "—" if hover.px4_hover_thrust is None else f"{hover.px4_hover_thrust:.3f}"
+    table.add_row(
+        "thrust sp / PX4 hover est.",
+        f"{hover.thrust_setpoint:.3f} / {px4}",
+        "vehicle_thrust_setpoint / hover_thrust_estimate",
+        "",
+    )
+    table.add_row(
+        "hover rotor speed",
+        f"{hover.rotor_speed_radps:.0f} rad/s",
+        f"√(mg/4k_T) at ρ {hover.air_density_kgpm3:.3f} kg/m³, {hover.battery_voltage_v:.2f} V",
+        "",
+    )
+    add("speed_offset_radps", hover.speed_offset_radps)
+    table.add_row(
+        "speed_slope_radps",
+        f"{hover.speed_slope_radps:.1f}",
+        "ω(1) of the vehicle kept: slope = ω(1) − offset",
+        "",
+    )
+    for axis in result.axes:
+        if not axis.identified:
+            table.add_row(f"{axis.axis}", "not identified", axis.reason, "")
+            continue
+        verdict = "" if axis.reliable else " (unreliable)"
+        add(f"{axis.axis} B rad/s²{verdict}", axis.control_effectiveness_radps2)
+        add(f"{axis.axis} inertia kg·m²{verdict}", axis.inertia_kgm2)
+        cross = axis.cross_check_inertia_kgm2
+        cross_text = "—" if cross is None else f"{cross:.4g}"
+        table.add_row(f"{axis.axis} inertia, whole flight", cross_text, "cross-check window", "")
+        add(f"{axis.axis} τ_m s", axis.motor_time_constant_s)
+        add(f"{axis.axis} delay s", axis.delay_s)
+        if axis.reason:
+            table.add_row("", "", axis.reason, "")
+    for note in result.notes:
+        table.add_row("note", "", note, "")
+    return table
+
+
+def identification_toml(result: Identification, vehicle: Vehicle) -> str:
+    """``[body]``/``[propulsion]`` lines to paste into the vehicle file, each tagged with its
+    method and window; values the log could not identify are kept from ``vehicle`` and say so."""
+    hover, prop = result.hover, vehicle.propulsion
+    source = f"rig identify {result.log.name}"
+    inertia = np.array(vehicle.body.inertia_kgm2)
+    tags = []
+    for index, axis in enumerate(result.axes):
+        estimate = axis.inertia_kgm2
+        if axis.reliable and estimate is not None:
+            inertia[index, index] = estimate.value
+            tags.append(f"I_{'xyz'[index] * 2} [identified] {_format(estimate, digits=3)}")
+        else:
+            tags.append(f"I_{'xyz'[index] * 2} kept ({axis.reason.split(';')[0]})")
+    window = hover.speed_offset_radps.window_s
+    offset = hover.speed_offset_radps
+    lines = [
+        "[body]",
+        f"# {source}: " + "; ".join(tags),
+        f"inertia_kgm2 = {[[round(float(v), 5) for v in row] for row in inertia]}",
+        "",
+        "[propulsion]",
+        f"speed_slope_radps = {hover.speed_slope_radps:.1f}   # [identified] {source}, "
+        f"ω(1) = {prop.speed_slope_radps + prop.speed_offset_radps:.0f} rad/s kept",
+        f"speed_offset_radps = {offset.value:.1f}   # [identified] {source}, hover "
+        f"{window[0]:.1f}-{window[1]:.1f} s, ± {offset.uncertainty:.0f} rad/s",
+    ]
+    lags = [a.motor_time_constant_s for a in result.axes if a.motor_lag_identified]
+    if lags:
+        tau = float(np.mean([e.value for e in lags]))
+        lines.append(
+            f"motor_time_constant_s = {tau:.4f}   # [identified] {source}, mean of {len(lags)} axes"
+        )
+    else:
+        lines.append(
+            f"# motor_time_constant_s = {prop.motor_time_constant_s} kept: "
+            "not identifiable from this log"
+        )
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,561 @@
+"""PX4's multicopter control cascade, one class per PX4 module.
+
+position P → velocity PID → acceleration → thrust vector and attitude (``mc_pos_control``
+``PositionControl``) → quaternion attitude P (``mc_att_control`` ``AttitudeControl``) →
+body-rate PID with the D term on the filtered measurement (``mc_rate_control``
+``RateControl``) → quad-X control allocation with sequential desaturation
+(``control_allocator``). The algorithms follow PX4's (files named on each class); gains are
+PX4's parameters, read in ``configure`` so a parameter change takes effect at the next frame.
+
+Conventions are PX4's: NED world, FRD body, quaternions body→NED scalar first, thrust as a
+normalized vector whose NED-z is negative for lift, torque normalized to -1..1.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+from scipy import signal
+
+from quad_model import frames
+from quad_model.frames import STANDARD_GRAVITY_MPS2
+from rig.autopilots.reference import rotation
+from rig.autopilots.reference.params import Parameters
+from rig.autopilots.reference.rotation import cross3, quat_from_dcm
+
+# The per-frame parts of the cascade (gyro filters, attitude and rate control, allocation) are
+# compiled with numba: each is a few dozen operations on 3- and 4-vectors, which numpy runs at
+# ~1 µs per operation and compiled code at ~1 ns, and together they ran every IMU frame. The
+# position loop runs at 50 Hz and stays in numpy. The same convention helpers as everywhere:
+_quat_to_dcm = njit(cache=True)(frames.quat_to_dcm)
+_quat_multiply = njit(cache=True)(frames.quat_multiply)
+_quat_conjugate = njit(cache=True)(rotation.quat_conjugate)
+_quat_between = njit(cache=True)(rotation.quat_between)
+
+_AXES = ("ROLL", "PITCH", "YAW")
+_INT_LIMITS = ("MC_RR_INT_LIM", "MC_PR_INT_LIM", "MC_YR_INT_LIM")
+#: PX4 RateControl: the I gain fades with the rate error, reaching 0 at 400 °/s.
+_I_FADE_RATE_RADPS = math.radians(400.0)
+
+
+class LowPass2p:
+    """Second-order Butterworth low-pass on a 3-vector, PX4's ``LowPassFilter2p``.
+
+    Designed with :func:`scipy.signal.butter`; run by hand one sample at a time (transposed
+    direct form II), because ``lfilter`` per 3-sample call costs more than the whole loop.
+    A cutoff of 0 or at/above Nyquist passes the signal through, as in PX4.
+    """
+
+    def __init__(self, sample_rate_hz: float, cutoff_hz: float) -> None:
+        self.enabled = 0.0 < cutoff_hz < 0.5 * sample_rate_hz
+        if self.enabled:
+            self.b, self.a = signal.butter(2, cutoff_hz, fs=sample_rate_hz)
+        self._state = np.zeros((2, 3))  # z1, z2
+        self._started = False
+
+    def reset(self, value: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Start at steady state on ``value`` (no start-up transient)."""
+        if self.enabled:
+            b, a = self.b, self.a
+            self._state[1] = (b[2] - a[2]) * value
+            self._state[0] = (b[1] - a[1]) * value + self._state[1]
+            self._started = True
+        return value
+
+    def apply(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        if not self.enabled:
+            return x
+        if not self._started:
+            return self.reset(x)
+        return _lowpass_step(self.b, self.a, self._state, np.asarray(x, dtype=float))
+
+
+@njit(cache=True)
+def _lowpass_step(b, a, state, x):
+    y = b[0] * x + state[0]
+    state[0] = b[1] * x - a[1] * y + state[1]
+    state[1] = b[2] * x - a[2] * y
+    return y
+
+
+#: PX4 ``VehicleAngularVelocity::CheckFilters``: the gyro filters are redesigned when the
+#: measured IMU rate differs from their design rate by more than 1 %.
+_RATE_TOLERANCE = 0.01
+#: Sample intervals averaged per rate check. PX4 averages 1000; 100 corrects a wrong design
+#: within 0.4 s at 250 Hz and still averages a jittery link's intervals.
+_RATE_WINDOW_SAMPLES = 100
+#: PX4 bounds the derivative's dt to 0.2..20 ms (``VehicleAngularVelocity::Run``).
+_DT_RANGE_S = (2e-4, 0.02)
+
+
+class AngularVelocityFilter:
+    """Filtered body rates and angular acceleration, PX4's ``VehicleAngularVelocity``:
+    gyro low-pass ``IMU_GYRO_CUTOFF``; derivative of the raw rate low-passed at
+    ``IMU_DGYRO_CUTOFF`` for the rate controller's D term.
+
+    The digital filters are designed for the IMU rate measured from the sample timestamps,
+    never assumed: a 40 Hz Butterworth designed for 1 kHz but run at 250 Hz cuts at 10 Hz,
+    and its phase lag drives the rate loop into a limit cycle. The first interval sets the
+    design; each window of intervals re-checks it, as PX4 does, within 1 %.
+    """
+
+    def __init__(self, params: Parameters) -> None:
+        self.sample_rate_hz: float | None = None  # None: no interval seen yet
+        self.rates_radps = np.zeros(3)
+        self.angular_accel_radps2 = np.zeros(3)
+        self._last_time_us: int | None = None
+        self._previous = np.zeros(3)
+        self._interval_sum_us = 0
+        self._interval_count = 0
+        self.configure(params)
+
+    def configure(self, params: Parameters) -> None:
+        """Take the cutoffs; the filters restart at the current outputs (no transient)."""
+        self.gyro_cutoff_hz = params["IMU_GYRO_CUTOFF"]
+        self.dgyro_cutoff_hz = params["IMU_DGYRO_CUTOFF"]
+        if self.sample_rate_hz is not None:
+            self._design(self.sample_rate_hz)
+
+    def update(self, rates_radps: NDArray[np.float64], time_us: int) -> None:
+        """One gyro sample (bias-corrected, rad/s) taken at ``time_us``."""
+        last, self._last_time_us = self._last_time_us, time_us
+        rates_radps = np.asarray(rates_radps, dtype=float)
+        if last is None or time_us <= last:  # no interval: nothing to differentiate
+            self._previous = self.rates_radps = rates_radps
+            self._interval_sum_us = self._interval_count = 0
+            return
+        interval_us = time_us - last
+        self._check_rate(interval_us)
+        dt_s = min(max(interval_us * 1e-6, _DT_RANGE_S[0]), _DT_RANGE_S[1])
+        derivative = (rates_radps - self._previous) / dt_s
+        self._previous = rates_radps
+        self.rates_radps = self._rate_filter.apply(rates_radps)
+        self.angular_accel_radps2 = self._accel_filter.apply(derivative)
+
+    def _check_rate(self, interval_us: int) -> None:
+        if not _DT_RANGE_S[0] <= interval_us * 1e-6 <= _DT_RANGE_S[1]:
+            self._interval_sum_us = self._interval_count = 0  # a gap is not a rate
+            return
+        if self.sample_rate_hz is None:
+            self._design(1e6 / interval_us)
+            return
+        self._interval_sum_us += interval_us
+        self._interval_count += 1
+        if self._interval_count < _RATE_WINDOW_SAMPLES:
+            return
+        measured_hz = 1e6 * self._interval_count / self._interval_sum_us
+        self._interval_sum_us = self._interval_count = 0
+        if abs(measured_hz - self.sample_rate_hz) > _RATE_TOLERANCE * self.sample_rate_hz:
+            self._design(measured_hz)
+
+    def _design(self, sample_rate_hz: float) -> None:
+        self.sample_rate_hz = sample_rate_hz
+        self._rate_filter = LowPass2p(sample_rate_hz, self.gyro_cutoff_hz)
+        self._rate_filter.reset(self.rates_radps)
+        self._accel_filter = LowPass2p(sample_rate_hz, self.dgyro_cutoff_hz)
+        self._accel_filter.reset(self.angular_accel_radps2)
+
+
+class RateController:
+    """Body-rate PID with feed-forward, PX4 ``src/lib/rate_control/rate_control.cpp``.
+
+    ``torque = K·(P·e + I∫e − D·α) + FF·ω_sp`` with ``α`` the filtered angular acceleration
+    (D on the measurement, so set-point steps do not kick), the integral frozen on the
+    ground and in the saturated direction, faded for large errors, and clamped to
+    ``MC_*_INT_LIM``.
+    """
+
+    def __init__(self, params: Parameters) -> None:
+        self.integral = np.zeros(3)
+        self.saturated_positive = np.zeros(3, dtype=bool)
+        self.saturated_negative = np.zeros(3, dtype=bool)
+        self.configure(params)
+
+    def configure(self, params: Parameters) -> None:
+        k = np.array([params[f"MC_{a}RATE_K"] for a in _AXES])
+        self.gain_p = k * [params[f"MC_{a}RATE_P"] for a in _AXES]
+        self.gain_i = k * [params[f"MC_{a}RATE_I"] for a in _AXES]
+        self.gain_d = k * [params[f"MC_{a}RATE_D"] for a in _AXES]
+        self.gain_ff = np.array([params[f"MC_{a}RATE_FF"] for a in _AXES])
+        self.integral_limit = np.array([params[n] for n in _INT_LIMITS])
+        self._gains = np.stack((self.gain_p, self.gain_i, self.gain_d, self.gain_ff,
+                                self.integral_limit))  # fmt: skip
+
+    def reset_integral(self) -> None:
+        self.integral[:] = 0.0
+
+    def update(
+        self,
+        rates_radps: NDArray[np.float64],
+        rates_sp_radps: NDArray[np.float64],
+        angular_accel_radps2: NDArray[np.float64],
+        dt_s: float,
+        landed: bool,
+    ) -> NDArray[np.float64]:
+        return _rate_step(
+            self._gains, self.integral, rates_radps, rates_sp_radps, angular_accel_radps2, dt_s,
+            landed, self.saturated_positive, self.saturated_negative,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def _rate_step(gains, integral, rates, rates_sp, angular_accel, dt, landed, sat_pos, sat_neg):
+    """Torque of :class:`RateController`; the integral is updated in place."""
+    torque = np.empty(3)
+    for i in range(3):
+        error = rates_sp[i] - rates[i]
+        torque[i] = (
+            gains[0, i] * error + integral[i] - gains[2, i] * angular_accel[i]
+            + gains[3, i] * rates_sp[i]
+        )  # fmt: skip
+        if landed:
+            continue
+        if sat_pos[i]:
+            error = min(error, 0.0)
+        if sat_neg[i]:
+            error = max(error, 0.0)
+        fade = max(0.0, 1.0 - (error / _I_FADE_RATE_RADPS) ** 2)
+        limit = gains[4, i]
+        integral[i] = min(max(integral[i] + fade * gains[1, i] * error * dt, -limit), limit)
+    return torque
+
+
+class AttitudeController:
+    """Quaternion attitude P, PX4 ``mc_att_control/AttitudeControl/AttitudeControl.cpp``.
+
+    Tilt is corrected first through the reduced attitude; the remaining yaw error is
+    weighted by ``MC_YAW_WEIGHT`` (and the yaw gain compensated for it), then rates are
+    ``2·sign(qe_w)·qe_xyz·P`` limited to ``MC_*RATE_MAX``.
+    """
+
+    def __init__(self, params: Parameters) -> None:
+        self.configure(params)
+
+    def configure(self, params: Parameters) -> None:
+        self.yaw_weight = min(max(params["MC_YAW_WEIGHT"], 0.0), 1.0)
+        gain = np.array([params["MC_ROLL_P"], params["MC_PITCH_P"], params["MC_YAW_P"]])
+        if self.yaw_weight > 1e-4:
+            gain[2] /= self.yaw_weight
+        self.gain = gain
+        self.rate_limit_radps = np.radians(
+            [params["MC_ROLLRATE_MAX"], params["MC_PITCHRATE_MAX"], params["MC_YAWRATE_MAX"]]
+        )
+
+    def update(
+        self, q: NDArray[np.float64], q_sp: NDArray[np.float64], yawspeed_sp_radps: float = 0.0
+    ) -> NDArray[np.float64]:
+        return _attitude_rates(
+            np.asarray(q, dtype=float), np.asarray(q_sp, dtype=float), yawspeed_sp_radps,
+            self.yaw_weight, self.gain, self.rate_limit_radps,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def _attitude_rates(q, q_sp, yawspeed_sp, yaw_weight, gain, rate_limit):
+    """Body-rate set-point of :class:`AttitudeController`."""
+    e_z = _quat_to_dcm(q)[:, 2].copy()
+    e_z_sp = _quat_to_dcm(q_sp)[:, 2].copy()
+    q_reduced = _quat_between(e_z, e_z_sp)
+    if abs(q_reduced[1]) > 1 - 1e-5 or abs(q_reduced[2]) > 1 - 1e-5:
+        q_reduced = q_sp  # thrust exactly opposite: full attitude control
+    else:
+        q_reduced = _quat_multiply(q_reduced, q)
+    q_yaw = _quat_multiply(_quat_conjugate(q_reduced), q_sp)
+    if q_yaw[0] < 0.0:
+        q_yaw = -q_yaw
+    q_mix = np.array(
+        [
+            math.cos(yaw_weight * math.acos(min(max(q_yaw[0], -1.0), 1.0))),
+            0.0,
+            0.0,
+            math.sin(yaw_weight * math.asin(min(max(q_yaw[3], -1.0), 1.0))),
+        ]
+    )
+    q_target = _quat_multiply(q_reduced, q_mix)
+    q_error = _quat_multiply(_quat_conjugate(q), q_target)
+    sign = 1.0 if q_error[0] >= 0.0 else -1.0
+    rates_sp = 2.0 * sign * q_error[1:] * gain
+    # the commanded yaw rate is fed forward about the world down axis, seen in the body
+    rates_sp += _quat_to_dcm(q)[2] * yawspeed_sp
+    return np.minimum(np.maximum(rates_sp, -rate_limit), rate_limit)
+
+
+def limit_tilt(body_z: NDArray[np.float64], max_tilt_rad: float) -> NDArray[np.float64]:
+    """Bring the body z axis (unit, in NED; level is ``(0, 0, 1)``) back into a cone of
+    ``max_tilt_rad`` about the world z axis (PX4 ``ControlMath::limitTilt``)."""
+    world_z = np.array([0.0, 0.0, 1.0])
+    dot = min(max(float(body_z @ world_z), -1.0), 1.0)
+    if math.acos(dot) <= max_tilt_rad:
+        return body_z
+    rejection = body_z - dot * world_z
+    norm = float(np.linalg.norm(rejection))
+    rejection = rejection / norm if norm > 1e-9 else np.array([1.0, 0.0, 0.0])
+    return math.cos(max_tilt_rad) * world_z + math.sin(max_tilt_rad) * rejection
+
+
+def constrain_xy(
+    v0: NDArray[np.float64], v1: NDArray[np.float64], max_norm: float
+) -> NDArray[np.float64]:
+    """``v0 + s·v1`` with the largest ``s ≤ 1`` whose norm fits ``max_norm``, keeping ``v0``
+    first (PX4 ``ControlMath::constrainXY``: the position term wins over feed-forward)."""
+    total = v0 + v1
+    if np.linalg.norm(total) <= max_norm:
+        return total
+    n0 = float(np.linalg.norm(v0))
+    if n0 >= max_norm:
+        return v0 / n0 * max_norm
+    # |v0 + s v1| = max_norm, s in [0, 1]: a quadratic in s
+    a, b, c = float(v1 @ v1), 2.0 * float(v0 @ v1), n0**2 - max_norm**2
+    s = (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
+    return v0 + s * v1
+
+
+def thrust_to_attitude(
+    thrust_ned: NDArray[np.float64], yaw_rad: float
+) -> tuple[NDArray[np.float64], float]:
+    """Attitude whose body z is against the thrust vector, with the requested heading, and the
+    collective thrust (PX4 ``ControlMath::bodyzToAttitude``)."""
+    magnitude = float(np.linalg.norm(thrust_ned))
+    body_z = -thrust_ned / magnitude if magnitude > 1e-9 else np.array([0.0, 0.0, 1.0])
+    y_c = np.array([-math.sin(yaw_rad), math.cos(yaw_rad), 0.0])
+    body_x = cross3(y_c, body_z)
+    if body_z[2] < 0.0:
+        body_x = -body_x
+    if abs(body_z[2]) < 1e-6:  # thrust horizontal: keep the nose along the heading
+        body_x = np.array([0.0, 0.0, 1.0])
+    body_x /= np.linalg.norm(body_x)
+    body_y = cross3(body_z, body_x)
+    return quat_from_dcm(np.column_stack([body_x, body_y, body_z])), magnitude
+
+
+class FilteredDerivative:
+    """PX4's ``BlockDerivative``: the difference quotient through a first-order low-pass.
+
+    The low-pass is PX4's ``BlockLowPass`` (``a = b / (1 + b)``, ``b = 2π·f_c·dt``; a
+    cutoff of 0 disables it, as ``MPC_VELD_LP = 0`` does). The first update after a reset
+    returns 0, since one sample has no derivative.
+    """
+
+    def __init__(self, cutoff_hz: float) -> None:
+        self.cutoff_hz = cutoff_hz
+        self.reset()
+
+    def reset(self) -> None:
+        self._previous: NDArray[np.float64] | None = None
+        self.value = np.zeros(3)
+
+    def update(self, sample: NDArray[np.float64], dt_s: float) -> NDArray[np.float64]:
+        previous, self._previous = self._previous, np.array(sample, dtype=float)
+        if previous is None or dt_s <= 0.0:
+            return self.value
+        raw = (self._previous - previous) / dt_s
+        if self.cutoff_hz > 0.0:
+            b = 2.0 * math.pi * self.cutoff_hz * dt_s
+            self.value = self.value + (b / (1.0 + b)) * (raw - self.value)
+        else:
+            self.value = raw
+        return self.value
+
+
+class PositionController:
+    """PX4 ``mc_pos_control/PositionControl/PositionControl.cpp``.
+
+    Position P → velocity set-point (horizontal limit, position term first); velocity PID
+    (D on the velocity estimate's derivative, low-passed at ``MPC_VELD_LP`` as PX4's
+    ``_vel_*_deriv``: the raw accelerometer would feed frame vibration straight into the
+    tilt set-point) → acceleration set-point; acceleration → thrust vector
+    through the hover thrust, tilt limited to ``MPC_TILTMAX_AIR``; vertical thrust has
+    priority with a horizontal margin ``MPC_THR_XY_MARG``; anti-windup vertical by clamping
+    and horizontal by tracking. Set-point entries that are NaN are not controlled.
+    """
+
+    def __init__(self, params: Parameters) -> None:
+        self.velocity_integral = np.zeros(3)
+        self.velocity_derivative = FilteredDerivative(params["MPC_VELD_LP"])
+        self.configure(params)
+
+    def configure(self, params: Parameters) -> None:
+        self.gain_pos = np.array([params["MPC_XY_P"], params["MPC_XY_P"], params["MPC_Z_P"]])
+        xy_p, z_p = params["MPC_XY_VEL_P_ACC"], params["MPC_Z_VEL_P_ACC"]
+        xy_i, z_i = params["MPC_XY_VEL_I_ACC"], params["MPC_Z_VEL_I_ACC"]
+        xy_d, z_d = params["MPC_XY_VEL_D_ACC"], params["MPC_Z_VEL_D_ACC"]
+        self.gain_vel_p = np.array([xy_p, xy_p, z_p])
+        self.gain_vel_i = np.array([xy_i, xy_i, z_i])
+        self.gain_vel_d = np.array([xy_d, xy_d, z_d])
+        self.hover_thrust = params["MPC_THR_HOVER"]
+        self.thrust_min = max(params["MPC_THR_MIN"], 10e-4)
+        self.thrust_max = params["MPC_THR_MAX"]
+        self.thrust_xy_margin = params["MPC_THR_XY_MARG"]
+        self.tilt_max_rad = math.radians(params["MPC_TILTMAX_AIR"])
+        self.velocity_derivative.cutoff_hz = params["MPC_VELD_LP"]
+
+    def reset_integral(self) -> None:
+        """Clear the velocity integral and the derivative's memory (the loop restarts)."""
+        self.velocity_integral[:] = 0.0
+        self.velocity_derivative.reset()
+
+    def update(
+        self,
+        position_ned_m: NDArray[np.float64],
+        velocity_ned_mps: NDArray[np.float64],
+        position_sp: NDArray[np.float64],
+        velocity_sp: NDArray[np.float64],
+        velocity_limits_mps: tuple[float, float, float],
+        dt_s: float,
+        freeze_integral: bool = False,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """One step → ``(thrust_ned, velocity_sp_used, acceleration_sp)``.
+
+        ``velocity_limits_mps`` is (horizontal, up, down).
+        """
+        vel_from_pos = np.nan_to_num((position_sp - position_ned_m) * self.gain_pos)
+        feed_forward = np.nan_to_num(velocity_sp)
+        vel_sp = np.empty(3)
+        vel_sp[:2] = constrain_xy(vel_from_pos[:2], feed_forward[:2], velocity_limits_mps[0])
+        vel_sp[2] = min(
+            max(vel_from_pos[2] + feed_forward[2], -velocity_limits_mps[1]),
+            velocity_limits_mps[2],
+        )
+        # an axis with neither a position nor a velocity set-point is not controlled: zero
+        # acceleration (level flight for x/y), as PX4 does for NaN set-points
+        free = np.isnan(position_sp) & np.isnan(velocity_sp)
+        vel_error = np.where(free, 0.0, vel_sp - velocity_ned_mps)
+        acc_sp = vel_error * self.gain_vel_p + np.where(free, 0.0, self.velocity_integral)
+        accel_ned_mps2 = self.velocity_derivative.update(velocity_ned_mps, dt_s)
+        acc_sp -= np.where(free, 0.0, accel_ned_mps2 * self.gain_vel_d)
+        thrust = self._acceleration_to_thrust(acc_sp)
+
+        if (thrust[2] >= -self.thrust_min and vel_error[2] >= 0.0) or (
+            thrust[2] <= -self.thrust_max and vel_error[2] <= 0.0
+        ):
+            vel_error[2] = 0.0  # vertical anti-windup: stop integrating into a limit
+        xy_norm = float(np.linalg.norm(thrust[:2]))
+        allocated_xy = min(xy_norm, self.thrust_xy_margin)
+        thrust[2] = max(thrust[2], -math.sqrt(self.thrust_max**2 - allocated_xy**2))
+        xy_max = math.sqrt(max(self.thrust_max**2 - thrust[2] ** 2, 0.0))
+        if xy_norm > xy_max:
+            thrust[:2] *= xy_max / xy_norm
+        # horizontal tracking anti-windup (Rundqwist 1990), as PX4
+        acc_produced = thrust[:2] * (STANDARD_GRAVITY_MPS2 / self.hover_thrust)
+        acc_limited = (
+            acc_produced if acc_sp[:2] @ acc_sp[:2] > acc_produced @ acc_produced else acc_sp[:2]
+        )
+        vel_error[:2] -= (2.0 / self.gain_vel_p[0]) * (acc_sp[:2] - acc_limited)
+        if not freeze_integral:
+            self.velocity_integral += vel_error * self.gain_vel_i * dt_s
+            z = self.velocity_integral[2]
+            self.velocity_integral[2] = math.copysign(min(abs(z), STANDARD_GRAVITY_MPS2), z)
+        return thrust, vel_sp, acc_sp
+
+    def _acceleration_to_thrust(self, acc_sp: NDArray[np.float64]) -> NDArray[np.float64]:
+        body_z = np.array([-acc_sp[0], -acc_sp[1], STANDARD_GRAVITY_MPS2])
+        body_z = limit_tilt(body_z / np.linalg.norm(body_z), self.tilt_max_rad)
+        collective = acc_sp[2] * (self.hover_thrust / STANDARD_GRAVITY_MPS2) - self.hover_thrust
+        collective = min(collective / body_z[2], -self.thrust_min)
+        return body_z * collective
+
+
+class ControlAllocator:
+    """Quad-X allocation from the rotor geometry ``CA_ROTORi_PX/PY/KM``.
+
+    The effectiveness of rotor ``i`` at ``r`` with axis ``-z`` is moment ``r × a − KM·a`` and
+    thrust ``a`` (PX4 ``ActuatorEffectivenessRotors``); its pseudo-inverse is normalized as
+    PX4's ``ControlAllocationPseudoInverse`` does (same scale on roll and pitch, yaw by its
+    largest entry, thrust by the mean), so the rate gains mean what they mean in PX4. Outputs
+    are desaturated in PX4's order with airmode off: thrust (down only) then roll and pitch,
+    then yaw added on top with 15 % headroom.
+    """
+
+    def __init__(self, params: Parameters) -> None:
+        self.configure(params)
+        self.unallocated = np.zeros(4)
+
+    def configure(self, params: Parameters) -> None:
+        count = params["CA_ROTOR_COUNT"]
+        effectiveness = np.zeros((4, count))  # rows: roll, pitch, yaw torque; collective thrust
+        axis = np.array([0.0, 0.0, -1.0])
+        for i in range(count):
+            position = np.array([params[f"CA_ROTOR{i}_PX"], params[f"CA_ROTOR{i}_PY"], 0.0])
+            effectiveness[:3, i] = cross3(position, axis) - params[f"CA_ROTOR{i}_KM"] * axis
+            effectiveness[3, i] = 1.0  # collective thrust magnitude (PX4's -thrust_z)
+        mix = np.linalg.pinv(effectiveness)
+        nonzero_roll = np.count_nonzero(np.abs(mix[:, 0]) > 1e-3)
+        nonzero_pitch = np.count_nonzero(np.abs(mix[:, 1]) > 1e-3)
+        scale_rp = max(
+            math.sqrt(mix[:, 0] @ mix[:, 0] / (nonzero_roll / 2.0)),
+            math.sqrt(mix[:, 1] @ mix[:, 1] / (nonzero_pitch / 2.0)),
+        )
+        scale = np.array([scale_rp, scale_rp, mix[:, 2].max(), np.abs(mix[:, 3]).mean()])
+        mix /= scale
+        mix[np.abs(mix) < 1e-3] = 0.0
+        self.mix = mix
+        self._mix_columns = np.ascontiguousarray(mix.T)  # roll, pitch, yaw, thrust directions
+        self.effectiveness = np.linalg.pinv(mix)  # normalized: what the outputs achieve
+
+    def allocate(
+        self, torque: NDArray[np.float64], collective_thrust: float
+    ) -> NDArray[np.float64]:
+        """Motor commands 0..1 for a normalized torque (3) and collective thrust (0..1).
+
+        ``unallocated`` keeps set-point minus achieved (roll, pitch, yaw, thrust) for the
+        rate controller's anti-windup.
+        """
+        outputs, self.unallocated = _allocate(
+            self._mix_columns,
+            self.effectiveness,
+            np.asarray(torque, dtype=float),
+            collective_thrust,
+        )
+        return outputs
+
+
+@njit(cache=True)
+def _allocate(mix_columns, effectiveness, torque, collective_thrust):
+    """Outputs and unallocated set-point of :meth:`ControlAllocator.allocate`."""
+    roll, pitch, yaw, thrust = mix_columns[0], mix_columns[1], mix_columns[2], mix_columns[3]
+    outputs = roll * torque[0] + pitch * torque[1] + thrust * collective_thrust
+    outputs = _desaturate(outputs, thrust, True, 1.0)
+    outputs = _desaturate(outputs, roll, False, 1.0)
+    outputs = _desaturate(outputs, pitch, False, 1.0)
+    outputs = outputs + yaw * torque[2]
+    outputs = _desaturate(outputs, yaw, False, 1.0)
+    outputs = _desaturate(outputs, thrust, False, 1.15)
+    outputs = _desaturate(outputs, thrust, True, 1.0)
+    outputs = np.minimum(np.maximum(outputs, 0.0), 1.0)
+    wanted = np.array([torque[0], torque[1], torque[2], collective_thrust])
+    return outputs, wanted - effectiveness @ outputs
+
+
+@njit(cache=True)
+def _desaturation_gain(outputs, direction, lower, upper):
+    """PX4 ``computeDesaturationGain``: how far along ``direction`` to move to fit the range."""
+    k_min = k_max = 0.0
+    for i in range(outputs.shape[0]):
+        d, value = direction[i], outputs[i]
+        if abs(d) < 1e-6:
+            continue
+        if value < lower:
+            k = (lower - value) / d
+        elif value > upper:
+            k = (upper - value) / d
+        else:
+            continue
+        k_min, k_max = min(k_min, k), max(k_max, k)
+    return k_min + k_max
+
+
+@njit(cache=True)
+def _desaturate(outputs, direction, reduce_only, upper):
+    """Move ``outputs`` along ``direction`` into ``0..upper`` (twice: full, then half a step,
+    as PX4 does to centre a range that cannot fit); ``reduce_only`` never increases it."""
+    if outputs.min() >= 0.0 and outputs.max() <= upper:
+        return outputs
+    for fraction in (1.0, 0.5):
+        gain = fraction * _desaturation_gain(outputs, direction, 0.0, upper)
+        if reduce_only and gain > 0.0:
+            return outputs
+        outputs = outputs + gain * direction
+    return outputs

@@ -1,0 +1,213 @@
+"""The autopilot as a separate process: PX4 SITL's links around the flight controller.
+
+It connects to the rig on TCP 127.0.0.1:4560+i (retrying until accepted, like PX4's
+``simulator_mavlink``), sends a HEARTBEAT and asks for HIL_STATE_QUATERNION, then answers
+each HIL_SENSOR with ``id = 0`` with exactly one HIL_ACTUATOR_CONTROLS stamped with the same
+``time_usec``. Ground-station messages are handled as soon as they arrive, between sensor
+frames, in one ``select`` loop, so a command acknowledged before the next frame acts at a
+known frame.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rig.autopilots.reference.flight_controller import FlightController
+from rig.autopilots.reference.flight_log import open_flight_log
+from rig.autopilots.reference.gcs import GroundStation, MavlinkLink
+from rig.autopilots.reference.params import Parameters
+from rig.autopilots.reference.sensors import GpsFix, GroundTruth, SensorFrame
+from rig.mavlink.px4_api import (
+    DEFAULT_HOME_ALT_AMSL_M,
+    DEFAULT_HOME_LAT_DEG,
+    DEFAULT_HOME_LON_DEG,
+    LOCKSTEP_FLAG,
+    ActuatorMode,
+    HilSensorFields,
+    Ports,
+    mavlink,
+)
+
+#: PX4 asks the simulator for ground truth every 5000 µs (PX4_SIM_CONTRACT.md).
+GROUND_TRUTH_INTERVAL_US = 5000
+#: Wall-clock pause between connection attempts (PX4 retries about every 0.5 ms; a little
+#: slower here costs nothing and spares the CPU).
+CONNECT_RETRY_S = 0.01
+#: With the simulator quiet this long (wall time), heartbeats keep ground stations informed.
+IDLE_HEARTBEAT_S = 1.0
+
+
+def sensor_frame(message, gps: GpsFix | None) -> SensorFrame:
+    """HIL_SENSOR (SI units after PX4's conversions: hPa → Pa) → :class:`SensorFrame`."""
+    fields = message.fields_updated
+
+    def has(group: HilSensorFields) -> bool:
+        return fields & group == group
+
+    pressure = message.abs_pressure * 100.0 if has(HilSensorFields.BARO) else None
+    return SensorFrame(
+        accel_mps2=np.array([message.xacc, message.yacc, message.zacc])
+        if has(HilSensorFields.ACCEL) else None,
+        gyro_radps=np.array([message.xgyro, message.ygyro, message.zgyro])
+        if has(HilSensorFields.GYRO) else None,
+        mag_gauss=np.array([message.xmag, message.ymag, message.zmag])
+        if has(HilSensorFields.MAG) else None,
+        baro_pressure_pa=pressure,
+        baro_temperature_degc=message.temperature if pressure is not None else None,
+        gps=gps,
+    )  # fmt: skip
+
+
+def gps_fix(message) -> GpsFix:
+    """HIL_GPS (degE7, mm, cm/s, eph/epv in cm as PX4 reads them) → :class:`GpsFix`."""
+    return GpsFix(
+        lat_deg=message.lat * 1e-7,
+        lon_deg=message.lon * 1e-7,
+        alt_amsl_m=message.alt * 1e-3,
+        velocity_ned_mps=(message.vn * 0.01, message.ve * 0.01, message.vd * 0.01),
+        eph_m=message.eph * 0.01,
+        epv_m=message.epv * 0.01,
+        fix_type=message.fix_type,
+        satellites_used=message.satellites_visible,
+    )
+
+
+def ground_truth(message) -> GroundTruth:
+    """HIL_STATE_QUATERNION → :class:`GroundTruth` (for the estimator-error log only)."""
+    return GroundTruth(
+        q=np.array(message.attitude_quaternion, dtype=float),
+        lat_deg=message.lat * 1e-7,
+        lon_deg=message.lon * 1e-7,
+        alt_amsl_m=message.alt * 1e-3,
+        velocity_ned_mps=np.array([message.vx, message.vy, message.vz]) * 0.01,
+    )
+
+
+def warm_up() -> None:
+    """Compile the flight controller's numba kernels before talking to the simulator.
+
+    PX4 boots before it connects; a cold numba cache costs seconds of compiling, which the
+    rig would spend freewheeling frames unanswered. A throwaway controller flies a few
+    frames of a vehicle at rest, disarmed and then armed, so every compiled path runs once.
+    """
+    controller = FlightController(Parameters())
+    at_home = GpsFix(
+        DEFAULT_HOME_LAT_DEG, DEFAULT_HOME_LON_DEG, DEFAULT_HOME_ALT_AMSL_M, (0.0, 0.0, 0.0),
+        eph_m=0.5, epv_m=0.8, fix_type=3, satellites_used=10,
+    )  # fmt: skip
+    frame = SensorFrame(
+        accel_mps2=np.array([0.0, 0.0, -9.81]), gyro_radps=np.zeros(3),
+        mag_gauss=np.array([0.21, 0.01, 0.43]), baro_pressure_pa=95_460.0,
+        baro_temperature_degc=15.0, gps=at_home,
+    )  # fmt: skip
+    for k in range(1, 60):
+        if k == 30:
+            controller.arm(force=True)
+        controller.update(frame, k * 4000)
+
+
+class Autopilot:
+    """The process: the flight controller, the simulator link and the ground-station links."""
+
+    def __init__(self, instance: int, params: Parameters, log_path: Path | None) -> None:
+        self.ports = Ports(instance)
+        params.set("MAV_SYS_ID", self.ports.system_id)
+        self.log = open_flight_log(log_path, params.as_dict()) if log_path else None
+        self.fc = FlightController(params, self.log)
+        sysid = self.ports.system_id
+        self.links = [
+            MavlinkLink("gcs", self.ports.gcs_local_udp, self.ports.gcs_remote_udp, sysid),
+            MavlinkLink("api", self.ports.api_local_udp, self.ports.api_remote_udp, sysid),
+            MavlinkLink(
+                "onboard", self.ports.onboard_local_udp, self.ports.onboard_remote_udp, sysid
+            ),
+        ]
+        self.ground = GroundStation(self.fc, self.links)
+        self.sim_mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
+        self.sim_mav.robust_parsing = True
+        self.sim: socket.socket | None = None
+        self.sim_malformed = 0
+        self._gps: GpsFix | None = None
+
+    def connect(self) -> None:
+        """Connect to the rig, retrying until it accepts; heartbeats meanwhile."""
+        last_heartbeat = 0.0
+        while True:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            try:
+                sock.connect(("127.0.0.1", self.ports.simulator_tcp))
+                break
+            except OSError:
+                sock.close()
+            if time.monotonic() - last_heartbeat > IDLE_HEARTBEAT_S:
+                last_heartbeat = time.monotonic()
+                self.ground.heartbeat()
+            time.sleep(CONNECT_RETRY_S)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.sim = sock
+        mav = self.sim_mav
+        self._send_sim(mavlink.MAVLink_heartbeat_message(
+            mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0, 3))  # fmt: skip
+        self._send_sim(mav.command_long_encode(
+            0, 0, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+            mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, GROUND_TRUTH_INTERVAL_US, 0, 0, 0, 0, 0,
+        ))  # fmt: skip
+
+    def run(self) -> str:
+        """Serve until the simulator closes the link; returns why it stopped."""
+        warm_up()
+        self.connect()
+        while True:
+            readable, _, _ = select.select([self.sim, *(link.sock for link in self.links)],
+                                           [], [], IDLE_HEARTBEAT_S)  # fmt: skip
+            if not readable:
+                self.ground.heartbeat()
+            for link in self.links:
+                if link.sock in readable:
+                    for message in link.receive():
+                        self.ground.handle(link, message)
+            self.ground.retry_uploads()
+            if self.sim in readable:
+                data = self.sim.recv(65536)
+                if not data:
+                    return f"the simulator closed the link at t={self.fc.time_us / 1e6:.3f} s"
+                for message in self.sim_mav.parse_buffer(data) or []:
+                    self._handle_sim(message)
+
+    def close(self) -> None:
+        if self.sim is not None:
+            self.sim.close()
+        for link in self.links:
+            link.close()
+        if self.log is not None:
+            self.log.close()
+
+    def _handle_sim(self, message) -> None:
+        kind = message.get_type()
+        if kind == "HIL_SENSOR":
+            if message.id != 0:
+                return  # only IMU 0 drives the lockstep clock, as in PX4
+            frame = sensor_frame(message, self._gps)
+            self._gps = None
+            controls = self.fc.update(frame, message.time_usec)
+            mode = ActuatorMode.CUSTOM_MODE_ENABLED
+            if controls.armed:
+                mode |= ActuatorMode.SAFETY_ARMED
+            outputs = [*controls.motors, *[0.0] * 12]
+            self._send_sim(mavlink.MAVLink_hil_actuator_controls_message(
+                message.time_usec, outputs, int(mode), LOCKSTEP_FLAG))  # fmt: skip
+            self.ground.stream(message.time_usec)
+        elif kind == "HIL_GPS":
+            self._gps = gps_fix(message)
+        elif kind == "HIL_STATE_QUATERNION":
+            self.fc.observe_truth(ground_truth(message))
+        elif kind == "BAD_DATA":
+            self.sim_malformed += 1
+
+    def _send_sim(self, message) -> None:
+        self.sim.sendall(message.pack(self.sim_mav))

@@ -1,0 +1,289 @@
+"""The emulated sensor chips in the loop: SI samples in, what PX4's drivers read out.
+
+Per lockstep frame the rig hands the chips a :class:`ChipFrame` (new samples as the
+chips' raw words, simulated time, bus faults, the PWM pulses that ended) and gets back a
+:class:`ChipReadout` decoded by fpga_hdl's autopilot-side drivers, which issue PX4's own
+transactions: an MPU-6000 burst every frame, an IST8310 read + single-measurement trigger
+at the mag rate, the MS5611 convert/read cycle every 10 ms (D2 then D1, so a pressure every
+20 ms), and the PWM capture's widths. Quantization, full-scale saturation, conversion
+latency and bus faults therefore reach the autopilot as on the real rig.
+
+:class:`SensorEngine` is written once against fpga_hdl's async bus protocols and a
+:class:`ChipHost` (how samples reach the chips). It runs in two places:
+
+- ``sensor_layer = "tlm"``: here, over the pure-Python register models
+  (:class:`TlmChips`); the coroutines never suspend, so :func:`run_now` drives them
+  without an event loop.
+- ``sensor_layer = "rtl"``: inside the cocotb process (``rig.chips.rtl``), over the
+  co-simulation harness's SPI/I2C controllers, PWM generator and the generated Verilog
+  of every chip and the PWM capture, behind the binary channel of ``rig.chips.channel``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Coroutine, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol, TypeVar
+
+from fpga_hdl.buses import BusError, I2cBus, SpiBus, TlmI2cBus, TlmSpiBus
+from fpga_hdl.ist8310 import regs as ist_regs
+from fpga_hdl.ist8310.driver import Ist8310Driver
+from fpga_hdl.ist8310.model import Ist8310Model
+from fpga_hdl.mpu6000 import regs as mpu_regs
+from fpga_hdl.mpu6000.driver import Mpu6000Driver, decode
+from fpga_hdl.mpu6000.model import Mpu6000Model
+from fpga_hdl.ms5611 import regs as ms_regs
+from fpga_hdl.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
+from fpga_hdl.ms5611.model import Ms5611Model
+from quad_model.sensors import SensorReadings
+from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
+
+CHIPS = ("mpu6000", "ms5611", "ist8310")
+
+_T = TypeVar("_T")
+
+
+class SensorLayerError(RuntimeError):
+    """A driver could not bring a chip up (wrong WHO_AM_I, PROM CRC, configuration)."""
+
+
+@dataclass(frozen=True)
+class ChipFault:
+    """Bus fault of one chip: ``mute`` (stops answering), ``flip`` (XOR on sent bytes)."""
+
+    mute: bool = False
+    flip: int = 0
+
+
+NO_FAULT = ChipFault()
+
+
+@dataclass(frozen=True)
+class ChipFrame:
+    """What the rig gives the chips for one frame; ``None`` where nothing new is loaded."""
+
+    now_us: int
+    imu: mpu_regs.Mpu6000Sample | None
+    mag: ist_regs.Ist8310Sample | None
+    baro_d1_d2: tuple[int, int] | None
+    read_mag: bool
+    faults: Mapping[str, ChipFault] = field(default_factory=dict)
+    #: PWM pulses that started since the previous frame (the autopilot's outputs).
+    pulses: tuple[Pulse, ...] = ()
+    #: The SI samples the words came from; only :class:`BypassSensorLayer` reads them.
+    si: SensorReadings | None = None
+
+
+@dataclass(frozen=True)
+class ChipReadout:
+    """What the autopilot-side drivers decoded this frame (SI, sensor axes = body FRD)."""
+
+    accel_mps2: tuple[float, float, float]
+    gyro_radps: tuple[float, float, float]
+    imu_temperature_degc: float
+    mag_gauss: tuple[float, float, float] | None
+    baro_pa_degc: tuple[float, float] | None
+    #: What the PWM capture measured per motor channel (µs) and whether it timed out.
+    pwm_widths_us: tuple[float, ...]
+    pwm_timed_out: tuple[bool, ...]
+    #: ``(chip, message)`` for each failed transfer this frame.
+    bus_errors: tuple[tuple[str, str], ...] = ()
+
+
+class ChipHost(Protocol):
+    """How samples, time and faults reach the chips (TLM: models; RTL: the host port)."""
+
+    async def load(self, frame: ChipFrame) -> None: ...
+
+    async def capture(
+        self, pulses: tuple[Pulse, ...], now_us: int
+    ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
+        """Feed the PWM pulses; return each motor channel's captured width and timeout."""
+        ...
+
+
+class SensorLayer(Protocol):
+    """What the loop needs of a sensor layer (:class:`TlmSensorLayer`, ``RtlSensorLayer``)."""
+
+    def start(self) -> None: ...
+
+    def frame(self, frame: ChipFrame) -> ChipReadout: ...
+
+    def close(self) -> None: ...
+
+
+def run_now(coroutine: Coroutine[Any, Any, _T]) -> _T:
+    """Run a coroutine that never suspends (TLM buses) to its result, without an event loop.
+
+    An asyncio loop would cost tens of µs per frame for nothing: the TLM buses return at
+    once. A coroutine that does suspend is a bug here and is reported as one.
+    """
+    try:
+        coroutine.send(None)
+    except StopIteration as done:
+        return done.value
+    coroutine.close()
+    raise SensorLayerError("a TLM bus transaction suspended; TLM buses must return at once")
+
+
+class SensorEngine:
+    """PX4's three sensor drivers on one SPI bus and one I2C bus, frame by frame."""
+
+    def __init__(self, spi: SpiBus, i2c: I2cBus, host: ChipHost) -> None:
+        self.host = host
+        self.imu = Mpu6000Driver(spi, "imu")
+        self.baro = Ms5611Driver(spi, self._boot_sleep, "baro")
+        self.mag = Ist8310Driver(i2c)
+        self._next_baro_us = 0
+        self._baro_phase_d1 = False  # False: a D2 (temperature) conversion is running
+        self._d2 = 0
+        self._baro_started = False
+
+    @staticmethod
+    async def _boot_sleep(duration_us: int) -> None:
+        """Start-up runs before simulated time begins; the chips are ready at once."""
+
+    async def start(self) -> None:
+        """PX4's probe/reset/configure sequences, before the first frame."""
+        try:
+            await self.imu.start()
+            await self.baro.start()
+            if not await self.mag.probe():
+                raise SensorLayerError("IST8310 WHO_AM_I does not read 0x10")
+            await self.mag.reset()
+            if not (await self.mag.reset_done() and await self.mag.configure()):
+                raise SensorLayerError("IST8310 configuration registers do not hold")
+        except BusError as error:
+            raise SensorLayerError(f"sensor start-up failed: {error}") from None
+
+    async def frame(self, frame: ChipFrame) -> ChipReadout:
+        """Load the frame's samples, then read as PX4's drivers would at this time."""
+        await self.host.load(frame)
+        errors: list[tuple[str, str]] = []
+        imu = decode(await self.imu.read_raw(), self.imu.gyro_config, self.imu.accel_config)
+        mag = None
+        if frame.read_mag:
+            try:
+                mag = await self.mag.read_field_gauss()
+                await self.mag.start_measurement()
+            except BusError as error:
+                errors.append(("ist8310", str(error)))
+        baro = None
+        if frame.now_us >= self._next_baro_us:
+            self._next_baro_us = frame.now_us + CONVERSION_INTERVAL_US
+            try:
+                baro = await self._baro_cycle()
+            except BusError as error:
+                errors.append(("ms5611", str(error)))
+        widths_us, timed_out = await self.host.capture(frame.pulses, frame.now_us)
+        return ChipReadout(
+            accel_mps2=tuple(imu.accel_mps2.tolist()),
+            gyro_radps=tuple(imu.gyro_rads.tolist()),
+            imu_temperature_degc=imu.temperature_c,
+            mag_gauss=mag,
+            baro_pa_degc=baro,
+            pwm_widths_us=widths_us,
+            pwm_timed_out=timed_out,
+            bus_errors=tuple(errors),
+        )
+
+    async def _baro_cycle(self) -> tuple[float, float] | None:
+        """PX4's MS5611 cycle: collect the running conversion, start the next one."""
+        if not self._baro_started:
+            self._baro_started = True
+            await self.baro.convert(ms_regs.CMD_CONVERT_D2)
+            return None
+        result = await self.baro.read_adc()
+        self._baro_phase_d1 = not self._baro_phase_d1
+        if self._baro_phase_d1:  # the D2 just read: start the pressure conversion
+            self._d2 = result
+            await self.baro.convert(ms_regs.CMD_CONVERT_D1)
+            return None
+        await self.baro.convert(ms_regs.CMD_CONVERT_D2)
+        if result == 0 or self._d2 == 0:  # PX4 ms5611.cpp: zero means read too early
+            raise BusError(f"MS5611 conversion not ready (D1={result}, D2={self._d2})")
+        compensated = ms_regs.compensate(result, self._d2, self.baro.prom)
+        return compensated.pressure_pa, compensated.temperature_c
+
+
+class TlmChips:
+    """The three chips as fpga_hdl's Python register models, behind TLM buses."""
+
+    def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
+        self.mpu6000 = Mpu6000Model()
+        self.ms5611 = Ms5611Model()
+        self.ist8310 = Ist8310Model()
+        self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
+        self.i2c = TlmI2cBus({self.ist8310.address: self.ist8310})
+        self.pwm = PwmCapture(MOTOR_CHANNELS, tick_hz=pwm_tick_hz)
+        self._faults: Mapping[str, ChipFault] | None = None  # the fault inputs set last
+
+    async def load(self, frame: ChipFrame) -> None:
+        self.ms5611.now_us = self.ist8310.now_us = frame.now_us
+        if frame.imu is not None:
+            self.mpu6000.load_sample(frame.imu)
+        if frame.mag is not None:
+            self.ist8310.load_sample(frame.mag)
+        if frame.baro_d1_d2 is not None:
+            self.ms5611.load_sample(*frame.baro_d1_d2)
+        if frame.faults is not self._faults:  # the injector hands the same map until it changes
+            self._faults = frame.faults
+            for name in CHIPS:
+                fault = frame.faults.get(name, NO_FAULT)
+                chip = getattr(self, name)
+                chip.fault_mute, chip.fault_flip = fault.mute, fault.flip
+
+    async def capture(
+        self, pulses: tuple[Pulse, ...], now_us: int
+    ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
+        return self.pwm.capture(pulses, now_us)
+
+
+class TlmSensorLayer:
+    """``sensor_layer = "tlm"``: the engine in this process over :class:`TlmChips`."""
+
+    def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
+        self.chips = TlmChips(pwm_tick_hz=pwm_tick_hz)
+        self.engine = SensorEngine(self.chips.spi, self.chips.i2c, self.chips)
+
+    def start(self) -> None:
+        run_now(self.engine.start())
+
+    def frame(self, frame: ChipFrame) -> ChipReadout:
+        return run_now(self.engine.frame(frame))
+
+    def close(self) -> None:
+        """Nothing to release: the models live in this process."""
+
+
+class BypassSensorLayer:
+    """No chips: the SI samples go straight into HIL_SENSOR and the commanded pulse widths
+    straight to the motors, as a bare simulator (Gazebo's) feeds PX4. For measuring what
+    the chips cost (``make bench``); the credible rig is ``tlm`` or ``rtl``."""
+
+    def __init__(self) -> None:
+        self._widths_us = [0.0] * MOTOR_CHANNELS
+
+    def start(self) -> None:
+        """Nothing to bring up."""
+
+    def frame(self, frame: ChipFrame) -> ChipReadout:
+        readings = frame.si
+        assert readings is not None, "the loop passes the samples"
+        assert readings.imu is not None, "the IMU is due every frame"
+        for pulse in frame.pulses:
+            if pulse.channel < MOTOR_CHANNELS:
+                self._widths_us[pulse.channel] = float(pulse.width_us)
+        imu, mag, baro = readings.imu, readings.mag, readings.baro
+        return ChipReadout(
+            accel_mps2=tuple(map(float, imu.accel_mps2)),
+            gyro_radps=tuple(map(float, imu.gyro_radps)),
+            imu_temperature_degc=imu.temperature_degc,
+            mag_gauss=None if mag is None else tuple(map(float, mag.field_gauss)),
+            baro_pa_degc=None if baro is None else (baro.pressure_pa, baro.temperature_degc),
+            pwm_widths_us=tuple(self._widths_us),
+            pwm_timed_out=(False,) * MOTOR_CHANNELS,
+        )
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -1,0 +1,566 @@
+"""The closed loop: model → sensor chips → autopilot → PWM → model, in lockstep, logged.
+
+One frame is one IMU period (1 ms by default):
+
+1. the model advances one frame holding the motor throttles the PWM capture measured;
+2. sensor physics samples the truth (IMU every frame, mag/baro/GPS on their schedules) and
+   the sensor-layer faults are applied;
+3. the samples are loaded into the chips and PX4's drivers read them over SPI/I2C
+   (``sensor_layer``: Python register models, or the RTL under cocotb in its own process);
+4. due scenario commands go to the autopilot on the API link (acknowledged first with the
+   reference autopilot, so each acts at a known frame);
+5. HIL_SENSOR (+ HIL_GPS, + HIL_STATE_QUATERNION at the asked interval) goes out and, once
+   lockstep is established, the autopilot's HIL_ACTUATOR_CONTROLS for this very frame is
+   awaited under the watchdog;
+6. the controls become PWM pulses whose captured widths set the throttles of the next frame.
+
+The next frame's throttles are the widths captured up to this frame, so steps 1–2 of the
+next frame and this frame's logging do not need the autopilot's answer: the rig does them
+between sending the frame and awaiting the answer, while the autopilot computes (on another
+core when one is free). Lockstep is unchanged: PX4 never sees a frame before it answered
+the previous one, and every number is the same as in strict order (a golden test).
+
+Two clocks: the rig's own parts (model, chips, PWM, faults, scenario commands) count run
+time from 0; everything that leaves the rig (every message to the autopilot, every log
+timestamp) is stamped on the autopilot's boot clock, ``Scenario.clock_start_s`` later. A
+replay starts that clock at the real log's first timestamp, so both logs share one time
+axis, while the RTL never simulates the hundreds of seconds before it.
+
+Everything lands in ``rig.ulg``. Any failure (a stalled or dead autopilot, a refused
+command, Ctrl-C) ends the run cleanly: the reason is logged, the log is closed readable,
+and the error propagates as one line.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from fpga_hdl.ist8310.driver import sample_from_field_gauss
+from fpga_hdl.mpu6000.regs import Mpu6000Sample
+from fpga_hdl.ms5611.model import raw_from_si
+from quad_model import QuadModel, SensorSuite, load_vehicle
+from quad_model.frames import ned_to_geodetic
+from quad_model.model import Mount, VehicleTruth
+from quad_model.sensors import SensorReadings
+from quad_model.vehicle import VehicleFileError
+from rig.autopilots.px4 import Px4Sitl, check_imu_rate, find_px4, px4_parameters
+from rig.chips.layer import BypassSensorLayer, ChipFrame, ChipReadout, SensorLayer, TlmSensorLayer
+from rig.chips.pwm import PwmOutput, throttle_from_capture
+from rig.errors import RigError, ScenarioError
+from rig.logs.rig_log import RigLog
+from rig.mavlink.ground_link import GroundLink
+from rig.mavlink.px4_api import Ports, mavlink
+from rig.mavlink.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
+from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
+from rig.processes import exit_description, stop_process_group
+from rig.scenarios.faults import FaultInjector
+from rig.scenarios.scenario import Rates, Scenario
+from rig.scenarios.script import Action, CommandScript
+
+AUTOPILOTS = ("reference", "px4")
+#: ``RunOptions.sensor_layer`` that skips the chips (benchmarks only, not a scenario's).
+BYPASS = "bypass"
+#: Seconds the reference autopilot gets to close its log after SIGINT.
+AUTOPILOT_STOP_GRACE_S = 5.0
+#: Where runs land unless ``--out`` says otherwise (ignored by git).
+RUNS_DIR = Path("runs")
+#: Ground truth is logged at this rate (PX4 SITL logs its groundtruth topics at ~100 Hz).
+TRUTH_LOG_HZ = 250
+_MOUNTS = {
+    "free": Mount.FREE,
+    "gimbal_pitch": Mount.GIMBAL_PITCH,
+    "gimbal_roll": Mount.GIMBAL_ROLL,
+    "thrust_stand": Mount.THRUST_STAND,
+}
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run a scenario (everything the scenario file does not say)."""
+
+    autopilot: str = "reference"
+    instance: int = 0
+    out_dir: Path | None = None
+    sensor_layer: str | None = None  # None: the scenario's
+    duration_s: float | None = None  # None: the scenario's
+    timeouts: LinkTimeouts = field(default_factory=LinkTimeouts)
+    #: Autopilot parameters ``NAME=VALUE`` (``--param``), for either autopilot.
+    autopilot_params: tuple[str, ...] = ()
+    #: PX4 SITL build (``--px4``); None: ``$PX4_DIR``, else the user starts PX4 by hand.
+    px4_dir: Path | None = None
+    #: Told the command to run when the rig waits for a PX4 started by hand.
+    on_waiting: Callable[[str], None] | None = None
+    #: Command that starts the autopilot instead of ``python -m rig.autopilots.reference`` (tests).
+    autopilot_argv: tuple[str, ...] | None = None
+    #: ``(level, text)`` events for the start of ``rig.ulg`` (e.g. what a replay skipped).
+    notes: tuple[tuple[str, str], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.autopilot not in AUTOPILOTS:
+            raise RigError(
+                f"autopilot must be one of {', '.join(AUTOPILOTS)}, not {self.autopilot!r}"
+            )
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What a progress display shows, once per simulated tenth of a second."""
+
+    time_s: float
+    duration_s: float
+    real_time_factor: float
+    altitude_m: float
+    armed: bool
+    last_event: str
+
+
+@dataclass(frozen=True)
+class FrameBudget:
+    """Mean wall time of one frame, split by part of the loop (µs per frame).
+
+    Measured every run (a clock read per part costs well under 1 µs) so a slow run shows
+    where its time went. The lockstep is sequential, so the autopilot's compute shows up
+    here too: in ``autopilot_wait_us`` (blocked on its answer, beyond the work the rig
+    overlaps with it) and in ``socket_send_us`` (the send wakes the autopilot, which often
+    runs on the sender's core before the send returns).
+    """
+
+    model_us: float  # motor faults, the 5 kHz model over one frame, its truth
+    sensor_physics_us: float  # sensor models and sensor faults
+    chips_us: float  # chip words, register models + PX4's drivers (or the RTL), PWM capture
+    mavlink_us: float  # HIL_* encoding and packing, parsing the autopilot's messages
+    socket_send_us: float
+    autopilot_wait_us: float
+    logging_us: float  # rig.ulg
+    other_us: float  # ground link, scenario commands, loop bookkeeping
+
+    @property
+    def total_us(self) -> float:
+        return sum(getattr(self, f.name) for f in fields(self))
+
+
+@dataclass(frozen=True)
+class RunResult:
+    run_dir: Path
+    rig_log: Path
+    autopilot_log: Path | None
+    simulated_s: float
+    wall_s: float
+    frames: int
+    link: LinkStats
+    budget: FrameBudget
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.wall_s if self.wall_s > 0 else math.inf
+
+
+def default_run_dir(scenario: Scenario) -> Path:
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    return RUNS_DIR / f"{scenario.name}-{stamp}"
+
+
+def run_scenario(
+    scenario: Scenario,
+    options: RunOptions = RunOptions(),
+    progress: Callable[[Progress], None] | None = None,
+) -> RunResult:
+    """Fly ``scenario`` closed-loop; returns where the logs are, raises :class:`RigError`."""
+    if options.autopilot == "px4":
+        check_imu_rate(scenario.rates.imu_hz)  # before anything starts
+        find_px4(options.px4_dir)  # a --px4 or $PX4_DIR that holds no PX4 fails here
+    run_dir = options.out_dir or default_run_dir(scenario)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    loop = _Loop(scenario, options, run_dir, progress)
+    try:
+        loop.run()
+    except RigError as error:
+        loop.log.event(loop.time_us, f"run ended: {error}", "err")
+        raise
+    except KeyboardInterrupt:
+        loop.log.event(loop.time_us, "run interrupted by the user (Ctrl-C)", "warn")
+        raise
+    finally:
+        loop.close()
+    return loop.result()
+
+
+class _Loop:
+    """One run's state; :func:`run_scenario` is its only user."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        options: RunOptions,
+        run_dir: Path,
+        progress: Callable[[Progress], None] | None,
+    ) -> None:
+        self.scenario = scenario
+        self.options = options
+        self.run_dir = run_dir
+        self.progress = progress
+        self.duration_s = options.duration_s or scenario.duration_s
+        self.sensor_layer_name = options.sensor_layer or scenario.sensor_layer
+        self.rates = scenario.rates
+        self.frame_us = self.rates.frame_us
+        #: The autopilot's clock at frame 0 (µs); ``time_us`` is that clock, ``run_us`` the run's.
+        self.clock_start_us = round(scenario.clock_start_s * 1e6)
+        self.run_us = 0
+        self.time_us = self.clock_start_us
+        self.frames = 0
+        self.armed = False
+        self.last_event = ""
+        self._wall_start = time.monotonic()
+        self._wall_end: float | None = None
+        self._process: subprocess.Popen[bytes] | None = None
+        self._px4: Px4Sitl | None = None
+        self._closers: list[Callable[[], None]] = []
+        #: Wall time of each part of the frames so far (s), for :class:`FrameBudget`.
+        self._spent_s = dict.fromkeys(("model", "sensor physics", "chips", "messages", "logging"),
+                                      0.0)  # fmt: skip
+
+        try:
+            vehicle = load_vehicle(scenario.vehicle)
+        except VehicleFileError as error:
+            raise ScenarioError(f"{scenario.source}: key 'vehicle': {error}") from None
+        environment = scenario.environment
+        home = environment.home
+        self.log = RigLog(
+            run_dir / "rig.ulg",
+            info={
+                "sys_name": "hil-rig",
+                "ver_hw": f"RIG_{self.sensor_layer_name.upper()}",
+                "scenario": scenario.name,
+                "scenario_source": Path(scenario.source).name,
+                "vehicle": vehicle.name,
+                "autopilot": options.autopilot,
+            },
+            parameters={
+                "RIG_SEED": scenario.seed,
+                "RIG_IMU_HZ": self.rates.imu_hz,
+                "RIG_PWM_HZ": self.rates.pwm_hz,
+                "SYS_HITL": 0,
+            },
+            home_lat_deg=home.lat_deg,
+            home_lon_deg=home.lon_deg,
+            home_alt_m=home.alt_amsl_m,
+        )
+        self._closers.append(self.log.close)
+        for level, text in options.notes:
+            self.log.event(self.time_us, text, level)
+
+        model_rng, sensor_rng, fault_rng = np.random.default_rng(scenario.seed).spawn(3)
+        self.model = QuadModel(
+            vehicle, model_rng, environment, _MOUNTS[scenario.constraint], self.rates.model_hz
+        )
+        start = scenario.start
+        self.model.reset(
+            position_ned_m=start.position_ned_m,
+            attitude_quat=_yaw_quat(math.radians(start.yaw_deg)),
+            battery_voltage_v=scenario.initial_battery_voltage_v,
+        )
+        self.sensors = SensorSuite(
+            vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
+            self.rates.baro_hz,
+        )  # fmt: skip
+        self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event)
+        self.layer = _make_sensor_layer(self.sensor_layer_name, self.rates)
+        self._closers.append(self.layer.close)
+        self.pwm = PwmOutput(4, self.rates.pwm_hz, scenario.motor_pwm_range_us)
+        self.throttle = np.zeros(4)
+        self._capture: tuple[tuple[float, ...], tuple[bool, ...]] | None = None
+        self.ports = Ports(options.instance)
+        if options.autopilot == "px4":
+            params = px4_parameters(vehicle, self.model.hover_throttle(), self.rates.imu_hz,
+                                    options.autopilot_params)  # fmt: skip
+            self._px4 = Px4Sitl(find_px4(options.px4_dir), run_dir, options.instance, params)
+
+    # -- run ---------------------------------------------------------------------------
+
+    def run(self) -> None:
+        self.layer.start()
+        link = SimulatorLink(self.ports, self.options.timeouts, peer_exit=self._autopilot_exit)
+        self._closers.append(link.close)
+        self.link = link
+        ground = GroundLink(self.ports, self.scenario.environment.home)
+        self._closers.append(ground.close)
+        self.ground = ground
+        reference = self.options.autopilot == "reference"
+        script = CommandScript(self.scenario.commands, ground, barrier=reference,
+                               clock_start_s=self.scenario.clock_start_s)  # fmt: skip
+        if reference:
+            self._start_reference_autopilot()
+            link.accept("the reference autopilot (python -m rig.autopilots.reference)")
+        else:
+            self._accept_px4(link)
+        self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")
+        frames_total = round(self.duration_s * 1e6) // self.frame_us
+        self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
+        state_next_us = self.clock_start_us
+        truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
+        poll_every = max(1, self.rates.imu_hz // 100)
+        pending: list[Action] = []
+        clock = time.perf_counter
+        truth, readings = self._advance(1)
+        for frame in range(1, frames_total + 1):
+            started = clock()
+            self.run_us = frame * self.frame_us
+            self.time_us = self.clock_start_us + self.run_us
+            time_s = self.run_us / 1e6
+            chip_frame, out = self._read_chips(readings)
+            read = clock()
+            messages = self._sensor_messages(readings, out)
+            if link.state_interval_us and self.time_us >= state_next_us:
+                state_next_us = self.time_us + link.state_interval_us
+                messages.append(self._state_message(truth))
+            self._spent_s["chips"] += read - started
+            self._spent_s["messages"] += clock() - read
+            # Read the API link every 10 ms (every frame while PX4 owes an answer): its
+            # telemetry would otherwise fill the socket buffer and the kernel would drop
+            # the next COMMAND_ACK.
+            if ground.busy or frame % poll_every == 0:
+                result = ground.poll(time_s)
+                if result is not None:
+                    self._event(result)
+            if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
+                pending.extend(script.due(time_s))
+                pending = self._run_actions(pending, time_s, reference)
+            link.send_frame(self.time_us, messages)
+            # While the autopilot computes its answer, do what does not depend on it: log
+            # this frame, step the model to the next one (its throttle is the PWM captured
+            # up to now) and sample its sensors. The answer only sets the PWM widths that
+            # the next frame's pulses carry, so the result is the same as in strict order.
+            logging = clock()
+            self._log_readings(readings, chip_frame, out)
+            if frame % truth_every == 0:
+                self.log.truth(self.time_us, truth)
+            self._spent_s["logging"] += clock() - logging
+            this_truth = truth
+            if frame < frames_total:
+                truth, readings = self._advance(frame + 1)
+            controls = link.answer(self.time_us)
+            if controls is not None:
+                answered = clock()
+                self.armed = controls.armed
+                self.pwm.command(controls.motors, controls.armed)
+                commanded = clock()
+                self.log.motors(self.time_us, controls.time_us, controls.motors)
+                self._spent_s["chips"] += commanded - answered
+                self._spent_s["logging"] += clock() - commanded
+            self.frames = frame
+            if self.progress is not None and frame % max(1, self.rates.imu_hz // 10) == 0:
+                self._report(this_truth)
+        self._wall_end = time.monotonic()
+        self.log.event(self.time_us, f"run completed: {self.frames} frames")
+
+    def _advance(self, frame: int) -> tuple[VehicleTruth, SensorReadings]:
+        """Step the model to the end of ``frame`` and sample its sensors (faults applied)."""
+        started = time.perf_counter()
+        self.faults.update(frame * self.frame_us, self.model)
+        self.model.advance(self.throttle, self.frame_us / 1e6)
+        truth = self.model.truth
+        modelled = time.perf_counter()
+        readings = self.faults.samples(self.sensors.sample(truth))
+        self._spent_s["model"] += modelled - started
+        self._spent_s["sensor physics"] += time.perf_counter() - modelled
+        return truth, readings
+
+    def _read_chips(self, readings: SensorReadings) -> tuple[ChipFrame, ChipReadout]:
+        """Load the samples into the chips, read them as PX4's drivers do, capture the PWM."""
+        imu, mag, baro = readings.imu, readings.mag, readings.baro
+        pulses = self.pwm.pulses(self.run_us + 1, self.faults.pwm_dropped())
+        chip_frame = ChipFrame(
+            now_us=self.run_us,
+            imu=Mpu6000Sample.from_si(imu.accel_mps2, imu.gyro_radps, imu.temperature_degc),
+            mag=None if mag is None else sample_from_field_gauss(mag.field_gauss),
+            baro_d1_d2=None
+            if baro is None
+            else raw_from_si(baro.pressure_pa, baro.temperature_degc),
+            read_mag=mag is not None,
+            faults=self.faults.chip_faults(),
+            pulses=tuple(pulses),
+            si=readings,
+        )
+        out = self.layer.frame(chip_frame)
+        for chip, error in out.bus_errors:
+            self.log.bus_error(chip)
+            self._event(f"bus error: {chip}: {error}", "warn")
+        capture = (out.pwm_widths_us, out.pwm_timed_out)
+        if capture != self._capture:  # it changes only at pulse ends and timeouts
+            self._capture = capture
+            self.throttle = throttle_from_capture(*capture)
+        return chip_frame, out
+
+    def _log_readings(self, readings: SensorReadings, chip_frame: ChipFrame,
+                      out: ChipReadout) -> None:  # fmt: skip
+        if chip_frame.pulses:
+            self.log.pwm(self.time_us, out.pwm_widths_us)
+        self.log.imu(self.time_us, self.frame_us, out.accel_mps2, out.gyro_radps)
+        if out.mag_gauss is not None:
+            self.log.mag(self.time_us, out.mag_gauss, out.imu_temperature_degc)
+        if out.baro_pa_degc is not None:
+            self.log.baro(self.time_us, out.baro_pa_degc)
+        if readings.gps is not None:
+            self.log.gps(self.time_us, readings.gps)
+
+    def _sensor_messages(
+        self, readings: SensorReadings, out: ChipReadout
+    ) -> list[mavlink.MAVLink_message]:
+        messages = [
+            hil_sensor(
+                self.link.mav, self.time_us, accel_mps2=out.accel_mps2, gyro_radps=out.gyro_radps,
+                mag_gauss=out.mag_gauss, baro=out.baro_pa_degc,
+            )
+        ]  # fmt: skip
+        if readings.gps is not None:
+            gps = readings.gps
+            messages.append(
+                hil_gps(
+                    self.link.mav, self.time_us, lat_deg=gps.lat_deg, lon_deg=gps.lon_deg,
+                    alt_amsl_m=gps.alt_amsl_m, vel_ned_mps=gps.vel_ned_mps, eph_m=gps.eph_m,
+                    epv_m=gps.epv_m, fix_type=gps.fix_type,
+                    satellites_visible=gps.satellites_visible,
+                )
+            )  # fmt: skip
+        return messages
+
+    def _state_message(self, truth: VehicleTruth) -> mavlink.MAVLink_message:
+        home = self.scenario.environment.home
+        lat, lon, alt = ned_to_geodetic(
+            truth.position_ned_m, home.lat_deg, home.lon_deg, home.alt_amsl_m
+        )
+        return hil_state_quaternion(
+            self.link.mav, self.time_us, q_body_to_ned=truth.attitude_quat,
+            rates_frd_radps=truth.angular_rate_frd_radps, lat_deg=lat, lon_deg=lon,
+            alt_amsl_m=alt, vel_ned_mps=truth.velocity_ned_mps,
+            specific_force_frd_mps2=truth.specific_force_frd_mps2,
+        )  # fmt: skip
+
+    def _run_actions(self, actions: list[Action], time_s: float, reference: bool) -> list[Action]:
+        """Run due actions; returns those still waiting (PX4: one conversation at a time)."""
+        ground = self.ground
+        waiting = []
+        for action in actions:
+            if action.conversation is None:
+                ground.send_unacknowledged(action.unacknowledged)
+            elif reference:
+                result = ground.converse_now(action.name, action.conversation)
+                if action.logged:
+                    self._event(result)
+            elif ground.busy or waiting:
+                waiting.append(action)
+            else:
+                self._event(f"{action.name}: sent")
+                ground.start(action.name, action.conversation, time_s)
+        return waiting
+
+    # -- autopilot process ---------------------------------------------------------------
+
+    def _accept_px4(self, link: SimulatorLink) -> None:
+        """Start PX4 (or wait for the one the user starts) and accept its connection."""
+        px4 = self._px4
+        assert px4 is not None
+        self._closers.append(px4.stop)
+        if px4.build is not None:
+            px4.start()
+            self.log.event(self.time_us, f"started PX4: {px4.command()}")
+            link.accept(f"PX4 (its console: {px4.console_path})")
+            return
+        command = px4.command()
+        self.log.event(self.time_us, f"waiting for PX4 SITL on {link.endpoint}: {command}")
+        if self.options.on_waiting is not None:
+            self.options.on_waiting(command)
+        link.accept(f"PX4 SITL instance {self.ports.instance}: {command}")
+
+    def _start_reference_autopilot(self) -> None:
+        log_path = self.run_dir / "autopilot.ulg"
+        argv = self.options.autopilot_argv or (
+            sys.executable, "-m", "rig.autopilots.reference",
+            "--instance", str(self.ports.instance), "--log", str(log_path),
+            *(arg for param in self.options.autopilot_params for arg in ("--param", param)),
+        )  # fmt: skip
+        self._process = subprocess.Popen(list(argv), start_new_session=True)
+        self._closers.append(self._stop_autopilot)
+
+    def _autopilot_exit(self) -> str | None:
+        if self._px4 is not None:
+            return self._px4.exit_description()
+        return None if self._process is None else exit_description(self._process)
+
+    def _stop_autopilot(self) -> None:
+        """SIGINT first, so the autopilot closes its log; then SIGKILL if it hangs."""
+        if self._process is not None:
+            stop_process_group(self._process, AUTOPILOT_STOP_GRACE_S)
+
+    # -- reporting -------------------------------------------------------------------------
+
+    def _fault_event(self, run_us: int, text: str) -> None:
+        self.log.event(self.clock_start_us + run_us, text, "warn")
+        self.last_event = text
+
+    def _event(self, text: str, level: str = "info") -> None:
+        self.log.event(self.time_us, text, level)
+        self.last_event = text
+
+    def _report(self, truth: VehicleTruth) -> None:
+        wall = time.monotonic() - self._wall_start
+        self.progress(
+            Progress(
+                time_s=self.run_us / 1e6,
+                duration_s=self.duration_s,
+                real_time_factor=self.run_us / 1e6 / wall if wall > 0 else math.inf,
+                altitude_m=-float(truth.position_ned_m[2]),
+                armed=self.armed,
+                last_event=self.last_event,
+            )
+        )
+
+    def close(self) -> None:
+        for close in reversed(self._closers):
+            close()
+
+    def result(self) -> RunResult:
+        wall_end = self._wall_end or time.monotonic()
+        autopilot_log = self.run_dir / ("px4.ulg" if self._px4 is not None else "autopilot.ulg")
+        return RunResult(
+            run_dir=self.run_dir,
+            rig_log=self.log.path,
+            autopilot_log=autopilot_log if autopilot_log.is_file() else None,
+            simulated_s=self.run_us / 1e6,
+            wall_s=wall_end - self._wall_start,
+            frames=self.frames,
+            link=self.link.stats,
+            budget=self._budget(wall_end - self._wall_start),
+        )
+
+    def _budget(self, wall_s: float) -> FrameBudget:
+        frames = max(self.frames, 1)
+        spent, link = self._spent_s, self.link.stats
+        parts_s = (spent["model"], spent["sensor physics"], spent["chips"],
+                   spent["messages"] + link.encode_s + link.decode_s, link.send_s, link.wait_s,
+                   spent["logging"])  # fmt: skip
+        return FrameBudget(*(part_s / frames * 1e6 for part_s in parts_s),
+                           other_us=(wall_s - sum(parts_s)) / frames * 1e6)  # fmt: skip
+
+
+def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:
+    if name == "tlm":
+        return TlmSensorLayer(pwm_tick_hz=rates.pwm_tick_hz)
+    if name == BYPASS:
+        return BypassSensorLayer()
+    from rig.chips.rtl import RtlSensorLayer  # imported on demand: it starts a simulator
+
+    return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
+
+
+def _yaw_quat(yaw_rad: float) -> tuple[float, float, float, float]:
+    return (math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2))

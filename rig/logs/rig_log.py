@@ -1,0 +1,177 @@
+"""``rig.ulg``: what the rig knows, under PX4's topic and field names.
+
+Ground truth uses PX4 SITL's ``*_groundtruth`` topics (same formats as
+``vehicle_attitude``, ``vehicle_local_position``, ``vehicle_angular_velocity``), the
+sensor data is logged as delivered to the autopilot (after the chips and faults:
+``sensor_combined``, ``sensor_mag``, ``sensor_baro``, ``sensor_gps``), the autopilot's
+commands as ``actuator_motors`` (0..1) and the PWM the capture core measured as
+``actuator_outputs`` (µs). Field names and types follow PX4's ``msg/*.msg`` (checked
+against a real PX4 v1.17 log's format section); only the fields the rig can fill are
+declared, which ULog readers accept. Rig events (faults, lockstep waits, commands) are
+logged messages; the scenario, seed and vehicle are info entries and parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from quad_model.model import VehicleTruth
+from quad_model.sensors import GpsSample
+from rig.logs.ulog_writer import ULogWriter
+
+_ATTITUDE = [("uint64_t", "timestamp_sample"), ("float[4]", "q"), ("float[4]", "delta_q_reset"),
+             ("uint8_t", "quat_reset_counter")]  # fmt: skip
+_LOCAL_POSITION = [
+    ("uint64_t", "timestamp_sample"), ("double", "ref_lat"), ("double", "ref_lon"),
+    ("float", "x"), ("float", "y"), ("float", "z"), ("float", "vx"), ("float", "vy"),
+    ("float", "vz"), ("float", "ax"), ("float", "ay"), ("float", "az"), ("float", "heading"),
+    ("float", "ref_alt"), ("bool", "xy_valid"), ("bool", "z_valid"), ("bool", "v_xy_valid"),
+    ("bool", "v_z_valid"),
+]  # fmt: skip
+_ANGULAR_VELOCITY = [("uint64_t", "timestamp_sample"), ("float[3]", "xyz"),
+                     ("float[3]", "xyz_derivative")]  # fmt: skip
+
+TOPICS: dict[str, list[tuple[str, str]]] = {
+    "vehicle_attitude_groundtruth": _ATTITUDE,
+    "vehicle_local_position_groundtruth": _LOCAL_POSITION,
+    "vehicle_angular_velocity_groundtruth": _ANGULAR_VELOCITY,
+    "sensor_combined": [
+        ("float[3]", "gyro_rad"), ("uint32_t", "gyro_integral_dt"),
+        ("int32_t", "accelerometer_timestamp_relative"), ("float[3]", "accelerometer_m_s2"),
+        ("uint32_t", "accelerometer_integral_dt"), ("uint8_t", "accelerometer_clipping"),
+        ("uint8_t", "gyro_clipping"),
+    ],
+    "sensor_mag": [("uint64_t", "timestamp_sample"), ("uint32_t", "device_id"), ("float", "x"),
+                   ("float", "y"), ("float", "z"), ("float", "temperature"),
+                   ("uint32_t", "error_count")],
+    "sensor_baro": [("uint64_t", "timestamp_sample"), ("uint32_t", "device_id"),
+                    ("float", "pressure"), ("float", "temperature"), ("uint32_t", "error_count")],
+    "sensor_gps": [
+        ("uint64_t", "timestamp_sample"), ("double", "latitude_deg"), ("double", "longitude_deg"),
+        ("double", "altitude_msl_m"), ("float", "eph"), ("float", "epv"), ("float", "vel_m_s"),
+        ("float", "vel_n_m_s"), ("float", "vel_e_m_s"), ("float", "vel_d_m_s"),
+        ("float", "cog_rad"), ("uint8_t", "fix_type"), ("bool", "vel_ned_valid"),
+        ("uint8_t", "satellites_used"),
+    ],
+    "actuator_motors": [("uint64_t", "timestamp_sample"), ("float[12]", "control"),
+                        ("uint16_t", "reversible_flags")],
+    "actuator_outputs": [("uint32_t", "noutputs"), ("float[16]", "output")],
+    # The model's battery and propulsion truth, for thrust-stand and sensor-noise tests
+    # (battery fields as PX4's battery_status; the propulsion topic is the rig's own).
+    "battery_status_groundtruth": [("float", "voltage_v"), ("float", "current_a")],
+    "rig_propulsion_groundtruth": [("float[4]", "rotor_speed_radps"), ("float[4]", "thrust_n"),
+                               ("float[3]", "force_frd_n"), ("float[3]", "moment_frd_nm")],
+}  # fmt: skip
+
+_ZERO_Q = np.zeros(4)
+_ZERO_3 = np.zeros(3)
+#: ``actuator_motors.control`` and ``actuator_outputs.output`` lengths (PX4 msg/*.msg).
+_CONTROLS, _OUTPUTS = 12, 16
+
+
+class RigLog:
+    """Typed writers over :class:`rig.logs.ulog_writer.ULogWriter` for the rig's topics."""
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        info: Mapping[str, str],
+        parameters: Mapping[str, int | float],
+        home_lat_deg: float,
+        home_lon_deg: float,
+        home_alt_m: float,
+    ) -> None:
+        self.writer = ULogWriter(path, TOPICS, info=info, parameters=parameters)
+        self.path = self.writer.path
+        self._home = (home_lat_deg, home_lon_deg, home_alt_m)
+        self._previous_rates: np.ndarray | None = None
+        self._previous_rates_us = 0
+        self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0}
+        # Reused every frame (the writer packs them at once): unused slots stay NaN / 0.
+        self._control = np.full(_CONTROLS, math.nan)
+        self._output = np.zeros(_OUTPUTS)
+
+    def truth(self, time_us: int, truth: VehicleTruth) -> None:
+        w = self.writer
+        w.write("vehicle_attitude_groundtruth", time_us, timestamp_sample=time_us,
+                q=truth.attitude_quat, delta_q_reset=_ZERO_Q, quat_reset_counter=0)  # fmt: skip
+        # Plain floats: the writer turns each numpy scalar back into one anyway.
+        p, v = truth.position_ned_m.tolist(), truth.velocity_ned_mps.tolist()
+        a, q = truth.acceleration_ned_mps2.tolist(), truth.attitude_quat.tolist()
+        heading = math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
+        lat, lon, alt = self._home
+        w.write(
+            "vehicle_local_position_groundtruth", time_us, timestamp_sample=time_us,
+            ref_lat=lat, ref_lon=lon, ref_alt=alt, x=p[0], y=p[1], z=p[2], vx=v[0], vy=v[1],
+            vz=v[2], ax=a[0], ay=a[1], az=a[2], heading=heading, xy_valid=True, z_valid=True,
+            v_xy_valid=True, v_z_valid=True,
+        )  # fmt: skip
+        rates = truth.angular_rate_frd_radps
+        derivative = _ZERO_3
+        if self._previous_rates is not None and time_us > self._previous_rates_us:
+            dt_s = (time_us - self._previous_rates_us) / 1e6
+            derivative = (rates - self._previous_rates) / dt_s
+        self._previous_rates, self._previous_rates_us = rates, time_us
+        w.write("vehicle_angular_velocity_groundtruth", time_us, timestamp_sample=time_us,
+                xyz=rates, xyz_derivative=derivative)  # fmt: skip
+        w.write("battery_status_groundtruth", time_us, voltage_v=truth.battery_voltage_v,
+                current_a=truth.battery_current_a)  # fmt: skip
+        w.write("rig_propulsion_groundtruth", time_us, rotor_speed_radps=truth.rotor_speed_radps,
+                thrust_n=truth.rotor_thrust_n, force_frd_n=truth.force_frd_n,
+                moment_frd_nm=truth.moment_frd_nm)  # fmt: skip
+
+    def imu(
+        self, time_us: int, frame_us: int, accel_mps2: Sequence[float], gyro_radps: Sequence[float]
+    ) -> None:
+        self.writer.write(
+            "sensor_combined", time_us, gyro_rad=gyro_radps, gyro_integral_dt=frame_us,
+            accelerometer_timestamp_relative=0, accelerometer_m_s2=accel_mps2,
+            accelerometer_integral_dt=frame_us, accelerometer_clipping=0, gyro_clipping=0,
+        )  # fmt: skip
+
+    def bus_error(self, chip: str) -> None:
+        """Count a failed transfer: PX4 reports it as the sensor's ``error_count``."""
+        self._errors[chip] += 1
+
+    def mag(self, time_us: int, field_gauss: Sequence[float], temperature_degc: float) -> None:
+        x, y, z = field_gauss
+        self.writer.write("sensor_mag", time_us, timestamp_sample=time_us, device_id=0, x=x, y=y,
+                          z=z, temperature=temperature_degc,
+                          error_count=self._errors["ist8310"])  # fmt: skip
+
+    def baro(self, time_us: int, reading: tuple[float, float]) -> None:
+        self.writer.write("sensor_baro", time_us, timestamp_sample=time_us, device_id=0,
+                          pressure=reading[0], temperature=reading[1],
+                          error_count=self._errors["ms5611"])  # fmt: skip
+
+    def gps(self, time_us: int, sample: GpsSample) -> None:
+        vn, ve, vd = sample.vel_ned_mps
+        self.writer.write(
+            "sensor_gps", time_us, timestamp_sample=time_us, latitude_deg=sample.lat_deg,
+            longitude_deg=sample.lon_deg, altitude_msl_m=sample.alt_amsl_m, eph=sample.eph_m,
+            epv=sample.epv_m, vel_m_s=math.hypot(vn, ve), vel_n_m_s=vn, vel_e_m_s=ve,
+            vel_d_m_s=vd, cog_rad=math.atan2(ve, vn), fix_type=sample.fix_type,
+            vel_ned_valid=True, satellites_used=sample.satellites_visible,
+        )  # fmt: skip
+
+    def motors(self, time_us: int, commanded_us: int, controls: Sequence[float]) -> None:
+        self._control[: len(controls)] = controls
+        self._control[len(controls) :] = math.nan
+        self.writer.write("actuator_motors", time_us, timestamp_sample=commanded_us,
+                          control=self._control, reversible_flags=0)  # fmt: skip
+
+    def pwm(self, time_us: int, widths_us: Sequence[float]) -> None:
+        self._output[: len(widths_us)] = widths_us
+        self._output[len(widths_us) :] = 0.0
+        self.writer.write("actuator_outputs", time_us, noutputs=len(widths_us), output=self._output)
+
+    def event(self, time_us: int, text: str, level: str = "info") -> None:
+        self.writer.log(level, time_us, text)
+
+    def close(self) -> None:
+        self.writer.close()

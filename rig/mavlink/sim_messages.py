@@ -1,0 +1,218 @@
+"""SI values → the MAVLink messages of PX4's simulator API, and actuator controls → SI.
+
+One encoder per message the rig sends (HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION) and one
+decoder for what it receives (HIL_ACTUATOR_CONTROLS). Units, masks and ranges follow
+PX4-Autopilot ``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``
+(``update_sensors``, ``handle_message_hil_gps``, ``actuator_controls_from_outputs``) and
+``shared/PX4_SIM_CONTRACT.md``. Pure functions: no sockets, so the protocol tests can check
+every field against pymavlink's message definitions.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from rig.errors import AutopilotProtocolError
+from rig.mavlink.px4_api import LOCKSTEP_FLAG, ActuatorMode, HilSensorFields, mavlink
+
+#: PX4's CONSTANTS_ONE_G (m/s²); its simulated IMU 0 is a FIFO of int16 counts.
+STANDARD_GRAVITY_MPS2 = 9.80665
+#: IMU 0 quantisation in PX4 (SimulatorMavlink.cpp: ACCEL_FIFO_SCALE = g/2048, ±16 g).
+ACCEL_FIFO_SCALE_MPS2 = STANDARD_GRAVITY_MPS2 / 2048.0
+#: IMU 0 quantisation in PX4 (GYRO_FIFO_SCALE = radians(2000/32768), ±2000 °/s).
+GYRO_FIFO_SCALE_RADPS = math.radians(2000.0 / 32768.0)
+_INT16_MIN, _INT16_MAX = -32768, 32767
+#: HIL_GPS.cog when the course is unknown (MAVLink common.xml).
+COG_UNKNOWN = 65535
+#: Below this ground speed the course over ground is noise: report it as unknown.
+COG_MIN_SPEED_MPS = 0.5
+#: ISA sea-level pressure and the troposphere exponent for ``pressure_alt`` (ICAO Doc 7488).
+_ISA_P0_PA, _ISA_T0_K, _ISA_LAPSE_KPM, _ISA_EXPONENT = 101325.0, 288.15, 0.0065, 0.190263
+# The flags as plain ints: an IntFlag operation costs about a microsecond, every frame.
+_IMU_FIELDS = int(HilSensorFields.ACCEL | HilSensorFields.GYRO)
+_MAG_FIELDS = int(HilSensorFields.MAG)
+_BARO_FIELDS = int(HilSensorFields.BARO)
+_SAFETY_ARMED = int(ActuatorMode.SAFETY_ARMED)
+#: PX4's int16 FIFO range in SI units: (low, high) for accel (m/s²) and gyro (rad/s).
+_ACCEL_LIMITS = (_INT16_MIN * ACCEL_FIFO_SCALE_MPS2, _INT16_MAX * ACCEL_FIFO_SCALE_MPS2)
+_GYRO_LIMITS = (_INT16_MIN * GYRO_FIFO_SCALE_RADPS, _INT16_MAX * GYRO_FIFO_SCALE_RADPS)
+
+
+def _int16_limited(
+    values: Sequence[float], limits: tuple[float, float]
+) -> tuple[float, float, float]:
+    """Clamp to what PX4's int16 FIFO can hold, so a saturated sensor reads full scale.
+
+    PX4 divides by its FIFO scale and stores int16 without a range check: an out-of-range
+    value would wrap to the opposite sign (PX4_SIM_CONTRACT.md, "clamp to range or it
+    wraps").
+    """
+    low, high = limits
+    x, y, z = values
+    return (min(max(float(x), low), high), min(max(float(y), low), high),
+            min(max(float(z), low), high))  # fmt: skip
+
+
+def pressure_altitude_m(pressure_pa: float) -> float:
+    """ISA pressure altitude: PX4 ignores ``pressure_alt`` but a ground station shows it."""
+    return _ISA_T0_K / _ISA_LAPSE_KPM * (1.0 - (pressure_pa / _ISA_P0_PA) ** _ISA_EXPONENT)
+
+
+def hil_sensor(
+    mav: mavlink.MAVLink,
+    time_us: int,
+    *,
+    accel_mps2: Sequence[float],
+    gyro_radps: Sequence[float],
+    mag_gauss: Sequence[float] | None = None,
+    baro: tuple[float, float] | None = None,
+    imu_id: int = 0,
+) -> mavlink.MAVLink_hil_sensor_message:
+    """HIL_SENSOR for one IMU frame, plus the mag and baro groups when they have new data.
+
+    Every frame carries accel and gyro (a frame without gyro advances PX4's clock but gets
+    no answer, which stalls lockstep). ``baro`` is ``(pressure_pa, temperature_degc)``:
+    temperature only travels with the baro group, as PX4 reads it only then. Units sent:
+    m/s² FRD specific force, rad/s, gauss, hPa, °C.
+    """
+    if time_us <= 0:
+        raise ValueError(
+            f"HIL_SENSOR time_usec must be > 0 (PX4 sleeps in real time), got {time_us}"
+        )
+    fields = _IMU_FIELDS
+    if imu_id == 0:
+        accel = _int16_limited(accel_mps2, _ACCEL_LIMITS)
+        gyro = _int16_limited(gyro_radps, _GYRO_LIMITS)
+    else:
+        accel = tuple(map(float, accel_mps2))
+        gyro = tuple(map(float, gyro_radps))
+    mag = (0.0, 0.0, 0.0)
+    if mag_gauss is not None:
+        fields |= _MAG_FIELDS
+        mag = tuple(map(float, mag_gauss))
+    pressure_hpa = altitude_m = temperature_degc = 0.0
+    if baro is not None:
+        fields |= _BARO_FIELDS
+        pressure_pa, temperature_degc = baro
+        pressure_hpa = pressure_pa / 100.0
+        altitude_m = pressure_altitude_m(pressure_pa)
+    return mav.hil_sensor_encode(
+        time_us, *accel, *gyro, *mag, pressure_hpa, 0.0, altitude_m, temperature_degc,
+        fields, imu_id,
+    )  # fmt: skip
+
+
+def hil_gps(
+    mav: mavlink.MAVLink,
+    time_us: int,
+    *,
+    lat_deg: float,
+    lon_deg: float,
+    alt_amsl_m: float,
+    vel_ned_mps: Sequence[float],
+    eph_m: float,
+    epv_m: float,
+    fix_type: int,
+    satellites_visible: int,
+) -> mavlink.MAVLink_hil_gps_message:
+    """HIL_GPS in MAVLink's integer units: degE7, mm AMSL, cm/s, cdeg.
+
+    ``eph``/``epv`` are sent in centimetres of accuracy, which is how PX4 reads them
+    (``gps.eph = hil_gps.eph * 1e-2f``), although MAVLink documents them as DOP×100.
+    """
+    vn, ve, vd = (float(v) for v in vel_ned_mps)
+    ground_speed_mps = math.hypot(vn, ve)
+    cog = COG_UNKNOWN
+    if ground_speed_mps >= COG_MIN_SPEED_MPS:
+        cog = round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
+    return mav.hil_gps_encode(
+        time_us,
+        int(fix_type),
+        round(lat_deg * 1e7),
+        round(lon_deg * 1e7),
+        round(alt_amsl_m * 1000.0),
+        _uint16_cm(eph_m),
+        _uint16_cm(epv_m),
+        _uint16_cm(ground_speed_mps),
+        _int16_cm(vn),
+        _int16_cm(ve),
+        _int16_cm(vd),
+        cog,
+        int(satellites_visible),
+    )
+
+
+def hil_state_quaternion(
+    mav: mavlink.MAVLink,
+    time_us: int,
+    *,
+    q_body_to_ned: Sequence[float],
+    rates_frd_radps: Sequence[float],
+    lat_deg: float,
+    lon_deg: float,
+    alt_amsl_m: float,
+    vel_ned_mps: Sequence[float],
+    specific_force_frd_mps2: Sequence[float],
+) -> mavlink.MAVLink_hil_state_quaternion_message:
+    """HIL_STATE_QUATERNION (ground truth): q (w, x, y, z), rad/s, degE7, mm, cm/s, mG."""
+    vn, ve, vd = (float(v) for v in vel_ned_mps)
+    speed_cmps = _uint16_cm(math.sqrt(vn * vn + ve * ve + vd * vd))
+    milli_g = [
+        min(max(round(float(a) / STANDARD_GRAVITY_MPS2 * 1000.0), _INT16_MIN), _INT16_MAX)
+        for a in specific_force_frd_mps2
+    ]
+    p, q, r = (float(w) for w in rates_frd_radps)
+    return mav.hil_state_quaternion_encode(
+        time_us,
+        [float(c) for c in q_body_to_ned],
+        p, q, r,
+        round(lat_deg * 1e7), round(lon_deg * 1e7), round(alt_amsl_m * 1000.0),
+        _int16_cm(vn), _int16_cm(ve), _int16_cm(vd),
+        speed_cmps, speed_cmps,
+        *milli_g,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ActuatorControls:
+    """One decoded HIL_ACTUATOR_CONTROLS: motor commands 0..1 in PX4's quad-X order."""
+
+    time_us: int
+    motors: tuple[float, ...]
+    armed: bool
+    lockstep: bool
+
+
+def decode_actuator_controls(
+    message: mavlink.MAVLink_hil_actuator_controls_message, motor_count: int = 4
+) -> ActuatorControls:
+    """Motor commands from PX4's outputs: disarmed → all zero; armed → clamped to 0..1.
+
+    PX4 may send −0.4 for an armed motor in failsafe and sends 0 for every output while
+    disarmed (``actuator_controls_from_outputs``), so the clamp is part of the protocol.
+    A NaN command is rejected: silently treating it as zero thrust would hide a bug.
+    """
+    controls = message.controls[:motor_count]  # plain floats: numpy costs more for four
+    if not math.isfinite(sum(controls)):  # a NaN or an infinity anywhere makes the sum one
+        raise AutopilotProtocolError(
+            f"HIL_ACTUATOR_CONTROLS at time_usec={message.time_usec} has non-finite motor "
+            f"commands {list(controls)}"
+        )
+    armed = bool(message.mode & _SAFETY_ARMED)
+    motors = tuple([min(max(c, 0.0), 1.0) for c in controls]) if armed else (0.0,) * motor_count
+    return ActuatorControls(
+        time_us=int(message.time_usec),
+        motors=motors,
+        armed=armed,
+        lockstep=bool(message.flags & LOCKSTEP_FLAG),
+    )
+
+
+def _uint16_cm(value_m: float) -> int:
+    return min(max(round(float(value_m) * 100.0), 0), 65535)
+
+
+def _int16_cm(value_m: float) -> int:
+    return min(max(round(float(value_m) * 100.0), _INT16_MIN), _INT16_MAX)

@@ -1,0 +1,296 @@
+"""The simulator side of PX4's simulator MAVLink API: TCP server, lockstep and watchdog.
+
+The rig listens on TCP 127.0.0.1:4560+i and the autopilot connects, as PX4's
+``simulator_mavlink`` does (PX4-Autopilot ``src/modules/simulation/simulator_mavlink/``).
+Lockstep follows Gazebo-classic's loop, which PX4 was seen to run with
+(``shared/PX4_SIM_CONTRACT.md``): sensor frames freewheel until the first
+HIL_ACTUATOR_CONTROLS has ever arrived; from then on every frame waits for the answer
+stamped with its own ``time_usec``. Stale answers (to frames sent while freewheeling) are
+consumed on the way, so once lockstep is established the autopilot is never behind.
+
+The watchdog turns every way the autopilot can fail into one :class:`AutopilotStalled`
+line that says which side stalled: the link closed, the autopilot process exited, or no
+answer came within the wall-clock bound. PX4 never reconnects to a simulator, and the
+error says so.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from rig.errors import AutopilotNotConnected, AutopilotStalled
+from rig.mavlink.px4_api import Ports, mavlink
+from rig.mavlink.sim_messages import ActuatorControls, decode_actuator_controls
+
+#: What every link failure reminds the user of (PX4's simulator_mavlink spins forever).
+PX4_NEVER_RECONNECTS = "PX4 never reconnects to a simulator: start a new PX4 process per run"
+#: The rig's own MAVLink identity on the simulator link (Gazebo uses 1/51; PX4 ignores it).
+RIG_SYSTEM_ID, RIG_COMPONENT_ID = 1, 51
+_RECV_BYTES = 65536
+
+
+@dataclass(frozen=True)
+class LinkTimeouts:
+    """Bounds of every wait on the simulator link; none of them is ever infinite.
+
+    ``answer_s`` is wall time for one lockstep answer: generous, because a debugger or a
+    loaded machine can pause the autopilot, yet short enough that a hang is reported.
+    ``first_answer_sim_s`` bounds the freewheel phase in simulated time (PX4 answered
+    after 52–112 ms when it was measured).
+    """
+
+    connect_s: float = 60.0
+    answer_s: float = 10.0
+    first_answer_sim_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        for name in ("connect_s", "answer_s", "first_answer_sim_s"):
+            value = getattr(self, name)
+            if not value > 0:
+                raise ValueError(f"LinkTimeouts.{name} must be > 0 s, got {value!r}")
+
+
+@dataclass
+class LinkStats:
+    """Counters a run reports: how the lockstep went, what the peer sent, where time went.
+
+    The wall times are disjoint: ``encode_s`` packing MAVLink frames, ``send_s`` in the
+    socket's send, ``wait_s`` blocked until the autopilot's bytes arrive (its compute time
+    in lockstep), ``decode_s`` parsing and handling what it sent.
+    """
+
+    frames_sent: int = 0
+    answers: int = 0
+    stale_answers: int = 0
+    freewheel_frames: int = 0
+    malformed: int = 0
+    encode_s: float = 0.0
+    send_s: float = 0.0
+    wait_s: float = 0.0
+    decode_s: float = 0.0
+
+
+class SimulatorLink:
+    """One autopilot connection on ``Ports(instance).simulator_tcp``.
+
+    Parameters
+    ----------
+    ports
+        The SITL instance's port plan.
+    timeouts
+        Bounds for connecting and for each lockstep answer.
+    peer_exit
+        Optional callable returning a description of the autopilot's exit (``"exit code
+        -9"``) once its process has ended, else ``None``; lets the watchdog tell a dead
+        process from a hung one.
+    """
+
+    def __init__(
+        self,
+        ports: Ports,
+        timeouts: LinkTimeouts = LinkTimeouts(),
+        *,
+        peer_exit: Callable[[], str | None] | None = None,
+    ) -> None:
+        self.ports = ports
+        self.timeouts = timeouts
+        self.stats = LinkStats()
+        self.mav = mavlink.MAVLink(None, RIG_SYSTEM_ID, RIG_COMPONENT_ID)
+        self.mav.robust_parsing = True  # garbage is counted, never an exception mid-run
+        #: Interval the autopilot asked for HIL_STATE_QUATERNION (µs), None = not asked.
+        self.state_interval_us: int | None = None
+        self.peer_heartbeat: mavlink.MAVLink_heartbeat_message | None = None
+        self.lockstep = False
+        self.peer_exit = peer_exit or (lambda: None)
+        self._latest: ActuatorControls | None = None
+        self._sent_us = 0  # time_usec of the newest frame sent
+        self._first_sent_us: int | None = None  # the clock need not start at 0 (a replay)
+        self._awaited_us: int | None = None  # the frame whose answer is being waited for
+        self._conn: socket.socket | None = None
+        self._server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self._server.bind(("127.0.0.1", ports.simulator_tcp))
+        except OSError as error:
+            self._server.close()
+            raise AutopilotNotConnected(
+                f"cannot listen on TCP 127.0.0.1:{ports.simulator_tcp} ({error.strerror}); "
+                f"is another rig instance {ports.instance} running?"
+            ) from None
+        self._server.listen(1)
+
+    @property
+    def endpoint(self) -> str:
+        return f"TCP 127.0.0.1:{self.ports.simulator_tcp}"
+
+    def accept(self, waiting_for: str = "the autopilot") -> None:
+        """Wait (bounded) for the autopilot to connect, then read what it sends first."""
+        deadline = time.monotonic() + self.timeouts.connect_s
+        while self._conn is None:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise AutopilotNotConnected(
+                    f"no autopilot connected to {self.endpoint} within "
+                    f"{self.timeouts.connect_s:g} s; start {waiting_for}"
+                )
+            exit_reason = self.peer_exit()
+            if exit_reason is not None:
+                raise AutopilotNotConnected(
+                    f"the autopilot process ended before connecting to {self.endpoint} "
+                    f"({exit_reason})"
+                )
+            ready, _, _ = select.select([self._server], [], [], min(remaining, 0.1))
+            if ready:
+                conn, _ = self._server.accept()
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                self._conn = conn
+        self._server.close()  # one autopilot per link: PX4 does not reconnect anyway
+
+    def send(self, *messages: mavlink.MAVLink_message) -> None:
+        """Write messages to the autopilot (MAVLink 2 frames)."""
+        started = time.perf_counter()
+        payload = b"".join(message.pack(self.mav) for message in messages)
+        packed = time.perf_counter()
+        self.stats.encode_s += packed - started
+        try:
+            self._connection().sendall(payload)
+        except OSError as error:
+            raise AutopilotStalled(
+                f"the autopilot closed the simulator link ({self.endpoint}: {error.strerror}) "
+                f"{self._exit_note()}; {PX4_NEVER_RECONNECTS}"
+            ) from None
+        self.stats.send_s += time.perf_counter() - packed
+
+    def exchange(
+        self, time_us: int, messages: list[mavlink.MAVLink_message]
+    ) -> ActuatorControls | None:
+        """Send one sensor frame and return the motor commands for the next step.
+
+        :meth:`send_frame` then :meth:`answer`; the rig's loop calls the two itself, so it
+        can do what does not need the answer while the autopilot computes it.
+        """
+        self.send_frame(time_us, messages)
+        return self.answer(time_us)
+
+    def send_frame(self, time_us: int, messages: list[mavlink.MAVLink_message]) -> None:
+        """Send the sensor frame stamped ``time_us`` (its HIL_SENSOR and what goes with it)."""
+        self.send(*messages)
+        self._sent_us = time_us
+        if self._first_sent_us is None:
+            self._first_sent_us = time_us
+        self.stats.frames_sent += 1
+
+    def answer(self, time_us: int) -> ActuatorControls | None:
+        """The motor commands after the frame ``time_us`` was sent.
+
+        Freewheeling: the latest actuator message received so far (None before the first).
+        In lockstep: blocks until the answer stamped ``time_us`` arrives.
+        """
+        if not self.lockstep:
+            self.stats.freewheel_frames += 1
+            self._receive(0.0)
+            if self._latest is not None:
+                self.lockstep = True
+                self._wait_for_answer(time_us)
+            elif time_us - (self._first_sent_us or 0) > self.timeouts.first_answer_sim_s * 1e6:
+                raise AutopilotStalled(
+                    f"the autopilot connected but sent no HIL_ACTUATOR_CONTROLS in "
+                    f"{self.timeouts.first_answer_sim_s:g} s of simulated time "
+                    f"({self.stats.malformed} malformed messages received); check that it "
+                    "runs the simulator_mavlink module with lockstep"
+                )
+            return self._latest
+        self._wait_for_answer(time_us)
+        return self._latest
+
+    def close(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+        self._server.close()
+
+    def __enter__(self) -> SimulatorLink:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def _connection(self) -> socket.socket:
+        if self._conn is None:
+            raise AutopilotNotConnected(f"no autopilot connected to {self.endpoint} yet")
+        return self._conn
+
+    def _wait_for_answer(self, time_us: int) -> None:
+        deadline = time.monotonic() + self.timeouts.answer_s
+        self._awaited_us = time_us
+        while self._latest is None or self._latest.time_us < time_us:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                last = "none" if self._latest is None else f"t={self._latest.time_us / 1e6:.6f} s"
+                raise AutopilotStalled(
+                    f"the autopilot stalled: no HIL_ACTUATOR_CONTROLS for the frame at "
+                    f"t={time_us / 1e6:.6f} s within {self.timeouts.answer_s:g} s of wall "
+                    f"time (the rig sent the frame and is waiting; last answer {last}; "
+                    f"{self.stats.malformed} malformed messages){self._exit_note()}"
+                )
+            self._receive(min(remaining, 0.25))
+        self._awaited_us = None
+        self.stats.answers += 1
+
+    def _receive(self, timeout_s: float) -> None:
+        """Read what is there (waiting at most ``timeout_s``) and handle each message."""
+        conn = self._connection()
+        started = time.perf_counter()
+        ready, _, _ = select.select([conn], [], [], timeout_s)
+        if not ready:
+            self.stats.wait_s += time.perf_counter() - started
+            exit_reason = self.peer_exit()
+            if exit_reason is not None:
+                raise AutopilotStalled(
+                    f"the autopilot process ended ({exit_reason}) while the rig waited for "
+                    f"its answer on {self.endpoint}"
+                )
+            return
+        try:
+            data = conn.recv(_RECV_BYTES)
+        except ConnectionError as error:
+            data, reason = b"", error.strerror
+        else:
+            reason = "end of stream"
+        received = time.perf_counter()
+        self.stats.wait_s += received - started
+        if not data:
+            raise AutopilotStalled(
+                f"the autopilot closed the simulator link ({self.endpoint}: {reason}) "
+                f"{self._exit_note()}; {PX4_NEVER_RECONNECTS}"
+            )
+        for message in self.mav.parse_buffer(data) or ():
+            self._handle(message)
+        self.stats.decode_s += time.perf_counter() - received
+
+    def _handle(self, message: mavlink.MAVLink_message) -> None:
+        kind = message.get_type()
+        if kind == "HIL_ACTUATOR_CONTROLS":
+            controls = decode_actuator_controls(message)
+            previous_us = -1 if self._latest is None else self._latest.time_us
+            if not previous_us < controls.time_us <= self._sent_us:
+                self.stats.malformed += 1  # repeated, backwards or future: answers no frame
+                return
+            if self._awaited_us is not None and controls.time_us < self._awaited_us:
+                self.stats.stale_answers += 1
+            self._latest = controls
+        elif kind == "HEARTBEAT":
+            self.peer_heartbeat = message
+        elif kind == "COMMAND_LONG":
+            is_interval = message.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
+            if is_interval and int(message.param1) == mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION:
+                self.state_interval_us = int(message.param2)
+        elif kind == "BAD_DATA":
+            self.stats.malformed += 1
+
+    def _exit_note(self) -> str:
+        exit_reason = self.peer_exit()
+        return f" (autopilot process {exit_reason})" if exit_reason else ""

@@ -1,0 +1,177 @@
+"""The scenario's command script in simulated time: what to send to the autopilot, when.
+
+Turns each :class:`rig.scenarios.scenario.Command` into a ground-station conversation
+(:mod:`rig.mavlink.ground_link`) at its time, and keeps the offboard setpoint streams alive the way
+MAVSDK does (PX4 leaves offboard when setpoints stop): a ``goto`` re-sends its position
+setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at ``rate_hz``, a
+``track`` sends a :class:`SetpointTrack`'s recorded setpoints at their times and holds the
+last one (re-sent every 0.1 s) between them. A mode command (takeoff, land, mission,
+motor test, another stream) ends the running stream; arm, disarm and set_param do not
+change the mode, so the stream goes on as MAVSDK's does (a replay arms and disarms
+mid-stream).
+
+With ``barrier=True`` (the reference autopilot) every setpoint travels inside an
+acknowledged conversation, so it acts at a known frame; with PX4 the stream is sent
+without waiting, as PX4 acts only when its clock advances.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from rig.mavlink.ground_link import OFFBOARD_KEEPALIVE_S, Conversation, GroundLink, sweep_pitch_rad
+from rig.mavlink.px4_api import mavlink
+from rig.scenarios.scenario import Command
+
+
+@dataclass(frozen=True)
+class Action:
+    """One thing to do at this frame: a conversation, or setpoints sent without waiting."""
+
+    name: str
+    conversation: Conversation | None = None
+    unacknowledged: tuple[mavlink.MAVLink_message, ...] = ()
+    #: False for a stream's keep-alive repeats: only its first setpoint is a log event.
+    logged: bool = True
+
+
+#: What one sample of a :class:`SetpointTrack` holds, per kind.
+TRACK_KINDS = {
+    "velocity": "vn, ve, vd (m/s, NED) and yaw (rad; NaN: not controlled)",
+    "attitude": "q w, x, y, z (body to NED) and collective thrust 0..1",
+    "rates": "roll, pitch, yaw rate (rad/s, FRD) and collective thrust 0..1",
+}
+
+
+@dataclass(frozen=True)
+class SetpointTrack:
+    """Offboard setpoints recorded at known times (e.g. a real flight's), in run seconds.
+
+    A ``track`` command streams it from its own time on: each sample goes out at the first
+    frame at or after its time, and the latest one is held (zero-order hold) in between.
+    """
+
+    kind: str
+    times_s: tuple[float, ...]
+    values: tuple[tuple[float, ...], ...]
+
+    def __post_init__(self) -> None:
+        if self.kind not in TRACK_KINDS:
+            raise ValueError(f"track kind {self.kind!r} is not one of {', '.join(TRACK_KINDS)}")
+        if not self.times_s or len(self.times_s) != len(self.values):
+            raise ValueError("a track needs one value per time, and at least one")
+
+
+@dataclass
+class _Stream:
+    command: Command
+    started_s: float
+    next_s: float
+    period_s: float
+    announced: bool = False
+    sample: int = 0  # a track's latest sample due
+
+
+#: Commands that leave the flight mode, and so a running setpoint stream, as they are.
+_KEEP_STREAM = frozenset({"arm", "disarm", "set_param"})
+
+
+class CommandScript:
+    """Walks the scenario's commands in time order and yields the actions due.
+
+    Times are run seconds; setpoints are stamped ``clock_start_s`` later (the autopilot's
+    boot clock, which a replay starts at the real log's first timestamp).
+    """
+
+    def __init__(
+        self,
+        commands: tuple[Command, ...],
+        ground: GroundLink,
+        *,
+        barrier: bool,
+        clock_start_s: float = 0.0,
+    ) -> None:
+        self.ground = ground
+        self.barrier = barrier
+        self.clock_start_s = clock_start_s
+        self._commands = list(commands)
+        self._next = 0
+        self._stream: _Stream | None = None
+
+    def due(self, time_s: float) -> Iterator[Action]:
+        while self._next < len(self._commands) and self._commands[self._next].at_s <= time_s + 1e-9:
+            command = self._commands[self._next]
+            self._next += 1
+            yield from self._start(command, time_s)
+        stream = self._stream
+        if stream is not None and time_s + 1e-9 >= stream.next_s:
+            action = self._stream_action(stream, time_s)
+            if action is not None:
+                yield action
+
+    def _start(self, command: Command, time_s: float) -> Iterator[Action]:
+        g, p, name = self.ground, command.params, f"{command.action} at t={command.at_s:g} s"
+        if command.action not in _KEEP_STREAM:
+            self._stream = None  # a mode command takes over from a running setpoint stream
+        if command.action in ("goto", "pitch_sweep", "track"):
+            rate_hz = p.get("rate_hz", 50.0) if command.action == "pitch_sweep" else None
+            period = 1.0 / rate_hz if rate_hz else OFFBOARD_KEEPALIVE_S
+            self._stream = _Stream(command, time_s, time_s, period)
+            return
+        conversations = {
+            # PX4 (not the barrier) is asked again until its pre-flight checks pass
+            "arm": lambda: g.arm(True) if self.barrier else g.arm_when_ready(),
+            # a replay's disarm follows the real flight's and may find this one still flying
+            "disarm": lambda: g.attempt(g.arm(False)) if p.get("may_refuse") else g.arm(False),
+            "takeoff": lambda: g.takeoff(p["altitude_m"]),
+            "land": g.land,
+            "mission": lambda: g.mission(p["waypoints_ned_m"]),
+            "motor_test": lambda: g.motor_test(p["motor"], p["throttle"], p["duration_s"]),
+            "set_param": lambda: g.set_param(p["name"], p["value"]),
+        }
+        yield Action(name, conversations[command.action]())
+
+    def _stream_action(self, stream: _Stream, time_s: float) -> Action | None:
+        command, p = stream.command, stream.command.params
+        stream.next_s += stream.period_s
+        stamp_s = self.clock_start_s + time_s
+        if command.action == "goto":
+            setpoint = self.ground.position_setpoint(p["position_ned_m"], p.get("yaw_deg"), stamp_s)
+        elif command.action == "track":
+            setpoint = self._track_setpoint(stream, p["track"], time_s, stamp_s)
+        else:
+            elapsed = time_s - stream.started_s
+            if elapsed > p["duration_s"]:
+                self._stream = None
+                return None
+            pitch = sweep_pitch_rad(
+                elapsed, p["duration_s"], math.radians(p["amplitude_deg"]),
+                p["f_min_radps"], p["f_max_radps"],
+            )  # fmt: skip
+            setpoint = self.ground.attitude_setpoint(0.0, pitch, 0.0, p["thrust"], stamp_s)
+        name = f"{command.action} at t={command.at_s:g} s"
+        first = not stream.announced
+        stream.announced = True
+        if self.barrier or first:
+            return Action(name, self.ground.offboard([setpoint], name), logged=first)
+        return Action(name, unacknowledged=(setpoint,), logged=False)
+
+    def _track_setpoint(
+        self, stream: _Stream, track: SetpointTrack, time_s: float, stamp_s: float
+    ) -> mavlink.MAVLink_message:
+        """The track's latest sample at ``time_s`` as a message; schedules the next send: the
+        next sample's time, or the keep-alive if that comes first."""
+        times = track.times_s
+        while stream.sample + 1 < len(times) and times[stream.sample + 1] <= time_s + 1e-9:
+            stream.sample += 1
+        following = times[stream.sample + 1] if stream.sample + 1 < len(times) else math.inf
+        stream.next_s = min(following, time_s + OFFBOARD_KEEPALIVE_S)
+        value, ground = track.values[stream.sample], self.ground
+        if track.kind == "velocity":
+            yaw = value[3] if math.isfinite(value[3]) else None
+            return ground.velocity_setpoint(value[:3], yaw, stamp_s)
+        if track.kind == "attitude":
+            return ground.quaternion_setpoint(value[:4], value[4], stamp_s)
+        return ground.rates_setpoint(value[:3], value[3], stamp_s)
