@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 from pyulog import ULog
 from pyulog.core import ULogException
+from scipy.spatial.transform import Rotation
 
 from credibility.errors import CredibilityError
 from credibility.signals import Signal
@@ -116,11 +117,11 @@ def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Pa
 
 
 def _euler(w, x, y, z) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ZYX (yaw-pitch-roll) angles of a Hamilton quaternion, as PX4's matrix::Euler."""
-    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0))
-    yaw = np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
-    return roll, pitch, yaw
+    """ZYX (yaw-pitch-roll) angles of a Hamilton quaternion, as PX4's matrix::Euler; yaw
+    unwrapped. scipy's Rotation, so credibility needs no other package's conventions."""
+    rotation = Rotation.from_quat(np.column_stack((x, y, z, w)))  # scipy: scalar last
+    yaw, pitch, roll = rotation.as_euler("ZYX").T
+    return roll, pitch, np.unwrap(yaw)
 
 
 def open_log(path: Path) -> LogFile:

@@ -48,7 +48,7 @@ from fpga_hdl.ist8310.driver import sample_from_field_gauss
 from fpga_hdl.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.ms5611.model import raw_from_si
 from quad_model import QuadModel, SensorSuite, load_vehicle
-from quad_model.frames import ned_to_geodetic
+from quad_model.frames import ned_to_geodetic, yaw_quat
 from quad_model.model import Mount, VehicleTruth
 from quad_model.sensors import SensorReadings
 from quad_model.vehicle import VehicleFileError
@@ -265,7 +265,7 @@ class _Loop:
         start = scenario.start
         self.model.reset(
             position_ned_m=start.position_ned_m,
-            attitude_quat=_yaw_quat(math.radians(start.yaw_deg)),
+            attitude_quat=yaw_quat(math.radians(start.yaw_deg)),
             battery_voltage_v=scenario.initial_battery_voltage_v,
         )
         self.sensors = SensorSuite(
@@ -560,7 +560,3 @@ def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:
     from rig.chips.rtl import RtlSensorLayer  # imported on demand: it starts a simulator
 
     return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
-
-
-def _yaw_quat(yaw_rad: float) -> tuple[float, float, float, float]:
-    return (math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2))

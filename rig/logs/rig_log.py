@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from quad_model.frames import yaw_from_quat
 from quad_model.model import VehicleTruth
 from quad_model.sensors import GpsSample
 from rig.logs.ulog_writer import ULogWriter
@@ -103,13 +104,12 @@ class RigLog:
         # Plain floats: the writer turns each numpy scalar back into one anyway.
         p, v = truth.position_ned_m.tolist(), truth.velocity_ned_mps.tolist()
         a, q = truth.acceleration_ned_mps2.tolist(), truth.attitude_quat.tolist()
-        heading = math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
         lat, lon, alt = self._home
         w.write(
             "vehicle_local_position_groundtruth", time_us, timestamp_sample=time_us,
             ref_lat=lat, ref_lon=lon, ref_alt=alt, x=p[0], y=p[1], z=p[2], vx=v[0], vy=v[1],
-            vz=v[2], ax=a[0], ay=a[1], az=a[2], heading=heading, xy_valid=True, z_valid=True,
-            v_xy_valid=True, v_z_valid=True,
+            vz=v[2], ax=a[0], ay=a[1], az=a[2], heading=yaw_from_quat(q), xy_valid=True,
+            z_valid=True, v_xy_valid=True, v_z_valid=True,
         )  # fmt: skip
         rates = truth.angular_rate_frd_radps
         derivative = _ZERO_3

@@ -96,3 +96,26 @@ def test_tables_nan_and_gaps(tmp_path):
     pd.DataFrame({"t": t}).to_csv(tmp_path / "bad.csv", index=False)
     with pytest.raises(CredibilityError, match=r"no time column"):
         open_log(tmp_path / "bad.csv")
+
+
+def test_euler_angles_of_a_quaternion_are_pxs_zyx_with_yaw_unwrapped(tmp_path):
+    """Closed form: q = yaw(ψ) ⊗ pitch(θ) ⊗ roll(φ) gives back (φ, θ, ψ); a yaw passing
+    ±180° continues instead of jumping by 360°."""
+    roll, pitch = np.radians(10.0), np.radians(-20.0)
+    yaw = np.radians(np.array([170.0, 179.0, 181.0, 190.0]))
+    half = lambda a: (np.cos(a / 2), np.sin(a / 2))  # noqa: E731
+    (cr, sr), (cp, sp), (cy, sy) = half(roll), half(pitch), half(yaw)
+    table = pd.DataFrame({
+        "timestamp": [1_000_000, 2_000_000, 3_000_000, 4_000_000],
+        "vehicle_attitude.q[0]": cr * cp * cy + sr * sp * sy,
+        "vehicle_attitude.q[1]": sr * cp * cy - cr * sp * sy,
+        "vehicle_attitude.q[2]": cr * sp * cy + sr * cp * sy,
+        "vehicle_attitude.q[3]": cr * cp * sy - sr * sp * cy,
+    })  # fmt: skip
+    path = tmp_path / "attitude.csv"
+    table.to_csv(path, index=False)
+    log = open_log(path)
+    for angle, expected in (("roll", np.full(4, roll)), ("pitch", np.full(4, pitch)),
+                            ("yaw", yaw)):  # fmt: skip
+        signal = log.signal(SignalSpec(f"vehicle_attitude.q.{angle}"))
+        assert signal.values == pytest.approx(expected, abs=1e-12)

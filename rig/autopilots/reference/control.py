@@ -21,10 +21,8 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from quad_model import frames
-from quad_model.frames import STANDARD_GRAVITY_MPS2
-from rig.autopilots.reference import rotation
+from quad_model.frames import STANDARD_GRAVITY_MPS2, cross3, quat_from_dcm
 from rig.autopilots.reference.params import Parameters
-from rig.autopilots.reference.rotation import cross3, quat_from_dcm
 
 # The per-frame parts of the cascade (gyro filters, attitude and rate control, allocation) are
 # compiled with numba: each is a few dozen operations on 3- and 4-vectors, which numpy runs at
@@ -32,8 +30,8 @@ from rig.autopilots.reference.rotation import cross3, quat_from_dcm
 # position loop runs at 50 Hz and stays in numpy. The same convention helpers as everywhere:
 _quat_to_dcm = njit(cache=True)(frames.quat_to_dcm)
 _quat_multiply = njit(cache=True)(frames.quat_multiply)
-_quat_conjugate = njit(cache=True)(rotation.quat_conjugate)
-_quat_between = njit(cache=True)(rotation.quat_between)
+_quat_conjugate = njit(cache=True)(frames.quat_conjugate)
+_quat_between = njit(cache=True)(frames.quat_between)
 
 _AXES = ("ROLL", "PITCH", "YAW")
 _INT_LIMITS = ("MC_RR_INT_LIM", "MC_PR_INT_LIM", "MC_YR_INT_LIM")

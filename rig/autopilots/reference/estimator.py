@@ -23,9 +23,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from quad_model import frames
-from quad_model.frames import STANDARD_GRAVITY_MPS2, quat_multiply
+from quad_model.frames import STANDARD_GRAVITY_MPS2, cross3, quat_from_dcm, quat_multiply, yaw_quat
 from rig.autopilots.reference.params import Parameters
-from rig.autopilots.reference.rotation import cross3, quat_from_dcm, yaw_quat
 
 #: PX4 holds the gyro bias while rotating faster than this (attitude_estimator_q: 0.175 rad/s).
 _BIAS_LEARN_MAX_RATE_RADPS = 0.175

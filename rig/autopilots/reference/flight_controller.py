@@ -20,6 +20,7 @@ from quad_model.frames import (
     euler_from_quat,
     geodetic_to_ned,
     ned_to_geodetic,
+    quat_conjugate,
     quat_multiply,
     quat_to_dcm,
 )
@@ -41,7 +42,6 @@ from rig.autopilots.reference.flight_log import ImuAverage
 from rig.autopilots.reference.land_detector import LandDetector
 from rig.autopilots.reference.navigator import MissionItem, Navigator, NavState, Setpoint
 from rig.autopilots.reference.params import Parameters
-from rig.autopilots.reference.rotation import quat_conjugate
 from rig.autopilots.reference.sensors import GroundTruth, SensorFrame, SensorMonitor
 from rig.logs.ulog_writer import ULogWriter
 from rig.mavlink.px4_api import mavlink
