@@ -8,7 +8,6 @@ time (also mid-campaign). Written as ``report.json`` (for scripts) and ``report.
 from __future__ import annotations
 
 import base64
-import html
 import io
 import json
 from collections import defaultdict
@@ -19,6 +18,7 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
+import jinja2
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -32,6 +32,11 @@ from rig.apps.campaign import (
 
 #: How many of the slowest cases the report lists.
 SLOWEST = 5
+#: The report's page template (``templates/`` beside this module); HTML-escaped values.
+_TEMPLATES = jinja2.Environment(
+    loader=jinja2.PackageLoader("rig.apps"), autoescape=True, undefined=jinja2.StrictUndefined,
+    trim_blocks=True, lstrip_blocks=True,
+)  # fmt: skip
 
 
 def campaign_summary(
@@ -156,85 +161,30 @@ def write_report(out_dir: Path) -> Path:
 
 
 def _html(summary: dict[str, Any], png: bytes) -> str:
-    def table(header: list[str], rows: list[list[Any]]) -> str:
-        head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-        body = "".join(
-            "<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>"
-            for row in rows
-        )
-        return f"<table><tr>{head}</tr>{body}</table>"
+    """The page, from ``templates/campaign_report.html.j2`` (values formatted here)."""
+    metrics, provenance = summary["metrics"], summary["provenance"]
 
     def stat(metric: str, cell: dict[str, float] | None) -> str:
-        if cell is None:
-            return "-"
-        return f"{cell['mean']:.3g} / {cell[_worst(metric)]:.3g}"
+        return "-" if cell is None else f"{cell['mean']:.3g} / {cell[_worst(metric)]:.3g}"
 
-    metrics = summary["metrics"]
+    def axis_row(r: dict[str, Any]) -> list[Any]:
+        return [r["value"], r["cases"], f"{r['pass_rate']:.0%}", *(stat(m, r[m]) for m in metrics)]
 
-    parts = [
-        f"<h1>Campaign report</h1><p>{summary['cases']} cases: "
-        + ", ".join(f"{n} {s}" for s, n in summary["statuses"].items())
-        + "</p>"
-    ]
-    if "credibility_plan" in summary["provenance"]:
-        provenance = summary["provenance"]
-        parts.append(
-            f"<p>Credibility: plan {html.escape(provenance['credibility_plan'])} "
-            f"(sha256 {provenance['credibility_plan_sha256']}), the case's "
-            f"{html.escape(provenance['credibility_log'])}.ulg as role "
-            f"{html.escape(provenance['credibility_role'])!r}</p>"
-        )
-    for axis, rows in summary["axes"].items():
-        parts.append(f"<h2>Axis {html.escape(axis)}</h2>")
-        parts.append(
-            table(
-                ["value", "cases", "pass rate", *(f"{m} mean / {_worst(m)}" for m in metrics)],
-                [
-                    [
-                        r["value"],
-                        r["cases"],
-                        f"{r['pass_rate']:.0%}",
-                        *(stat(m, r[m]) for m in metrics),
-                    ]
-                    for r in rows
-                ],
-            )
-        )
-    parts.append("<h2>Failure envelope</h2>")
-    parts.append(
-        table(
-            ["fault", "onset (s)", "survived"],
-            [
-                [c["fault"], c["onset_s"], f"{c['survived']}/{c['cases']}"]
-                for c in summary["envelope"]
-            ],
-        )
-    )
-    if png:
-        parts.append(
-            f'<img alt="failure envelope" src="data:image/png;base64,'
-            f'{base64.b64encode(png).decode()}">'
-        )
-    for title, key in (("Slowest cases", "slowest"), ("Cases not ok", "not_ok")):
-        parts.append(f"<h2>{title}</h2>")
-        parts.append(
-            table(
-                ["case", "status", "reason", "wall (s)", "axes", "logs"],
-                [
-                    [
-                        r["index"],
-                        r["status"],
-                        r["reason"],
-                        f"{r['wall_s']:.1f}",
-                        ", ".join(f"{k}={v}" for k, v in r["axes"].items()),
-                        r["rig_log"] or r["run_dir"],
-                    ]
-                    for r in summary[key]
-                ],
-            )
-        )
-    style = "table{border-collapse:collapse}td,th{border:1px solid #999;padding:2px 6px}"
-    return (
-        f"<!doctype html><html><head><meta charset='utf-8'><title>Campaign report</title>"
-        f"<style>{style}</style></head><body>{''.join(parts)}</body></html>"
+    def case_row(r: dict[str, Any]) -> list[Any]:
+        axes = ", ".join(f"{k}={v}" for k, v in r["axes"].items())
+        return [r["index"], r["status"], r["reason"], f"{r['wall_s']:.1f}", axes,
+                r["rig_log"] or r["run_dir"]]  # fmt: skip
+
+    lists = (("Slowest cases", "slowest"), ("Cases not ok", "not_ok"))
+    return _TEMPLATES.get_template("campaign_report.html.j2").render(
+        cases=summary["cases"],
+        statuses=summary["statuses"],
+        credibility=provenance if "credibility_plan" in provenance else None,
+        axis_header=["value", "cases", "pass rate", *(f"{m} mean / {_worst(m)}" for m in metrics)],
+        axes={axis: [axis_row(r) for r in rows] for axis, rows in summary["axes"].items()},
+        envelope=[
+            [c["fault"], c["onset_s"], f"{c['survived']}/{c['cases']}"] for c in summary["envelope"]
+        ],
+        envelope_png=base64.b64encode(png).decode() if png else "",
+        case_lists={title: [case_row(r) for r in summary[key]] for title, key in lists},
     )
