@@ -7,12 +7,13 @@ base64 PNG, so the report opens offline and can be mailed as one file.
 import base64
 import dataclasses
 import hashlib
-import html
 import io
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import jinja2
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -237,8 +238,7 @@ def _png(figure: Figure) -> str:
     FigureCanvasAgg(figure)
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=96, bbox_inches="tight")
-    encoded = base64.b64encode(buffer.getvalue()).decode("ascii")
-    return f'<img alt="plot" src="data:image/png;base64,{encoded}">'
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
 
 
 #: Points per plotted curve: more than a PNG can show; long logs are decimated to this.
@@ -310,55 +310,63 @@ pre{background:#f6f6f6;padding:0.6em;overflow-x:auto;font-size:0.85em}
 .warn{color:#a60}
 ul.why{text-align:left;margin:0;padding-left:1.2em}
 """
+#: The page template (``templates/report.html.j2``); every value is escaped there.
+_TEMPLATES = jinja2.Environment(
+    loader=jinja2.PackageLoader("credibility"), autoescape=True, undefined=jinja2.StrictUndefined,
+    trim_blocks=True, lstrip_blocks=True,
+)  # fmt: skip
 
 
-def _e(value: Any) -> str:
-    return html.escape(str(value))
+@dataclass(frozen=True)
+class Verdict:
+    """A table cell that reads ``yes`` in green when ``ok``, else ``no`` in red."""
+
+    ok: bool
+    yes: str = "pass"
+    no: str = "fail"
+    kind: str = "verdict"
 
 
-def _table(header: list[str], rows: list[list[Any]]) -> str:
-    head = "".join(f"<th>{_e(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
+@dataclass(frozen=True)
+class Code:
+    """A table cell in monospace (a hash)."""
+
+    text: str
+    kind: str = "code"
 
 
-def _verdict(ok: bool, yes: str = "pass", no: str = "fail") -> str:
-    return f'<span class="{"pass" if ok else "fail"}">{yes if ok else no}</span>'
+@dataclass(frozen=True)
+class Reasons:
+    """A table cell listing ``(role, η, why)`` findings."""
+
+    items: tuple[tuple[str, str, str], ...]
+    kind: str = "reasons"
 
 
 def _pct(value: float) -> str:
     return f"{100.0 * value:.2f} %"
 
 
-def _performance_section(result: PerformanceResult, pass_mark: float) -> str:
+def _performance_section(result: PerformanceResult, pass_mark: float) -> dict[str, Any]:
     test = result.test
     where = "values given in the plan"
     if test.signal:
         where = (
-            f"{_e(test.signal.path)}, segment {list(test.segment_s)} s "
+            f"{test.signal.path}, segment {list(test.segment_s)} s "
             f"(sim {list(test.segment_sim_s)} s)"
         )
     hp = f", {test.highpass_hz:g} Hz high-pass" if test.highpass_hz else ""
     rows = [
-        [
-            _e(r.role),
-            f"{r.p_e:.6g}",
-            f"{r.p_s:.6g}",
-            f"{r.error:.4g}",
-            f"{r.threshold:.4g} ({_e(r.threshold_rule)})",
-            _pct(r.eta),
-            _verdict(r.eta >= pass_mark),
-        ]
+        [r.role, f"{r.p_e:.6g}", f"{r.p_s:.6g}", f"{r.error:.4g}",
+         f"{r.threshold:.4g} ({r.threshold_rule})", _pct(r.eta), Verdict(r.eta >= pass_mark)]
         for r in result.rows
-    ]
-    header = ["sim", "p_e", "p_s", "e_p", "ε_p", "η_p", "at pass mark"]
-    return (
-        f"<h3>{_e(test.name)} — performance: {_e(test.parameter)} [{_e(test.unit)}]</h3>"
-        f"<p>{where}{hp}; K_p = {test.k_p:g}.</p>" + _table(header, rows)
-    )
+    ]  # fmt: skip
+    return {"kind": "performance", "name": test.name, "parameter": test.parameter,
+            "unit": test.unit, "where": where + hp, "k_p": f"{test.k_p:g}",
+            "rows": rows}  # fmt: skip
 
 
-def _time_section(result: TimeResult, pass_mark: float) -> str:
+def _time_section(result: TimeResult, pass_mark: float) -> dict[str, Any]:
     test = result.test
     smoothing = (
         f"Savitzky–Golay {test.smoothing.window_s:g} s, order {test.smoothing.polyorder}"
@@ -366,115 +374,60 @@ def _time_section(result: TimeResult, pass_mark: float) -> str:
         else "none"
     )
     align = test.alignment
-    rows = [[_e(test.roles.real), "0", _pct(1.0), "0", "—", "—"]]
+    rows: list[list[Any]] = [[test.roles.real, "0", _pct(1.0), "0", "—", "—"]]
     rows += [
-        [
-            _e(r.role),
-            f"{r.error:.4g}",
-            _pct(r.eta),
-            f"{r.theil_u:.3f}",
-            f"{r.alignment_shift_s:+.4f} s → [{r.segment_s[0]:.3f}, {r.segment_s[1]:.3f}]",
-            _verdict(r.eta >= pass_mark),
-        ]
+        [r.role, f"{r.error:.4g}", _pct(r.eta), f"{r.theil_u:.3f}",
+         f"{r.alignment_shift_s:+.4f} s → [{r.segment_s[0]:.3f}, {r.segment_s[1]:.3f}]",
+         Verdict(r.eta >= pass_mark)]
         for r in result.rows
-    ]
+    ]  # fmt: skip
     rows.append(["error bounds", f"{result.threshold:.4g}", _pct(pass_mark), "—", "—", "—"])
-    rows.append(
-        [
-            "zero output",
-            f"{result.zero_output_error:.4g}",
-            _pct(result.zero_output_eta),
-            "1.000",
-            "—",
-            "—",
-        ]
+    rows.append(["zero output", f"{result.zero_output_error:.4g}",
+                 _pct(result.zero_output_eta), "1.000", "—", "—"])  # fmt: skip
+    max_lag = f" (max lag {align.max_lag_s:g} s)" if align.method != "none" else ""
+    text = (
+        f"Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s before alignment); "
+        f"n_t = {result.n_t}; ε_t = {result.threshold:.4g} ({result.threshold_rule}, "
+        f"K_p = {test.k_p:g}); smoothing: {smoothing}; alignment: {align.method}{max_lag}."
     )
-    header = ["curve", "e_t", "η_t", "Theil U", "alignment shift, sim segment [s]", "at pass mark"]
-    return (
-        f"<h3>{_e(test.name)} — time: {_e(test.signal.path)} [{_e(test.unit)}]</h3>"
-        f"<p>Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s before alignment); "
-        f"n_t = {result.n_t}; ε_t = {result.threshold:.4g} ({_e(result.threshold_rule)}, "
-        f"K_p = {test.k_p:g}); smoothing: {smoothing}; alignment: {_e(align.method)}"
-        f"{f' (max lag {align.max_lag_s:g} s)' if align.method != 'none' else ''}.</p>"
-        + _table(header, rows)
-        + _time_plot(result)
-    )
+    return {"kind": "time", "name": test.name, "signal": test.signal.path, "unit": test.unit,
+            "text": text, "rows": rows, "png": _time_plot(result)}  # fmt: skip
 
 
-def _frequency_section(result: FrequencyResult, pass_mark: float) -> str:
+def _frequency_section(result: FrequencyResult, pass_mark: float) -> dict[str, Any]:
     test = result.test
     real = result.real
     rows = [
-        [
-            _e(r.role),
-            f"{int(r.included.sum())}/{r.included.size}",
-            f"{r.e_mag_db:.4g} / {r.eps_mag_db:.4g}",
-            _pct(r.eta_mag),
-            f"{r.e_pha_deg:.4g} / {r.eps_pha_deg:.4g}",
-            _pct(r.eta_pha),
-            _pct(r.eta),
-            f"{r.cifer_j:.2f}",
-            _verdict(r.eta >= pass_mark),
-        ]
+        [r.role, f"{int(r.included.sum())}/{r.included.size}",
+         f"{r.e_mag_db:.4g} / {r.eps_mag_db:.4g}", _pct(r.eta_mag),
+         f"{r.e_pha_deg:.4g} / {r.eps_pha_deg:.4g}", _pct(r.eta_pha), _pct(r.eta),
+         f"{r.cifer_j:.2f}", Verdict(r.eta >= pass_mark)]
         for r in result.rows
-    ]
-    header = [
-        "sim",
-        "n_f",
-        "e_mag / ε_mag [dB]",
-        "η_mag",
-        "e_pha / ε_pha [deg]",
-        "η_pha",
-        "η_f",
-        "CIFER J",
-        "at pass mark",
-    ]
-    excluded = "".join(
-        f"<li>{_e(r.role)}: {', '.join(f'{f:.3g}' for f in r.excluded_hz) or 'none'} Hz</li>"
-        for r in result.rows
-    )
-    return (
-        f"<h3>{_e(test.name)} — frequency: {_e(test.input.path)} → {_e(test.output.path)}</h3>"
-        f"<p>Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s), resampled at "
+    ]  # fmt: skip
+    text = (
+        f"Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s), resampled at "
         f"{result.sample_rate_hz:g} Hz; {test.n_points} log-spaced points over "
         f"{list(test.band_hz)} Hz; windows {', '.join(f'{w:.3g}' for w in real.windows_s)} s "
         f"(real averages {list(real.averages)}, overlap {test.overlap:g}) combined by inverse "
         f"random-error variance; coherence gate ε_co = {test.coherence_min:g}; "
-        f"η weighting {_e(PAPER_W_GAMMA if test.coherence_weighting else 'W_γ ≡ 1')}; "
-        f"CIFER J with {_e(CIFER_W_GAMMA)}; K_p = {test.k_p:g} "
-        f"({_e(result.rows[0].threshold_rule)}).</p>"
-        + _table(header, rows)
-        + f"<p>Excluded frequencies (γ² &lt; ε_co in either log):</p><ul>{excluded}</ul>"
-        + _frequency_plot(result)
+        f"η weighting {PAPER_W_GAMMA if test.coherence_weighting else 'W_γ ≡ 1'}; "
+        f"CIFER J with {CIFER_W_GAMMA}; K_p = {test.k_p:g} ({result.rows[0].threshold_rule})."
     )
+    excluded = [(r.role, ", ".join(f"{f:.3g}" for f in r.excluded_hz) or "none")
+                for r in result.rows]  # fmt: skip
+    return {"kind": "frequency", "name": test.name, "input": test.input.path,
+            "output": test.output.path, "text": text, "rows": rows, "excluded": excluded,
+            "png": _frequency_plot(result)}  # fmt: skip
 
 
-def _weakest_section(assessment: Assessment) -> str:
+def _weakest_rows(assessment: Assessment) -> list[list[Any]]:
     """Every test, lowest η first, with the reason its numbers give for each sim."""
-    rows = []
-    for rank, weakness in enumerate(weakest.rank(assessment), start=1):
-        reasons = "".join(
-            f"<li><b>{_e(f.role)}</b> (η {_pct(f.eta)}): {_e(f.why)}</li>"
-            for f in weakness.findings
-        )
-        rows.append(
-            [
-                str(rank),
-                _e(weakness.test),
-                _e(weakness.kind),
-                _pct(weakness.eta),
-                _verdict(not weakness.below_pass_mark, "pass", "below pass mark"),
-                f'<ul class="why">{reasons}</ul>',
-            ]
-        )
-    return (
-        "<h2>Where the model is weakest</h2><p>Tests ranked by the assessed sim's index, "
-        "lowest first. Time tests: Theil's proportions of e_t² (U_M offset, U_S amplitude, U_C "
-        "unsystematic; Theil 1966) and the residual lag between the scored curves. Frequency "
-        "tests: where the W_γ-weighted magnitude and phase errors peak (half-maximum band), "
-        "the excluded frequencies and CIFER J. Performance tests: the sim's value against the "
-        "real one and ε_p.</p>" + _table(["rank", "test", "kind", "η", "at pass mark", "why"], rows)
-    )
+    return [
+        [str(rank), weakness.test, weakness.kind, _pct(weakness.eta),
+         Verdict(not weakness.below_pass_mark, "pass", "below pass mark"),
+         Reasons(tuple((f.role, _pct(f.eta), f.why) for f in weakness.findings))]
+        for rank, weakness in enumerate(weakest.rank(assessment), start=1)
+    ]  # fmt: skip
 
 
 def render_html(assessment: Assessment) -> str:
@@ -494,42 +447,27 @@ def render_html(assessment: Assessment) -> str:
             sections.append(_time_section(result, plan.pass_mark))
         else:
             sections.append(_frequency_section(result, plan.pass_mark))
-    logs = _table(
-        ["role", "file", "format", "SHA-256"],
-        [
-            [_e(log.role), _e(log.path), _e(log.format), f"<code>{log.sha256}</code>"]
-            for log in assessment.logs
+    return _TEMPLATES.get_template("report.html.j2").render(
+        css=_CSS,
+        plan=plan,
+        eta_all=_pct(assessment.eta_all),
+        eta_min=_pct(assessment.eta_min),
+        passes=Verdict(assessment.passes, "at or above", "below"),
+        meets_eps_min=Verdict(assessment.meets_eps_min, "≥", "<"),
+        pass_mark=_pct(plan.pass_mark),
+        eps_min=_pct(plan.eps_min),
+        k_e=f"{indices.pass_mark_gain(plan.pass_mark):.4g}",
+        summary_rows=summary_rows,
+        weakest_rows=_weakest_rows(assessment),
+        sections=sections,
+        package_version=assessment.package_version,
+        created_utc=assessment.created_utc,
+        plan_sha256=hashlib.sha256(plan.text.encode()).hexdigest(),
+        log_rows=[
+            [log.role, str(log.path), log.format, Code(log.sha256)] for log in assessment.logs
         ],
+        warnings=[w for log in assessment.logs for w in log.warnings],
     )
-    warnings = "".join(
-        f'<li class="warn">{_e(w)}</li>' for log in assessment.logs for w in log.warnings
-    )
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>Credibility report: {_e(plan.name)}</title>
-<style>{_CSS}</style></head><body>
-<h1>Simulation credibility: {_e(plan.name)}</h1>
-<p>{_e(plan.description)}</p>
-<h2>Summary</h2>
-<p>η_all = <b>{_pct(assessment.eta_all)}</b>:
-{_verdict(assessment.passes, "at or above", "below")} the pass mark {_pct(plan.pass_mark)}
-(K_e = {indices.pass_mark_gain(plan.pass_mark):.4g}).
-η_min = <b>{_pct(assessment.eta_min)}</b>
-{_verdict(assessment.meets_eps_min, "≥", "<")} ε_min = {_pct(plan.eps_min)}: η_all
-{"is" if assessment.meets_eps_min else "is not"} a valid summary of this simulation.</p>
-{_table(["index", "value", "weight α"], summary_rows)}
-<p>Weights: {_e(plan.weights_source)}. Method: Dai, Ke, Quan, Cai, section 3 (equation labels in
-the package docstrings).</p>
-{_weakest_section(assessment)}
-<h2>Tests</h2>
-{"".join(sections)}
-<h2>Provenance</h2>
-<p>hil-rig credibility {_e(assessment.package_version)}, generated {_e(assessment.created_utc)}.
-Plan {_e(plan.path)} (SHA-256 <code>{hashlib.sha256(plan.text.encode()).hexdigest()}</code>).</p>
-{logs}
-{f"<p>Reader warnings:</p><ul>{warnings}</ul>" if warnings else ""}
-<details><summary>Plan text</summary><pre>{_e(plan.text)}</pre></details>
-</body></html>
-"""
 
 
 def write_report(assessment: Assessment, out_dir: Path) -> tuple[Path, Path]:
