@@ -7,7 +7,7 @@ One frame is one IMU period (1 ms by default):
    the sensor-layer faults are applied;
 3. the samples are loaded into the chips and PX4's drivers read them over SPI/I2C
    (``sensor_layer``: Python register models, or the RTL under cocotb in its own process);
-4. due scenario commands go to the autopilot on the API link (acknowledged first with the
+4. due scenario commands go to the autopilot on its onboard link (acknowledged first with the
    reference autopilot, so each acts at a known frame);
 5. HIL_SENSOR (+ HIL_GPS, + HIL_STATE_QUATERNION at the asked interval) goes out and, once
    lockstep is established, the autopilot's HIL_ACTUATOR_CONTROLS for this very frame is
@@ -324,7 +324,7 @@ class _Loop:
                 messages.append(self._state_message(truth))
             self._spent_s["chips"] += read - started
             self._spent_s["messages"] += clock() - read
-            # Read the API link every 10 ms (every frame while PX4 owes an answer): its
+            # Read the onboard link every 10 ms (every frame while PX4 owes an answer): its
             # telemetry would otherwise fill the socket buffer and the kernel would drop
             # the next COMMAND_ACK.
             if ground.busy or frame % poll_every == 0:
