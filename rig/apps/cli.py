@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import signal
 import sys
 from collections.abc import Callable
@@ -21,11 +22,14 @@ from rich.text import Text
 from rig.apps.replay import DRIVES, ReplayOptions, plan_replay, run_replay
 from rig.errors import RigError
 from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
+from rig.lockstep.pacing import parse_speed
 from rig.mavlink.px4_api import Ports
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import SENSOR_LAYERS, load_scenario
 
 HIL_SIM_SCENARIO = "hil_sim"
+#: Pacing per command: the demo flight is watched in a ground station, so real time.
+DEFAULT_SPEED = {"hil-sim": 1.0}
 
 
 class Terminated(BaseException):
@@ -35,6 +39,13 @@ class Terminated(BaseException):
 
 def _raise_terminated(signum: int, frame: object) -> None:
     raise Terminated
+
+
+def _speed(text: str) -> float:
+    try:
+        return parse_speed(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -161,6 +172,7 @@ def _run_options(args: argparse.Namespace) -> RunOptions:
         timeouts=LinkTimeouts(connect_s=args.connect_timeout),
         autopilot_params=tuple(args.param),
         px4_dir=getattr(args, "px4", None),
+        speed=args.speed if args.speed is not None else DEFAULT_SPEED.get(args.command, math.inf),
     )
 
 
@@ -194,6 +206,9 @@ def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) 
                             help="vehicle file instead of the scenario's")  # fmt: skip
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="autopilot parameter, PX4's names (repeatable)")  # fmt: skip
+    parser.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max",
+                        help="at most FACTOR × real time, kept by sleeping (default: 1 for "
+                             "hil-sim, which you watch; max otherwise)")  # fmt: skip
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to wait for the autopilot to connect")  # fmt: skip
 

@@ -56,6 +56,7 @@ from rig.autopilots.px4 import Px4Sitl, check_imu_rate, find_px4, px4_parameters
 from rig.chips.layer import BypassSensorLayer, ChipFrame, ChipReadout, SensorLayer, TlmSensorLayer
 from rig.chips.pwm import PwmOutput, throttle_from_capture
 from rig.errors import RigError, ScenarioError
+from rig.lockstep.pacing import Pacer
 from rig.logs.rig_log import RigLog
 from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
@@ -103,6 +104,8 @@ class RunOptions:
     autopilot_argv: tuple[str, ...] | None = None
     #: ``(level, text)`` events for the start of ``rig.ulg`` (e.g. what a replay skipped).
     notes: tuple[tuple[str, str], ...] = ()
+    #: At most this many simulated seconds per wall second (inf: as fast as possible).
+    speed: float = math.inf
 
     def __post_init__(self) -> None:
         if self.autopilot not in AUTOPILOTS:
@@ -305,6 +308,7 @@ class _Loop:
         self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")
         frames_total = round(self.duration_s * 1e6) // self.frame_us
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
+        pacer = Pacer(self.options.speed)
         state_next_us = self.clock_start_us
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
         poll_every = max(1, self.rates.imu_hz // 100)
@@ -359,6 +363,7 @@ class _Loop:
             self.frames = frame
             if self.progress is not None and frame % max(1, self.rates.imu_hz // 10) == 0:
                 self._report(this_truth)
+            pacer.wait(self.run_us / 1e6)
         self._wall_end = time.monotonic()
         self.log.event(self.time_us, f"run completed: {self.frames} frames")
 
