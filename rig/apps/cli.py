@@ -1,5 +1,6 @@
 """``rig``: run scenarios closed-loop (``rig run``), the demo flight (``rig hil-sim``),
-replays of real flights (``rig replay``) and campaigns of many runs (``rig campaign``).
+replays of real flights (``rig replay``), campaigns of many runs (``rig campaign``), a run's
+plots (``rig plot``) and identification from a log (``rig identify``).
 
 Errors are one line on stderr (exit 1); Ctrl-C stops the run cleanly with the logs
 readable (exit 130).
@@ -19,6 +20,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.text import Text
 
+from rig.apps.plots import plot_run
 from rig.apps.replay import DRIVES, ReplayOptions, plan_replay, run_replay
 from rig.errors import RigError
 from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
@@ -90,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
                           help="local processes (default: the cores given)")  # fmt: skip
     campaign.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
                           help="run on this Dask cluster instead of local processes")  # fmt: skip
+    plot = commands.add_parser("plot", help="(re)make a finished run's PNG plots in its folder")
+    plot.add_argument("run", type=Path, help="the run folder (holds rig.ulg)")
     identify = commands.add_parser(
         "identify", help="identify hover, roll/pitch plant and inertia from a flight log"
     )
@@ -106,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
         return _campaign(args, console)
     if args.command == "identify":
         return _identify(args)
+    if args.command == "plot":
+        return _plot(args, console)
     signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         result = _replay(args, console) if args.command == "replay" else _run(args, console)
@@ -125,7 +131,26 @@ def main(argv: list[str] | None = None) -> int:
         f"autopilot log: {result.autopilot_log or '(written by the autopilot, e.g. PX4)'}",
         highlight=False,
     )
+    try:
+        plots = _plot_names(plot_run(result.run_dir))
+        console.print(f"plots:         {plots}", highlight=False, soft_wrap=True)
+    except RigError as error:  # the run itself succeeded: say so, keep exit 0
+        print(f"rig: warning: no plots: {error}", file=sys.stderr)
     return 0
+
+
+def _plot(args: argparse.Namespace, console: Console) -> int:
+    """``rig plot RUN``: remake the plots of a finished run."""
+    try:
+        console.print(f"plots: {_plot_names(plot_run(args.run))}", highlight=False, soft_wrap=True)
+    except RigError as error:
+        print(f"rig: error: {error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _plot_names(paths: list[Path]) -> str:
+    return f"{paths[0].parent}/{{{','.join(p.name for p in paths)}}}"
 
 
 def _run(args: argparse.Namespace, console: Console) -> RunResult:
