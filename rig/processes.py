@@ -3,9 +3,25 @@ one is stopped and how its end is told, in one place."""
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import os
 import signal
 import subprocess
+import sys
+
+#: ``prctl`` option: the signal a process gets when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent() -> None:
+    """``preexec_fn`` for a child that must not outlive the rig (PX4 never exits on its
+    own once its simulator is gone): SIGKILL when the rig dies, even by SIGKILL itself.
+    Linux only; elsewhere nothing (the rig still stops its children on every way out
+    it controls)."""
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
 def stop_process_group(process: subprocess.Popen[bytes], grace_s: float) -> None:

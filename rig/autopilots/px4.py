@@ -31,7 +31,7 @@ from pathlib import Path
 
 from quad_model.vehicle import Vehicle
 from rig.errors import RigError
-from rig.processes import exit_description, stop_process_group
+from rig.processes import die_with_parent, exit_description, stop_process_group
 
 #: The environment variable naming the user's PX4 build (or PX4-Autopilot checkout).
 PX4_DIR_ENV = "PX4_DIR"
@@ -208,6 +208,7 @@ class Px4Sitl:
                  "-w", str(self.work_dir.resolve()), str(self.build.etc)],
                 cwd=self.work_dir, env=environment, stdin=subprocess.DEVNULL,
                 stdout=console, stderr=subprocess.STDOUT, start_new_session=True,
+                preexec_fn=die_with_parent,
             )  # fmt: skip
 
     def exit_description(self) -> str | None:

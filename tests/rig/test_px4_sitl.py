@@ -296,3 +296,18 @@ def test_px4_dying_mid_run_is_one_line_naming_its_console(tmp_path, free_instanc
     assert f"its console is in {out / 'px4.log'}" in last
     assert "Traceback" not in err
     pyulog.ULog(str(out / "rig.ulg"))  # readable up to that moment
+
+
+def test_px4_does_not_outlive_a_killed_rig(tmp_path, free_instance, px4_dir):
+    """PX4 spins forever once its simulator is gone; a rig killed outright (SIGKILL, no
+    clean-up) still takes it down (the kernel's parent-death signal)."""
+    out = tmp_path / "run"
+    rig = _start_rig_cli(px4_dir, free_instance(), out)
+    _wait_until_flying(rig, out)
+    assert _px4_pids(out)
+    rig.kill()
+    rig.communicate(timeout=30)
+    deadline = time.monotonic() + 10
+    while _px4_pids(out) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _px4_pids(out)
