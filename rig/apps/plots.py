@@ -113,20 +113,14 @@ def _position(figure, rig, autopilot, events) -> None:
     truth = _topic(rig, "vehicle_local_position_groundtruth")
     estimate = _topic(autopilot, "vehicle_local_position")
     setpoint = _topic(autopilot, "vehicle_local_position_setpoint")
-    for ax, field, label in zip(axes, "xyz", _AXES, strict=True):
+    for ax, field in zip(axes, "xyz", strict=True):
         if truth is not None:
             ax.plot(truth[0], truth[1][field], "k", lw=1.2, label="truth (rig)")
         if estimate is not None:
             ax.plot(estimate[0], estimate[1][field], lw=1.0, label="estimate (autopilot frame)")
         if setpoint is not None:
             ax.plot(setpoint[0], setpoint[1][field], "--", lw=1.0, label="setpoint")
-        ax.set_ylabel(f"{label} [m]")
-        ax.grid(alpha=0.3)
-        _mark(ax, events)
-    _legend(axes[0])
-    axes[0].set_title("position")
-    axes[-1].set_xlabel("time [s]")
-    _faults_legend(figure, events)
+    _finish(figure, axes, [f"{label} [m]" for label in _AXES], "position", events)
 
 
 def _euler_deg(fields: dict, prefix: str) -> np.ndarray:
@@ -149,12 +143,17 @@ def _attitude(figure, rig, autopilot, events) -> None:
         for ax, values in zip(axes, angles, strict=True):
             ax.plot(topic[0], values, color=color, lw=1.0, label=label,
                     ls="--" if label == "setpoint" else "-")  # fmt: skip
-    for ax, angle in zip(axes, _ANGLES, strict=True):
-        ax.set_ylabel(f"{angle} [deg]")
+    _finish(figure, axes, [f"{angle} [deg]" for angle in _ANGLES], "attitude", events)
+
+
+def _finish(figure, axes, ylabels: list[str], title: str, events) -> None:
+    """Labels, grid and event marks of a stack of time plots sharing one time axis."""
+    for ax, ylabel in zip(axes, ylabels, strict=True):
+        ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
         _mark(ax, events)
     _legend(axes[0])
-    axes[0].set_title("attitude")
+    axes[0].set_title(title)
     axes[-1].set_xlabel("time [s]")
     _faults_legend(figure, events)
 
