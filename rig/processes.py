@@ -4,7 +4,6 @@ one is stopped and how its end is told, in one place."""
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 import signal
 import subprocess
@@ -12,6 +11,9 @@ import sys
 
 #: ``prctl`` option: the signal a process gets when its parent dies (linux/prctl.h).
 _PR_SET_PDEATHSIG = 1
+#: The C library, loaded here in the parent: the forked child (``preexec_fn``) must not
+#: look it up, which would start ``ldconfig`` between fork and exec.
+_LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
 
 
 def die_with_parent() -> None:
@@ -19,9 +21,8 @@ def die_with_parent() -> None:
     own once its simulator is gone): SIGKILL when the rig dies, even by SIGKILL itself.
     Linux only; elsewhere nothing (the rig still stops its children on every way out
     it controls)."""
-    if sys.platform.startswith("linux"):
-        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if _LIBC is not None:
+        _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
 def stop_process_group(process: subprocess.Popen[bytes], grace_s: float) -> None:

@@ -21,6 +21,7 @@ both equal the simulator's IMU rate; ``IMU_INTEG_RATE`` stops at 1000 Hz.
 
 from __future__ import annotations
 
+import math
 import os
 import shlex
 import shutil
@@ -148,11 +149,12 @@ def parse_assignments(texts: tuple[str, ...]) -> dict[str, float]:
     for text in texts:
         name, sign, value = text.partition("=")
         try:
-            if not sign or not name.strip():
-                raise ValueError
-            params[name.strip()] = float(value)
+            number = float(value)
         except ValueError:
-            raise RigError(f"--param {text!r}: expected NAME=VALUE with a number") from None
+            number = math.nan
+        if not sign or not name.strip() or not math.isfinite(number):
+            raise RigError(f"--param {text!r}: expected NAME=VALUE with a finite number")
+        params[name.strip()] = number
     return params
 
 

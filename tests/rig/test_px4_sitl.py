@@ -311,3 +311,12 @@ def test_px4_does_not_outlive_a_killed_rig(tmp_path, free_instance, px4_dir):
     while _px4_pids(out) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not _px4_pids(out)
+
+
+@pytest.mark.parametrize("text", ["MPC_XY_P", "=1", "MPC_XY_P=fast", "MPC_XY_P=nan"])
+def test_a_bad_param_for_px4_is_one_line(text):
+    from rig.autopilots.px4 import parse_assignments
+
+    with pytest.raises(RigError, match=r"^--param .*: expected NAME=VALUE with a finite number$"):
+        parse_assignments((text,))
+    assert parse_assignments(("MPC_XY_P=1.5", "SDLOG_MODE=0")) == {"MPC_XY_P": 1.5, "SDLOG_MODE": 0}
