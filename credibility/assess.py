@@ -255,7 +255,7 @@ def _performance(test: PerformanceTest, logs: dict[str, LogFile], plan: Plan) ->
 
 def _alignment_shift(test: TimeTest, real_log: LogFile, sim_log: LogFile) -> float:
     """Seconds to add to the sim segment so its curve lines up with the real one."""
-    align = test.alignment
+    align = test.align
     if align.method == "none":
         return 0.0
     real = real_log.signal(align.signal)

@@ -16,15 +16,18 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Literal
 
 import numpy as np
 import pandas as pd
+from pydantic import Field
 from pyulog import ULog
 from pyulog.core import ULogException
 from scipy.spatial.transform import Rotation
 
 from credibility.errors import CredibilityError
 from credibility.signals import Signal
+from hil_config import Number, table
 
 _EULER = ("roll", "pitch", "yaw")
 _PATH = re.compile(r"^(?P<topic>[A-Za-z_][\w]*)(?:\.(?P<instance>\d+))?\.(?P<field>[\w.\[\]]+)$")
@@ -41,14 +44,16 @@ CONVERSIONS = {
 }
 
 
-@dataclass(frozen=True)
+@table
 class SignalSpec:
     """Where a signal lives in a log and how to convert it to the plan's units."""
 
-    path: str
-    scale: float = 1.0
-    convert: str | None = None
-    drop_nan: bool = False
+    #: ``topic[.instance].field``
+    path: Annotated[str, Field(strict=True, pattern=_PATH.pattern)]
+    scale: Number = 1.0
+    convert: Literal[tuple(CONVERSIONS)] | None = None
+    #: Drop the samples that are NaN (a topic logged with gaps) instead of failing.
+    drop_nan: Annotated[bool, Field(strict=True)] = False
 
     @property
     def factor(self) -> float:

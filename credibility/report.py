@@ -78,7 +78,7 @@ def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
             "rows": [vars(row) for row in result.rows],
         }
     if isinstance(result, TimeResult):
-        align = test.alignment
+        align = test.align
         return common | {
             "unit": test.unit,
             "signal": _spec(test.signal),
@@ -373,7 +373,7 @@ def _time_section(result: TimeResult, pass_mark: float) -> dict[str, Any]:
         if test.smoothing
         else "none"
     )
-    align = test.alignment
+    align = test.align
     rows: list[list[Any]] = [[test.roles.real, "0", _pct(1.0), "0", "—", "—"]]
     rows += [
         [r.role, f"{r.error:.4g}", _pct(r.eta), f"{r.theil_u:.3f}",

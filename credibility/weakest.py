@@ -222,7 +222,7 @@ def diagnose_time(result: TimeResult, row: TimeRow) -> TimeDiagnosis:
     shares = indices.theil_decomposition(y_e, y_s)
     u_m, u_s, u_c = shares if shares is not None else (None, None, None)
     sigma_e = float(y_e.std())
-    align = result.test.alignment
+    align = result.test.align
     return TimeDiagnosis(
         u_m=u_m,
         u_s=u_s,

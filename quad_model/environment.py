@@ -5,12 +5,14 @@ The atmosphere functions are compiled with numba (callable from Python as usual)
 """
 
 import math
-from dataclasses import dataclass, field
+from typing import Annotated
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+from pydantic import Field
 
+from hil_config import FieldError, Number, Vector3, table
 from quad_model.frames import GAUSS_PER_NANOTESLA, STANDARD_GRAVITY_MPS2
 
 # ISA troposphere (ISO 2533:1975 / ICAO Doc 7488): sea-level values and lapse rate.
@@ -24,8 +26,8 @@ KELVIN_AT_0_DEGC = 273.15
 _ISA_PRESSURE_EXPONENT = STANDARD_GRAVITY_MPS2 / (DRY_AIR_GAS_CONSTANT * ISA_LAPSE_RATE_KPM)
 
 
-class EnvironmentConfigError(ValueError):
-    """An environment setting is outside what the model covers."""
+class EnvironmentConfigError(FieldError):
+    """An environment setting is outside what the model covers; names the key."""
 
 
 @njit(cache=True)
@@ -49,20 +51,20 @@ def isa_density_kgpm3(altitude_m: float) -> float:
     return isa_pressure_pa(altitude_m) / (DRY_AIR_GAS_CONSTANT * isa_temperature_k(altitude_m))
 
 
-@dataclass(frozen=True)
+@table
 class GeoPoint:
     """A WGS-84 position; altitude above mean sea level."""
 
-    lat_deg: float
-    lon_deg: float
-    alt_amsl_m: float
+    lat_deg: Annotated[Number, Field(ge=-90, le=90)]
+    lon_deg: Annotated[Number, Field(ge=-180, le=180)]
+    alt_amsl_m: Number
 
 
 #: PX4 SITL's default home (``PX4_HOME_LAT/LON/ALT``, Zurich).
 PX4_DEFAULT_HOME = GeoPoint(lat_deg=47.397742, lon_deg=8.545594, alt_amsl_m=488.0)
 
 
-@dataclass(frozen=True)
+@table
 class MagneticField:
     """Earth's field at the flying site, as a navigator states it.
 
@@ -71,19 +73,17 @@ class MagneticField:
     with :meth:`from_wmm`.
     """
 
-    declination_deg: float
-    inclination_deg: float
-    intensity_gauss: float
+    declination_deg: Number
+    inclination_deg: Number
+    intensity_gauss: Number
 
     def __post_init__(self) -> None:
         if not 0.0 < self.intensity_gauss < 1.0:
             raise EnvironmentConfigError(
-                f"magnetic intensity_gauss={self.intensity_gauss} is not Earth-like (0..1 G)"
+                "intensity_gauss", self.intensity_gauss, "is not Earth-like (0..1 G)"
             )
         if not -90.0 <= self.inclination_deg <= 90.0:
-            raise EnvironmentConfigError(
-                f"magnetic inclination_deg={self.inclination_deg} not in ±90"
-            )
+            raise EnvironmentConfigError("inclination_deg", self.inclination_deg, "not in ±90°")
 
     def ned_gauss(self) -> NDArray[np.float64]:
         """Field vector in NED (gauss)."""
@@ -125,7 +125,7 @@ DEFAULT_MAGNETIC_FIELD = MagneticField(
 )
 
 
-@dataclass(frozen=True)
+@table
 class Wind:
     """Steady wind plus Dryden turbulence (MIL-F-8785C low-altitude model).
 
@@ -135,19 +135,17 @@ class Wind:
     generator.
     """
 
-    steady_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    wind_at_6m_mps: float = 0.0
+    steady_ned_mps: Vector3 = (0.0, 0.0, 0.0)
+    wind_at_6m_mps: Number = 0.0
 
     def __post_init__(self) -> None:
         if len(self.steady_ned_mps) != 3:
-            raise EnvironmentConfigError(
-                f"wind steady_ned_mps={self.steady_ned_mps} is not 3 values"
-            )
+            raise EnvironmentConfigError("steady_ned_mps", self.steady_ned_mps, "is not 3 values")
         if self.wind_at_6m_mps < 0.0:
-            raise EnvironmentConfigError(f"wind wind_at_6m_mps={self.wind_at_6m_mps} is negative")
+            raise EnvironmentConfigError("wind_at_6m_mps", self.wind_at_6m_mps, "is negative")
 
 
-@dataclass(frozen=True)
+@table
 class Environment:
     """Flying site: home (the NED origin, on the ground), magnetic field, wind, weather.
 
@@ -157,13 +155,15 @@ class Environment:
 
     home: GeoPoint = PX4_DEFAULT_HOME
     magnetic_field: MagneticField = DEFAULT_MAGNETIC_FIELD
-    wind: Wind = field(default_factory=Wind)
-    temperature_offset_k: float = 0.0
+    wind: Wind = Wind()
+    temperature_offset_k: Number = 0.0
 
     def __post_init__(self) -> None:
         if not -500.0 <= self.home.alt_amsl_m <= ISA_TROPOPAUSE_M - 1000.0:
             raise EnvironmentConfigError(
-                f"home alt_amsl_m={self.home.alt_amsl_m} is outside the ISA troposphere model"
+                "home.alt_amsl_m",
+                self.home.alt_amsl_m,
+                "is outside the ISA troposphere model (-500..10000 m)",
             )
 
     def altitude_amsl_m(self, position_ned_m: NDArray[np.float64]) -> float:

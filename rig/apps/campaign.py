@@ -26,21 +26,35 @@ import sqlite3
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, TypeVar
 
 import tomli_w
+from pydantic import Field
 
 from credibility import CredibilityError, load_plan
-from quad_model.toml_file import read_toml_file
+from hil_config import (
+    FieldError,
+    NonNegative,
+    NonNegativeInteger,
+    Number,
+    Positive,
+    PositiveInteger,
+    Text,
+    parse,
+    read_toml,
+    table,
+)
 from quad_model.vehicle import VEHICLES_DIR, VehicleFileError, vehicle_from_dict
 from rig.errors import RigError
 from rig.processes import stop_process_group
-from rig.scenarios.scenario import FAULT_KINDS, SCENARIOS_DIR, SENSOR_LAYERS, scenario_from_dict
+from rig.scenarios.scenario import SCENARIOS_DIR, FaultSpec, SensorLayer, scenario_from_dict
+
+T = TypeVar("T")
 
 CAMPAIGNS_DIR = Path(__file__).parent / "campaigns"
 PLANS_DIR = Path(__file__).parents[2] / "credibility" / "plans"
@@ -77,34 +91,7 @@ VEHICLE_SCALES: dict[str, tuple[str, tuple[str, ...]]] = {
         ("gyro_noise_density_radps_per_sqrthz", "accel_noise_density_mps2_per_sqrthz"),
     ),
 }
-#: Every axis a campaign may sweep, with the kind of its values.
-AXES = {
-    "fault": "fault name",
-    "fault_onset_s": "non-negative number",
-    "wind_north_mps": "number",
-    "wind_east_mps": "number",
-    "seed": "integer >= 0",
-    "autopilot_params": "list of NAME=VALUE strings",
-    **dict.fromkeys(VEHICLE_SCALES, "positive number"),
-}
 NO_FAULT = "none"
-_TOP_KEYS = {
-    "name",
-    "description",
-    "scenario",
-    "duration_s",
-    "sensor_layer",
-    "case_timeout_s",
-    "answer_timeout_s",
-    "first_instance",
-    "instances",
-    "axes",
-    "faults",
-    "criteria",
-    "crash",
-    "credibility",
-}
-_CREDIBILITY_KEYS = ("plan", "role", "log")
 
 
 class CampaignError(RigError):
@@ -134,12 +121,12 @@ class Criterion:
         return None
 
 
-@dataclass(frozen=True)
+@table
 class CrashLimits:
     """When the vehicle counts as crashed: tilted past the limit, or hit the ground harder."""
 
-    tilt_deg: float = 60.0
-    impact_speed_mps: float = 2.0
+    tilt_deg: Positive = 60.0
+    impact_speed_mps: Positive = 2.0
 
 
 @dataclass(frozen=True)
@@ -154,22 +141,113 @@ class CredibilityScoring:
     log: str = "autopilot"
 
 
+# -- the campaign file's tables (hil_config) ----------------------------------------------
+
+Assignment = Annotated[str, Field(strict=True, pattern=r"^[A-Za-z0-9_]+=.+$")]
+Values = Annotated[tuple[T, ...], Field(min_length=1)]
+
+
+@table
+class Axes:
+    """The axes to sweep, each a non-empty list; the cases are their Cartesian product in
+    the file's order. ``fault`` names ``[faults.NAME]`` tables (or ``"none"``); a
+    ``*_scale`` multiplies the vehicle-file entries of :data:`VEHICLE_SCALES`."""
+
+    fault: Values[Text] | None = None
+    fault_onset_s: Values[NonNegative] | None = None
+    wind_north_mps: Values[Number] | None = None
+    wind_east_mps: Values[Number] | None = None
+    seed: Values[NonNegativeInteger] | None = None
+    autopilot_params: Values[tuple[Assignment, ...]] | None = None
+    mass_scale: Values[Positive] | None = None
+    inertia_scale: Values[Positive] | None = None
+    thrust_coefficient_scale: Values[Positive] | None = None
+    torque_coefficient_scale: Values[Positive] | None = None
+    motor_time_constant_scale: Values[Positive] | None = None
+    imu_noise_scale: Values[Positive] | None = None
+
+
+@table
+class FaultSweep:
+    """What a ``[faults.NAME]`` table adds to a scenario fault (whose start is the onset)."""
+
+    #: The parameter whose list of values is swept, one case per value.
+    severity: Text | None = None
+    #: The fault's length; None: until the end of the run.
+    duration_s: Positive | None = None
+
+
+@table
+class Bounds:
+    """A pass criterion on one metric: ``min`` and/or ``max``, or ``equals`` for ``crashed``."""
+
+    min: Number | None = None
+    max: Number | None = None
+    equals: Annotated[bool, Field(strict=True)] | None = None
+
+
+@table
+class CredibilityTable:
+    """``[credibility]``: the plan scoring every case (a path relative to the campaign file,
+    or a bundled plan's name), the plan role the case's log fills, and which log."""
+
+    plan: Text
+    role: Text = "sim"
+    log: Literal["rig", "autopilot"] = "autopilot"
+
+
+@table
+class CampaignFile:
+    name: Text
+    scenario: Text
+    description: str = ""
+    #: None: the base scenario's.
+    duration_s: Positive | None = None
+    sensor_layer: SensorLayer = SensorLayer.TLM
+    #: Wall time before a case counts as hung.
+    case_timeout_s: Positive = 600.0
+    #: Wall time for one autopilot answer before it counts as stalled.
+    answer_timeout_s: Positive = 10.0
+    first_instance: NonNegativeInteger = 20
+    instances: PositiveInteger = 40
+    axes: Axes = Axes()
+    #: ``[faults.NAME]``: a scenario fault without its start; ``severity`` names the
+    #: parameter whose list of values is swept, ``duration_s`` the fault's length.
+    faults: dict[str, dict[str, Any]] = field(default_factory=dict)
+    criteria: dict[Literal[METRICS], Bounds] = field(default_factory=dict)
+    crash: CrashLimits = CrashLimits()
+    credibility: CredibilityTable | None = None
+
+    def __post_init__(self) -> None:
+        if self.first_instance + self.instances > 100:
+            raise FieldError(
+                "instances", self.instances,
+                f"first_instance ({self.first_instance}) + instances must lie within SITL "
+                "instances 0..99",
+            )  # fmt: skip
+        for metric, bounds in self.criteria.items():
+            given = {k: v for k, v in asdict(bounds).items() if v is not None}
+            if metric == "crashed" and set(given) != {"equals"}:
+                raise FieldError(f"criteria.{metric}", given, "expected {equals = true|false}")
+            if metric != "crashed" and ("equals" in given or not given):
+                raise FieldError(f"criteria.{metric}", given, "expected min and/or max")
+            if metric in CREDIBILITY_METRICS and self.credibility is None:
+                raise FieldError(f"criteria.{metric}", given, "needs a [credibility] table")
+        if NO_FAULT in self.faults:
+            raise FieldError(f"faults.{NO_FAULT}", NO_FAULT, "is the no-fault case, not a name")
+        for name in self.axes.fault or ():
+            if name != NO_FAULT and name not in self.faults:
+                raise FieldError("axes.fault", name, f"no [faults.{name}] table")
+
+
 @dataclass(frozen=True)
 class Campaign:
-    name: str
+    """A checked campaign file: its settings, the axes in file order, the faults by name."""
+
+    file: CampaignFile
     source: str
-    description: str
-    scenario: str
-    duration_s: float | None  # None: the base scenario's
-    sensor_layer: str
-    case_timeout_s: float
-    answer_timeout_s: float
-    first_instance: int
-    instances: int
     axes: tuple[tuple[str, tuple[Any, ...]], ...]
-    faults: Mapping[str, Mapping[str, Any]]
     criteria: tuple[Criterion, ...]
-    crash: CrashLimits
     credibility: CredibilityScoring | None = None
 
 
@@ -214,120 +292,73 @@ class CaseResult:
 
 def load_campaign(name_or_path: str | Path) -> Campaign:
     """Load a bundled campaign by name or any campaign file; one-line :class:`CampaignError`."""
-    document, path = read_toml_file(
-        name_or_path, CAMPAIGNS_DIR, kind="campaign", error=CampaignError
-    )
+    document, path = read_toml(name_or_path, CAMPAIGNS_DIR, kind="campaign", error=CampaignError)
     return campaign_from_dict(document, str(path))
 
 
 def campaign_from_dict(document: Mapping[str, Any], source: str = "<dict>") -> Campaign:
     """Check a parsed campaign document; the base scenario and every case are checked too."""
-
-    def fail(key: str, value: Any, reason: str) -> CampaignError:
-        return CampaignError(f"{source}: key {key!r} = {value!r}: {reason}")
-
-    for key in document:
-        if key not in _TOP_KEYS:
-            raise fail(key, document[key], f"unknown key (known: {', '.join(sorted(_TOP_KEYS))})")
-    for key in ("name", "scenario"):
-        if not isinstance(document.get(key), str) or not document[key]:
-            raise CampaignError(f"{source}: key {key!r} is missing or not a string")
-
-    def number(key: str, default: float | None, minimum: float = 0.0) -> float | None:
-        value = document.get(key, default)
-        if value is None:
-            return None
-        if isinstance(value, bool) or not isinstance(value, int | float) or value <= minimum:
-            raise fail(key, value, f"expected a number > {minimum:g}")
-        return float(value)
-
-    sensor_layer = document.get("sensor_layer", "tlm")
-    if sensor_layer not in SENSOR_LAYERS:
-        raise fail("sensor_layer", sensor_layer, f"expected one of {', '.join(SENSOR_LAYERS)}")
-    first_instance = document.get("first_instance", 20)
-    instances = document.get("instances", 40)
-    if not (
-        isinstance(first_instance, int)
-        and isinstance(instances, int)
-        and first_instance >= 0
-        and instances > 0
-        and first_instance + instances <= 100
-    ):
-        raise fail(
-            "instances",
-            [first_instance, instances],
-            "first_instance + instances must lie within SITL instances 0..99",
-        )
-    faults = _faults(document.get("faults", {}), fail)
-    axes = _axes(document.get("axes", {}), faults, fail)
-    crash_table = document.get("crash", {})
-    crash = CrashLimits(
-        **{
-            k: float(v)
-            for k, v in _table(crash_table, "crash", fail).items()
-            if _known(k, CrashLimits.__dataclass_fields__, "crash", v, fail)
-        }
-    )
-    campaign = Campaign(
-        name=document["name"],
-        source=source,
-        description=str(document.get("description", "")),
-        scenario=document["scenario"],
-        duration_s=number("duration_s", None),
-        sensor_layer=sensor_layer,
-        case_timeout_s=number("case_timeout_s", 600.0),
-        answer_timeout_s=number("answer_timeout_s", 10.0),
-        first_instance=first_instance,
-        instances=instances,
-        axes=axes,
-        faults=faults,
-        criteria=_criteria(document.get("criteria", {}), fail),
-        crash=crash,
-        credibility=_credibility(document.get("credibility"), source, fail),
-    )
-    for criterion in campaign.criteria:
-        if criterion.metric in CREDIBILITY_METRICS and campaign.credibility is None:
-            raise fail(
-                f"criteria.{criterion.metric}",
-                document["criteria"][criterion.metric],
-                "needs a [credibility] table",
+    file = parse(CampaignFile, document, source, CampaignError)
+    for name, fault in file.faults.items():
+        sweep = {key: fault[key] for key in ("severity", "duration_s") if key in fault}
+        severity = parse(FaultSweep, sweep, f"{source}: faults.{name}", CampaignError).severity
+        values = fault.get(severity)
+        if severity is not None and (not isinstance(values, list) or not values):
+            raise CampaignError(
+                f"{source}: key 'faults.{name}.severity' = {severity!r}: expected a parameter "
+                f"of {fault.get('kind')} whose value is a list of severities"
             )
+        for variant in _fault_variants(name, file.faults):
+            parse(FaultSpec, _fault_table(fault, variant, 0.0), f"{source}: faults.{name}",
+                  CampaignError)  # fmt: skip
+    axes = tuple(
+        (name, tuple(_values(name, file)))
+        for name in document.get("axes", {})  # the file's order is the cases' order
+    )
+    criteria = tuple(
+        Criterion(metric, minimum=bounds.min, maximum=bounds.max, equals=bounds.equals)
+        for metric, bounds in file.criteria.items()
+    )
+    scoring = None if file.credibility is None else _credibility(file.credibility, source)
+    campaign = Campaign(file, source, axes, criteria, scoring)
     expand(campaign, Path("."))  # every case must make a valid scenario and vehicle
     return campaign
 
 
-def _credibility(
-    table: Any, source: str, fail: Callable[..., CampaignError]
-) -> CredibilityScoring | None:
-    """``[credibility]``: the plan is loaded and checked here, once, so a bad plan or role
-    stops the campaign before any case flies."""
-    if table is None:
-        return None
-    table = _table(table, "credibility", fail)
-    for key, value in table.items():
-        _known(key, _CREDIBILITY_KEYS, "credibility", value, fail)
-    name = table.get("plan")
-    if not isinstance(name, str) or not name:
-        raise fail("credibility.plan", name, "expected a plan file or a bundled plan name")
-    path = _plan_path(name, Path(source).parent)
+def _values(axis: str, file: CampaignFile) -> list[Any]:
+    """An axis's values; a fault with a severity list becomes one value per severity."""
+    values = getattr(file.axes, axis)
+    if axis == "fault":
+        return [variant for name in values for variant in _fault_variants(name, file.faults)]
+    if axis == "autopilot_params":
+        return [list(assignments) for assignments in values]
+    return list(values)
+
+
+def _credibility(table: CredibilityTable, source: str) -> CredibilityScoring:
+    """The plan is loaded and checked here, once, so a bad plan or role stops the campaign
+    before any case flies."""
+
+    def fail(key: str, value: Any, reason: str) -> CampaignError:
+        return CampaignError(f"{source}: key {key!r} = {value!r}: {reason}")
+
+    path = _plan_path(table.plan, Path(source).parent)
     if path is None:
         bundled = ", ".join(sorted(p.stem for p in PLANS_DIR.glob("*.toml")))
-        raise fail("credibility.plan", name, f"no such plan file (bundled: {bundled})")
+        raise fail("credibility.plan", table.plan, f"no such plan file (bundled: {bundled})")
     try:
         plan = load_plan(path)
     except CredibilityError as error:
-        raise fail("credibility.plan", name, str(error)) from None
-    role = table.get("role", "sim")
-    if role not in plan.logs:
-        raise fail("credibility.role", role, f"not a log role of the plan ({', '.join(plan.logs)})")
-    log = table.get("log", "autopilot")
-    if log not in CASE_LOGS:
-        raise fail("credibility.log", log, f"expected one of {', '.join(CASE_LOGS)}")
+        raise fail("credibility.plan", table.plan, str(error)) from None
+    if table.role not in plan.logs:
+        raise fail(
+            "credibility.role", table.role, f"not a log role of the plan ({', '.join(plan.logs)})"
+        )
     return CredibilityScoring(
         plan_path=str(path),
         plan_sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
-        role=role,
-        log=log,
+        role=table.role,
+        log=table.log,
     )
 
 
@@ -339,86 +370,6 @@ def _plan_path(name: str, campaign_dir: Path) -> Path | None:
     return None
 
 
-def _table(value: Any, key: str, fail: Callable[..., CampaignError]) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise fail(key, value, "expected a table")
-    return value
-
-
-def _known(
-    key: str, known: Iterable[str], prefix: str, value: Any, fail: Callable[..., CampaignError]
-) -> bool:
-    if key not in known:
-        raise fail(f"{prefix}.{key}", value, f"unknown key (known: {', '.join(sorted(known))})")
-    return True
-
-
-def _faults(table: Any, fail: Callable[..., CampaignError]) -> dict[str, dict[str, Any]]:
-    """``[faults.NAME]``: a scenario fault without its start; ``severity`` names the
-    parameter whose list of values is swept, ``duration_s`` (optional) the fault's length."""
-    faults = {}
-    for name, fault in _table(table, "faults", fail).items():
-        fault = dict(_table(fault, f"faults.{name}", fail))
-        kind = fault.get("kind")
-        if kind not in FAULT_KINDS:
-            raise fail(f"faults.{name}.kind", kind, f"expected one of {', '.join(FAULT_KINDS)}")
-        for key, value in fault.items():
-            _known(
-                key,
-                {"kind", "duration_s", "severity", *FAULT_KINDS[kind]},
-                f"faults.{name}",
-                value,
-                fail,
-            )
-        severity = fault.get("severity")
-        if severity is not None and (
-            severity not in FAULT_KINDS[kind]
-            or not isinstance(fault.get(severity), list)
-            or not fault[severity]
-        ):
-            raise fail(
-                f"faults.{name}.severity",
-                severity,
-                f"expected a parameter of {kind} whose value is a list of severities",
-            )
-        if name == NO_FAULT:
-            raise fail(f"faults.{name}", name, f"{NO_FAULT!r} is the no-fault case, not a name")
-        faults[name] = fault
-    return faults
-
-
-def _axes(
-    table: Any, faults: Mapping[str, Any], fail: Callable[..., CampaignError]
-) -> tuple[tuple[str, tuple[Any, ...]], ...]:
-    axes = []
-    for name, values in _table(table, "axes", fail).items():
-        _known(name, AXES, "axes", values, fail)
-        if not isinstance(values, list) or not values:
-            raise fail(f"axes.{name}", values, "expected a non-empty list")
-        for value in values:
-            if not _axis_value_ok(name, value, faults):
-                raise fail(f"axes.{name}", value, f"expected a {AXES[name]}")
-        if name == "fault":  # a fault with a severity list becomes one value per severity
-            values = [v for name_ in values for v in _fault_variants(name_, faults)]
-        axes.append((name, tuple(values)))
-    return tuple(axes)
-
-
-def _axis_value_ok(axis: str, value: Any, faults: Mapping[str, Any]) -> bool:
-    is_number = isinstance(value, int | float) and not isinstance(value, bool)
-    if axis == "fault":
-        return value == NO_FAULT or value in faults
-    if axis == "seed":
-        return isinstance(value, int) and not isinstance(value, bool) and value >= 0
-    if axis == "autopilot_params":
-        return isinstance(value, list) and all(isinstance(v, str) and "=" in v for v in value)
-    if axis == "fault_onset_s":
-        return is_number and value >= 0
-    if axis in VEHICLE_SCALES:
-        return is_number and value > 0
-    return is_number
-
-
 def _fault_variants(name: str, faults: Mapping[str, Any]) -> list[tuple[str, str | None, Any]]:
     """``(name, swept parameter, severity)`` for each severity of a fault."""
     severity = None if name == NO_FAULT else faults[name].get("severity")
@@ -427,25 +378,16 @@ def _fault_variants(name: str, faults: Mapping[str, Any]) -> list[tuple[str, str
     return [(name, severity, value) for value in faults[name][severity]]
 
 
-def _criteria(table: Any, fail: Callable[..., CampaignError]) -> tuple[Criterion, ...]:
-    criteria = []
-    for metric, bound in _table(table, "criteria", fail).items():
-        _known(metric, METRICS, "criteria", bound, fail)
-        bound = _table(bound, f"criteria.{metric}", fail)
-        for key, value in bound.items():
-            _known(key, ("min", "max", "equals"), f"criteria.{metric}", value, fail)
-        if metric == "crashed":
-            if set(bound) != {"equals"} or not isinstance(bound["equals"], bool):
-                raise fail("criteria.crashed", dict(bound), "expected {equals = true|false}")
-            criteria.append(Criterion(metric, equals=bound["equals"]))
-            continue
-        if "equals" in bound or not bound:
-            raise fail(f"criteria.{metric}", dict(bound), "expected min and/or max")
-        for key in bound:
-            if isinstance(bound[key], bool) or not isinstance(bound[key], int | float):
-                raise fail(f"criteria.{metric}.{key}", bound[key], "expected a number")
-        criteria.append(Criterion(metric, minimum=bound.get("min"), maximum=bound.get("max")))
-    return tuple(criteria)
+def _fault_table(
+    fault: Mapping[str, Any], variant: tuple[str, str | None, Any], start_s: float
+) -> dict[str, Any]:
+    """The scenario's ``[[faults]]`` entry of one fault variant starting at ``start_s``."""
+    _, parameter, severity = variant
+    table = {k: v for k, v in fault.items() if k not in ("severity", "duration_s")}
+    table.update(start_s=start_s, **({} if parameter is None else {parameter: severity}))
+    if "duration_s" in fault:
+        table["end_s"] = start_s + fault["duration_s"]
+    return table
 
 
 # -- cases -------------------------------------------------------------------------------
@@ -453,14 +395,13 @@ def _criteria(table: Any, fail: Callable[..., CampaignError]) -> tuple[Criterion
 
 def expand(campaign: Campaign, out_dir: Path) -> list[CaseSpec]:
     """The Cartesian product of the axes, in file order; each case checked as a scenario."""
-    base, base_path = read_toml_file(
-        campaign.scenario, SCENARIOS_DIR, kind="scenario", error=CampaignError
+    settings = campaign.file
+    base, base_path = read_toml(
+        settings.scenario, SCENARIOS_DIR, kind="scenario", error=CampaignError
     )
     vehicle_name = base.get("vehicle")
     try:
-        vehicle, _ = read_toml_file(
-            vehicle_name, VEHICLES_DIR, kind="vehicle", error=VehicleFileError
-        )
+        vehicle, _ = read_toml(vehicle_name, VEHICLES_DIR, kind="vehicle", error=VehicleFileError)
     except (VehicleFileError, TypeError) as error:
         raise CampaignError(f"{base_path}: key 'vehicle': {error}") from None
     names = [name for name, _ in campaign.axes]
@@ -469,13 +410,13 @@ def expand(campaign: Campaign, out_dir: Path) -> list[CaseSpec]:
         chosen = dict(zip(names, values, strict=True))
         scenario = copy.deepcopy(base)
         vehicle_doc = copy.deepcopy(vehicle)
-        if campaign.duration_s is not None:  # a shorter run drops what would come after it
-            scenario["duration_s"] = campaign.duration_s
+        if settings.duration_s is not None:  # a shorter run drops what would come after it
+            scenario["duration_s"] = settings.duration_s
             for key, time_key in (("commands", "at_s"), ("faults", "start_s")):
                 if key in scenario:
                     scenario[key] = [item for item in scenario[key]
-                                     if item.get(time_key, 0.0) < campaign.duration_s]  # fmt: skip
-        scenario["sensor_layer"] = campaign.sensor_layer
+                                     if item.get(time_key, 0.0) < settings.duration_s]  # fmt: skip
+        scenario["sensor_layer"] = str(settings.sensor_layer)
         onset_s = _apply(chosen, campaign, scenario, vehicle_doc)
         labels = tuple((name, _label(name, value)) for name, value in chosen.items())
         # Everything the case flies, and its labels (the onset also sets the metric window
@@ -499,12 +440,12 @@ def expand(campaign: Campaign, out_dir: Path) -> list[CaseSpec]:
                 autopilot_params=tuple(chosen.get("autopilot_params", ())),
                 onset_s=onset_s,
                 run_dir=str(out_dir / f"case-{index:04d}-{case_id}"),
-                sensor_layer=campaign.sensor_layer,
-                timeout_s=campaign.case_timeout_s,
-                answer_timeout_s=campaign.answer_timeout_s,
-                first_instance=campaign.first_instance,
-                instances=campaign.instances,
-                crash=campaign.crash,
+                sensor_layer=settings.sensor_layer,
+                timeout_s=settings.case_timeout_s,
+                answer_timeout_s=settings.answer_timeout_s,
+                first_instance=settings.first_instance,
+                instances=settings.instances,
+                crash=settings.crash,
                 criteria=campaign.criteria,
                 credibility=campaign.credibility,
             )
@@ -519,9 +460,9 @@ def _apply(chosen: Mapping[str, Any], campaign: Campaign, scenario: dict, vehicl
     if "seed" in chosen:
         scenario["seed"] = chosen["seed"]
     if "wind_north_mps" in chosen or "wind_east_mps" in chosen:
-        environment = scenario.setdefault("environment", {})
-        down = environment.get("wind_steady_ned_mps", [0.0, 0.0, 0.0])[2]
-        environment["wind_steady_ned_mps"] = [
+        wind = scenario.setdefault("environment", {}).setdefault("wind", {})
+        down = wind.get("steady_ned_mps", [0.0, 0.0, 0.0])[2]
+        wind["steady_ned_mps"] = [
             float(chosen.get("wind_north_mps", 0.0)),
             float(chosen.get("wind_east_mps", 0.0)),
             down,
@@ -530,15 +471,10 @@ def _apply(chosen: Mapping[str, Any], campaign: Campaign, scenario: dict, vehicl
         if axis in chosen:
             for key in keys:
                 vehicle[section][key] = _scaled(vehicle[section][key], chosen[axis])
-    name, parameter, severity = chosen.get("fault", (NO_FAULT, None, None))
-    if name != NO_FAULT:
-        fault = dict(campaign.faults[name])
-        fault.pop("severity", None)
+    variant = chosen.get("fault", (NO_FAULT, None, None))
+    if variant[0] != NO_FAULT:
         start_s = 0.0 if onset_s is None else float(onset_s)
-        duration_s = fault.pop("duration_s", None)
-        fault.update(start_s=start_s, **({} if parameter is None else {parameter: severity}))
-        if duration_s is not None:
-            fault["end_s"] = start_s + duration_s
+        fault = _fault_table(campaign.file.faults[variant[0]], variant, start_s)
         scenario["faults"] = [*scenario.get("faults", []), fault]
     return None if onset_s is None else float(onset_s)
 

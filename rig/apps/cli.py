@@ -1,6 +1,7 @@
 """``rig``: run scenarios closed-loop (``rig run``), the demo flight (``rig hil-sim``),
 replays of real flights (``rig replay``), campaigns of many runs (``rig campaign``), a run's
-plots (``rig plot``) and identification from a log (``rig identify``).
+plots (``rig plot``), identification from a log (``rig identify``) and the configuration
+files' JSON Schema (``rig schema``).
 
 Errors are one line on stderr (exit 1); Ctrl-C stops the run cleanly with the logs
 readable (exit 130).
@@ -22,12 +23,13 @@ from rich.text import Text
 
 from rig.apps.plots import plot_run
 from rig.apps.replay import DRIVES, ReplayOptions, plan_replay, run_replay
+from rig.apps.schemas import write_schemas
 from rig.errors import RigError
 from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
 from rig.lockstep.pacing import parse_speed
 from rig.mavlink.px4_api import Ports
 from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import SENSOR_LAYERS, load_scenario
+from rig.scenarios.scenario import SensorLayer, load_scenario
 
 HIL_SIM_SCENARIO = "hil_sim"
 #: Pacing per command: the demo flight is watched in a ground station, so real time.
@@ -75,7 +77,12 @@ def main(argv: list[str] | None = None) -> int:
     replay.add_argument("--vehicle", default=None, metavar="NAME|PATH",
                         help="vehicle file (default: from the log's SYS_AUTOSTART)")  # fmt: skip
     replay.add_argument("--seed", type=int, default=0, help="seed of every random source")
-    replay.add_argument("--imu-hz", type=int, default=1000, help="IMU rate = lockstep rate")
+    replay.add_argument(
+        "--imu-hz",
+        type=int,
+        default=None,
+        help=f"IMU rate = lockstep rate (default {ReplayOptions.imu_hz})",
+    )
     _add_run_options(replay, scenario=False)
     campaign = commands.add_parser(
         "campaign", help="run a campaign file (resumable), or `campaign report DIR`"
@@ -104,8 +111,18 @@ def main(argv: list[str] | None = None) -> int:
                           help="boot seconds of the rate-loop fit (default: airborne)")  # fmt: skip
     identify.add_argument("--toml", action="store_true",
                           help="print [body]/[propulsion] lines for the vehicle file")  # fmt: skip
+    schema = commands.add_parser(
+        "schema", help="write the JSON Schema of each configuration file (for TOML editors)"
+    )
+    schema.add_argument(
+        "--out", type=Path, default=Path("schemas"), help="folder (default schemas/)"
+    )
     args = parser.parse_args(argv)
     console = Console(stderr=True)
+    if args.command == "schema":
+        for path in write_schemas(args.out):
+            console.print(str(path), highlight=False)
+        return 0
     if args.command == "campaign":
         return _campaign(args, console)
     if args.command == "identify":
@@ -171,10 +188,11 @@ def _run(args: argparse.Namespace, console: Console) -> RunResult:
 
 def _replay(args: argparse.Namespace, console: Console) -> RunResult:
     """``rig replay``: the plan first (a bad log fails before anything starts), then the run."""
+    given = {"sensor_layer": args.sensor_layer, "imu_hz": args.imu_hz}
     replay_options = ReplayOptions(
         drive=args.drive, window_s=tuple(args.window) if args.window else None,
         start_s=args.start, end_s=args.end, vehicle=args.vehicle, seed=args.seed,
-        sensor_layer=args.sensor_layer or "tlm", imu_hz=args.imu_hz,
+        **{name: value for name, value in given.items() if value is not None},
     )  # fmt: skip
     plan = plan_replay(args.log, replay_options)
     options = _run_options(args)
@@ -214,7 +232,7 @@ def _announce(console: Console, name: str, description: str, sensor_layer: str,
 
 def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) -> None:
     """Options of every closed-loop run; ``scenario``: also those a replay takes from the log."""
-    parser.add_argument("--sensor-layer", choices=SENSOR_LAYERS, default=None,
+    parser.add_argument("--sensor-layer", choices=list(SensorLayer), default=None,
                         help="default: the scenario's (tlm for a replay)")  # fmt: skip
     parser.add_argument("--instance", type=int, default=0, help="SITL instance i: ports +i")
     parser.add_argument("--out", type=Path, default=None,

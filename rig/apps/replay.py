@@ -39,16 +39,25 @@ from numpy.typing import NDArray
 
 from credibility.errors import CredibilityError
 from credibility.logs import read_ulog
-from quad_model.environment import GeoPoint, MagneticField
+from hil_config import FieldError, read_toml
+from quad_model.environment import Environment, GeoPoint, MagneticField
 from quad_model.model import ModelInputError, charge_used_for_voltage_c
-from quad_model.toml_file import read_toml_file
 from quad_model.vehicle import VEHICLES_DIR, BatteryParams, VehicleFileError, vehicle_from_dict
 from rig.autopilots.reference.params import PARAMETERS, ParameterError, Parameters
 from rig.chips.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PwmOutput
-from rig.errors import RigError, ScenarioError
+from rig.errors import RigError
 from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
-from rig.scenarios.scenario import SENSOR_LAYERS, Command, Scenario, scenario_from_dict
-from rig.scenarios.script import SetpointTrack
+from rig.scenarios.scenario import (
+    Arm,
+    Disarm,
+    Rates,
+    Scenario,
+    ScriptCommand,
+    SensorLayer,
+    SetpointTrack,
+    StartPose,
+    Track,
+)
 
 DRIVES = ("velocity", "attitude", "rates")
 #: PX4 SYS_AUTOSTART → bundled vehicle (PX4-Autopilot ROMFS/px4fmu_common/init.d/airframes).
@@ -90,8 +99,8 @@ class ReplayOptions:
     end_s: float | None = None  # None: the log's last timestamp
     vehicle: str | None = None  # None: from SYS_AUTOSTART
     seed: int = 0
-    sensor_layer: str = "tlm"
-    imu_hz: int = 1000
+    sensor_layer: SensorLayer = SensorLayer.TLM
+    imu_hz: int = Rates().imu_hz
 
 
 @dataclass(frozen=True)
@@ -129,9 +138,28 @@ class Replay:
     arm_s: float | None  # as flown: the real time, at least AUTOPILOT_READY_S after start
     disarm_s: float | None
     tracks: dict[str, SetpointTrack]
-    commands: tuple[Command, ...]
     options: ReplayOptions
     log_warnings: tuple[str, ...] = ()  # what pyulog reported (a damaged message skipped)
+
+    @property
+    def commands(self) -> tuple[ScriptCommand, ...]:
+        """Arm, stream the velocity track (the drive's inside the window), disarm; run seconds."""
+        start = self.start_s
+        if self.arm_s is None:
+            return ()
+        commands: list[ScriptCommand] = [
+            Arm(at_s=self.arm_s - start),
+            Track(at_s=self.arm_s - start, track=self.tracks["velocity"]),
+        ]
+        if self.window_s is not None and self.drive != "velocity":
+            a, b = self.window_s
+            commands += [
+                Track(at_s=a - start, track=self.tracks[self.drive]),
+                Track(at_s=b - start, track=self.tracks["velocity"]),
+            ]
+        if self.disarm_s is not None:
+            commands.append(Disarm(at_s=self.disarm_s - start, may_refuse=True))
+        return tuple(sorted(commands, key=lambda c: c.at_s))
 
     @property
     def autopilot_params(self) -> tuple[str, ...]:
@@ -161,41 +189,35 @@ class Replay:
 
     def scenario(self, vehicle_path: Path) -> Scenario:
         """The scenario this replay flies, with its vehicle file at ``vehicle_path``."""
-        document: dict[str, Any] = {
-            "name": f"replay-{self.log_path.stem}",
-            "description": f"replay of {self.log_path.name} ({self.drive} drive), "
-            f"{self.start_s:.3f}-{self.end_s:.3f} s",
-            "vehicle": str(vehicle_path),
-            "duration_s": self.end_s - self.start_s,
-            "seed": self.options.seed,
-            "sensor_layer": self.options.sensor_layer,
-            "rates": {"imu_hz": self.options.imu_hz},
-            "start": {"yaw_deg": math.degrees(self.yaw_rad)},
-        }
+        environment = Environment()
         if self.home is not None:
-            field = MagneticField.from_wmm(self.home, WMM_EPOCH_YEAR)
-            document["environment"] = {
-                "home": {
-                    "lat_deg": self.home.lat_deg,
-                    "lon_deg": self.home.lon_deg,
-                    "alt_amsl_m": self.home.alt_amsl_m,
-                },
-                "magnetic_field": {
-                    "declination_deg": field.declination_deg,
-                    "inclination_deg": field.inclination_deg,
-                    "intensity_gauss": field.intensity_gauss,
-                },
-            }
+            environment = Environment(
+                home=self.home, magnetic_field=MagneticField.from_wmm(self.home, WMM_EPOCH_YEAR)
+            )
         try:
-            scenario = scenario_from_dict(document, str(self.log_path))
-        except ScenarioError as error:  # e.g. an IMU rate the model cannot step
-            raise ReplayError(str(error).replace("key 'rates.imu_hz'", "--imu-hz")) from None
-        return replace(
-            scenario,
-            commands=self.commands,
-            clock_start_s=self.start_s,
+            rates = Rates(imu_hz=self.options.imu_hz)
+        except FieldError as error:  # an IMU rate the model cannot step
+            reason = f"--imu-hz = {error.value}: {error.reason}"
+            raise ReplayError(f"{self.log_path}: {reason}") from None
+        return Scenario(
+            name=f"replay-{self.log_path.stem}",
+            description=f"replay of {self.log_path.name} ({self.drive} drive), "
+            f"{self.start_s:.3f}-{self.end_s:.3f} s",
+            vehicle=str(vehicle_path),
+            duration_s=self.end_s - self.start_s,
+            seed=self.options.seed,
+            sensor_layer=self.options.sensor_layer,
+            rates=rates,
+            environment=environment,
+            start=StartPose(
+                yaw_deg=math.degrees(self.yaw_rad),
+                clock_s=self.start_s,
+                battery_voltage_v=self.initial_battery_voltage_v,
+            ),
             motor_pwm_range_us=self.motor_pwm_range_us,
-            initial_battery_voltage_v=self.initial_battery_voltage_v,
+            commands=tuple(c for c in self.commands if not isinstance(c, Track)),
+            tracks=tuple(c for c in self.commands if isinstance(c, Track)),
+            source=str(self.log_path),
         )
 
     def summary(self) -> dict[str, Any]:
@@ -240,9 +262,9 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
     path = Path(log_path)
     if options.drive not in DRIVES:
         raise ReplayError(f"--drive {options.drive!r}: expected one of {', '.join(DRIVES)}")
-    if options.sensor_layer not in SENSOR_LAYERS:
+    if options.sensor_layer not in list(SensorLayer):
         raise ReplayError(
-            f"--sensor-layer {options.sensor_layer!r}: expected one of {', '.join(SENSOR_LAYERS)}"
+            f"--sensor-layer {options.sensor_layer!r}: expected one of {', '.join(SensorLayer)}"
         )
     log = _FlightLog(path)
     start_s = log.first_s if options.start_s is None else options.start_s
@@ -311,11 +333,9 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         arm_s=arm_s,
         disarm_s=disarm_s,
         tracks=tracks,
-        commands=(),
         options=options,
         log_warnings=log.warnings,
     )
-    replay = replace(replay, commands=_commands(replay))
     replay.scenario(Path(vehicle))  # a bad rate fails here, before a run folder exists
     return replay
 
@@ -534,9 +554,7 @@ def _vehicle_document(
     """The vehicle file with the log's battery cell count (BAT1_N_CELLS, else BAT_N_CELLS),
     the count and the resulting battery."""
     try:
-        document, source = read_toml_file(
-            vehicle, VEHICLES_DIR, kind="vehicle", error=VehicleFileError
-        )
+        document, source = read_toml(vehicle, VEHICLES_DIR, kind="vehicle", error=VehicleFileError)
     except VehicleFileError as error:
         raise ReplayError(f"--vehicle: {error}") from None
     cells = log.parameters.get("BAT1_N_CELLS", log.parameters.get("BAT_N_CELLS"))
@@ -591,23 +609,3 @@ def _parameters(
         applied[name] = logged[name]
     unknown = sum(1 for name in logged if name not in known and name not in RIG_OWNED_PARAMETERS)
     return applied, tuple(skipped), unknown
-
-
-def _commands(replay: Replay) -> tuple[Command, ...]:
-    """Arm, stream the velocity track (the drive's inside the window), disarm."""
-    start, tracks = replay.start_s, replay.tracks
-    if replay.arm_s is None:
-        return ()
-    commands = [
-        Command(replay.arm_s - start, "arm"),
-        Command(replay.arm_s - start, "track", {"track": tracks["velocity"]}),
-    ]
-    if replay.window_s is not None and replay.drive != "velocity":
-        a, b = replay.window_s
-        commands += [
-            Command(a - start, "track", {"track": tracks[replay.drive]}),
-            Command(b - start, "track", {"track": tracks["velocity"]}),
-        ]
-    if replay.disarm_s is not None:
-        commands.append(Command(replay.disarm_s - start, "disarm", {"may_refuse": True}))
-    return tuple(sorted(commands, key=lambda c: c.at_s))

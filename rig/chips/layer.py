@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Coroutine, Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, Protocol, TypeVar
 
 from fpga_hdl.buses import BusError, I2cBus, SpiBus, TlmI2cBus, TlmSpiBus
@@ -38,7 +39,16 @@ from fpga_hdl.ms5611.model import Ms5611Model
 from quad_model.sensors import SensorReadings
 from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
 
-CHIPS = ("mpu6000", "ms5611", "ist8310")
+
+class Chip(StrEnum):
+    """The emulated chips, in the order the co-simulation channel numbers them."""
+
+    MPU6000 = "mpu6000"
+    MS5611 = "ms5611"
+    IST8310 = "ist8310"
+
+
+CHIPS = tuple(Chip)
 
 _T = TypeVar("_T")
 

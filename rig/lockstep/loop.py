@@ -22,7 +22,7 @@ the previous one, and every number is the same as in strict order (a golden test
 
 Two clocks: the rig's own parts (model, chips, PWM, faults, scenario commands) count run
 time from 0; everything that leaves the rig (every message to the autopilot, every log
-timestamp) is stamped on the autopilot's boot clock, ``Scenario.clock_start_s`` later. A
+timestamp) is stamped on the autopilot's boot clock, ``Scenario.start.clock_s`` later. A
 replay starts that clock at the real log's first timestamp, so both logs share one time
 axis, while the RTL never simulates the hundreds of seconds before it.
 
@@ -216,7 +216,7 @@ class _Loop:
         self.rates = scenario.rates
         self.frame_us = self.rates.frame_us
         #: The autopilot's clock at frame 0 (µs); ``time_us`` is that clock, ``run_us`` the run's.
-        self.clock_start_us = round(scenario.clock_start_s * 1e6)
+        self.clock_start_us = round(scenario.start.clock_s * 1e6)
         self.run_us = 0
         self.time_us = self.clock_start_us
         self.frames = 0
@@ -269,7 +269,7 @@ class _Loop:
         self.model.reset(
             position_ned_m=start.position_ned_m,
             attitude_quat=yaw_quat(math.radians(start.yaw_deg)),
-            battery_voltage_v=scenario.initial_battery_voltage_v,
+            battery_voltage_v=scenario.start.battery_voltage_v,
         )
         self.sensors = SensorSuite(
             vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
@@ -298,8 +298,8 @@ class _Loop:
         self._closers.append(ground.close)
         self.ground = ground
         reference = self.options.autopilot == "reference"
-        script = CommandScript(self.scenario.commands, ground, barrier=reference,
-                               clock_start_s=self.scenario.clock_start_s)  # fmt: skip
+        script = CommandScript(self.scenario.script(), ground, barrier=reference,
+                               clock_start_s=self.scenario.start.clock_s)  # fmt: skip
         if reference:
             self._start_reference_autopilot()
             link.accept("the reference autopilot (python -m rig.autopilots.reference)")

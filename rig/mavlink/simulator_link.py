@@ -66,6 +66,8 @@ class LinkStats:
     frames_sent: int = 0
     answers: int = 0
     stale_answers: int = 0
+    #: Answers stamped like the one before: PX4 may publish its outputs twice in one step.
+    repeated_answers: int = 0
     freewheel_frames: int = 0
     malformed: int = 0
     encode_s: float = 0.0
@@ -276,8 +278,11 @@ class SimulatorLink:
         if kind == "HIL_ACTUATOR_CONTROLS":
             controls = decode_actuator_controls(message)
             previous_us = -1 if self._latest is None else self._latest.time_us
+            if controls.time_us == previous_us:
+                self.stats.repeated_answers += 1
+                return
             if not previous_us < controls.time_us <= self._sent_us:
-                self.stats.malformed += 1  # repeated, backwards or future: answers no frame
+                self.stats.malformed += 1  # backwards or from the future: answers no frame
                 return
             if self._awaited_us is not None and controls.time_us < self._awaited_us:
                 self.stats.stale_answers += 1

@@ -87,10 +87,10 @@ class FaultInjector:
                 continue
             self._announce(time_us, f"fault {describe(fault)} {'started' if now else 'ended'}")
             if fault.kind in ("motor_loss", "motor_degradation"):
-                health = fault.params.get("efficiency", 0.0) if now else 1.0
-                model.set_motor_health(fault.params["motor"], health)
+                health = getattr(fault, "efficiency", 0.0) if now else 1.0
+                model.set_motor_health(fault.motor, health)
             if fault.kind == "sensor_stuck":
-                sensor = fault.params["sensor"]
+                sensor = fault.sensor
                 if now:
                     self._stuck[sensor] = self._last.get(sensor)
                 else:
@@ -116,13 +116,13 @@ class FaultInjector:
             else:
                 self._last[sensor] = value
             for fault in self._active:
-                if fault.params.get("sensor") != sensor:
+                if getattr(fault, "sensor", None) != sensor:
                     continue
                 if fault.kind == "sensor_bias":
-                    value = value + np.asarray(fault.params["bias"])
+                    value = value + np.asarray(fault.bias)
                 elif fault.kind == "noise_burst":
                     shape = np.shape(value)
-                    value = value + fault.params["std"] * self._rng.standard_normal(shape)
+                    value = value + fault.std * self._rng.standard_normal(shape)
             if value is not getattr(sample, field):
                 sample = dataclasses.replace(sample, **{field: _like(value, sample, field)})
                 readings = dataclasses.replace(readings, **{sample_name: sample})
@@ -141,30 +141,28 @@ class FaultInjector:
     def _chip_inputs(self) -> dict[str, ChipFault]:
         faults: dict[str, ChipFault] = {}
         for fault in self._active:
-            chip = fault.params.get("chip")
+            chip = getattr(fault, "chip", None)
             if chip is None:
                 continue
             current = faults.get(chip, ChipFault())
             if fault.kind == "chip_mute":
                 faults[chip] = dataclasses.replace(current, mute=True)
             elif fault.kind == "bus_bit_flip":
-                faults[chip] = dataclasses.replace(
-                    current, flip=current.flip | fault.params["mask"]
-                )
+                faults[chip] = dataclasses.replace(current, flip=current.flip | fault.mask)
         return faults
 
     def _dropped_channels(self) -> frozenset[int]:
         dropped: set[int] = set()
         for fault in self._active:
             if fault.kind == "pwm_dropout":
-                channel = fault.params.get("channel")
+                channel = fault.channel
                 dropped |= set(range(MOTOR_COUNT)) if channel is None else {channel}
         return frozenset(dropped)
 
 
 def describe(fault: FaultSpec) -> str:
     """``motor_loss (motor=0)``: the kind and its parameters, for log lines."""
-    params = ", ".join(f"{k}={v}" for k, v in fault.params.items())
+    params = ", ".join(f"{k}={v}" for k, v in fault.parameters.items() if v is not None)
     return f"{fault.kind} ({params})" if params else fault.kind
 
 

@@ -1,14 +1,14 @@
 """The scenario's command script in simulated time: what to send to the autopilot, when.
 
-Turns each :class:`rig.scenarios.scenario.Command` into a ground-station conversation
-(:mod:`rig.mavlink.ground_link`) at its time, and keeps the offboard setpoint streams alive the way
-MAVSDK does (PX4 leaves offboard when setpoints stop): a ``goto`` re-sends its position
-setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at ``rate_hz``, a
-``track`` sends a :class:`SetpointTrack`'s recorded setpoints at their times and holds the
-last one (re-sent every 0.1 s) between them. A mode command (takeoff, land, mission,
-motor test, another stream) ends the running stream; arm, disarm and set_param do not
-change the mode, so the stream goes on as MAVSDK's does (a replay arms and disarms
-mid-stream).
+Turns each command of :mod:`rig.scenarios.scenario` into a ground-station conversation
+(:mod:`rig.mavlink.ground_link`) at its time, and keeps the offboard setpoint streams alive
+the way MAVSDK does (PX4 leaves offboard when setpoints stop): a ``goto`` re-sends its
+position setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at ``rate_hz``,
+a ``track`` sends a :class:`~rig.scenarios.scenario.SetpointTrack`'s recorded setpoints at
+their times and holds the last one (re-sent every 0.1 s) between them. A mode command
+(takeoff, land, mission, motor test, another stream) ends the running stream; arm, disarm
+and set_param do not change the mode, so the stream goes on as MAVSDK's does (a replay arms
+and disarms mid-stream).
 
 With ``barrier=True`` (the reference autopilot) every setpoint travels inside an
 acknowledged conversation, so it acts at a known frame; with PX4 the stream is sent
@@ -23,7 +23,13 @@ from dataclasses import dataclass
 
 from rig.mavlink.ground_link import OFFBOARD_KEEPALIVE_S, Conversation, GroundLink, sweep_pitch_rad
 from rig.mavlink.px4_api import mavlink
-from rig.scenarios.scenario import Command
+from rig.scenarios.scenario import (
+    Goto,
+    PitchSweep,
+    ScriptCommand,
+    SetpointTrack,
+    Track,
+)
 
 
 @dataclass(frozen=True)
@@ -37,36 +43,9 @@ class Action:
     logged: bool = True
 
 
-#: What one sample of a :class:`SetpointTrack` holds, per kind.
-TRACK_KINDS = {
-    "velocity": "vn, ve, vd (m/s, NED) and yaw (rad; NaN: not controlled)",
-    "attitude": "q w, x, y, z (body to NED) and collective thrust 0..1",
-    "rates": "roll, pitch, yaw rate (rad/s, FRD) and collective thrust 0..1",
-}
-
-
-@dataclass(frozen=True)
-class SetpointTrack:
-    """Offboard setpoints recorded at known times (e.g. a real flight's), in run seconds.
-
-    A ``track`` command streams it from its own time on: each sample goes out at the first
-    frame at or after its time, and the latest one is held (zero-order hold) in between.
-    """
-
-    kind: str
-    times_s: tuple[float, ...]
-    values: tuple[tuple[float, ...], ...]
-
-    def __post_init__(self) -> None:
-        if self.kind not in TRACK_KINDS:
-            raise ValueError(f"track kind {self.kind!r} is not one of {', '.join(TRACK_KINDS)}")
-        if not self.times_s or len(self.times_s) != len(self.values):
-            raise ValueError("a track needs one value per time, and at least one")
-
-
 @dataclass
 class _Stream:
-    command: Command
+    command: Goto | PitchSweep | Track
     started_s: float
     next_s: float
     period_s: float
@@ -87,7 +66,7 @@ class CommandScript:
 
     def __init__(
         self,
-        commands: tuple[Command, ...],
+        commands: tuple[ScriptCommand, ...],
         ground: GroundLink,
         *,
         barrier: bool,
@@ -111,46 +90,47 @@ class CommandScript:
             if action is not None:
                 yield action
 
-    def _start(self, command: Command, time_s: float) -> Iterator[Action]:
-        g, p, name = self.ground, command.params, f"{command.action} at t={command.at_s:g} s"
+    def _start(self, command: ScriptCommand, time_s: float) -> Iterator[Action]:
+        g, c, name = self.ground, command, f"{command.action} at t={command.at_s:g} s"
         if command.action not in _KEEP_STREAM:
             self._stream = None  # a mode command takes over from a running setpoint stream
-        if command.action in ("goto", "pitch_sweep", "track"):
-            rate_hz = p.get("rate_hz", 50.0) if command.action == "pitch_sweep" else None
-            period = 1.0 / rate_hz if rate_hz else OFFBOARD_KEEPALIVE_S
-            self._stream = _Stream(command, time_s, time_s, period)
+        if isinstance(command, Goto | PitchSweep | Track):
+            period = 1.0 / command.rate_hz if isinstance(command, PitchSweep) else None
+            self._stream = _Stream(command, time_s, time_s, period or OFFBOARD_KEEPALIVE_S)
             return
         conversations = {
             # PX4 (not the barrier) is asked again until its pre-flight checks pass
             "arm": lambda: g.arm(True) if self.barrier else g.arm_when_ready(),
             # a replay's disarm follows the real flight's and may find this one still flying
-            "disarm": lambda: g.attempt(g.arm(False)) if p.get("may_refuse") else g.arm(False),
-            "takeoff": lambda: g.takeoff(p["altitude_m"]),
+            "disarm": lambda: g.attempt(g.arm(False)) if c.may_refuse else g.arm(False),
+            "takeoff": lambda: g.takeoff(c.altitude_m),
             "land": g.land,
-            "mission": lambda: g.mission(p["waypoints_ned_m"]),
-            "motor_test": lambda: g.motor_test(p["motor"], p["throttle"], p["duration_s"]),
-            "set_param": lambda: g.set_param(p["name"], p["value"]),
+            "mission": lambda: g.mission(c.waypoints_ned_m),
+            "motor_test": lambda: g.motor_test(c.motor, c.throttle, c.duration_s),
+            "set_param": lambda: g.set_param(c.name, c.value),
         }
         yield Action(name, conversations[command.action]())
 
     def _stream_action(self, stream: _Stream, time_s: float) -> Action | None:
-        command, p = stream.command, stream.command.params
+        command = stream.command
         stream.next_s += stream.period_s
         stamp_s = self.clock_start_s + time_s
-        if command.action == "goto":
-            setpoint = self.ground.position_setpoint(p["position_ned_m"], p.get("yaw_deg"), stamp_s)
-        elif command.action == "track":
-            setpoint = self._track_setpoint(stream, p["track"], time_s, stamp_s)
+        if isinstance(command, Goto):
+            setpoint = self.ground.position_setpoint(
+                command.position_ned_m, command.yaw_deg, stamp_s
+            )
+        elif isinstance(command, Track):
+            setpoint = self._track_setpoint(stream, command.track, time_s, stamp_s)
         else:
             elapsed = time_s - stream.started_s
-            if elapsed > p["duration_s"]:
+            if elapsed > command.duration_s:
                 self._stream = None
                 return None
             pitch = sweep_pitch_rad(
-                elapsed, p["duration_s"], math.radians(p["amplitude_deg"]),
-                p["f_min_radps"], p["f_max_radps"],
+                elapsed, command.duration_s, math.radians(command.amplitude_deg),
+                command.f_min_radps, command.f_max_radps,
             )  # fmt: skip
-            setpoint = self.ground.attitude_setpoint(0.0, pitch, 0.0, p["thrust"], stamp_s)
+            setpoint = self.ground.attitude_setpoint(0.0, pitch, 0.0, command.thrust, stamp_s)
         name = f"{command.action} at t={command.at_s:g} s"
         first = not stream.announced
         stream.announced = True

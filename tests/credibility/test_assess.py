@@ -205,16 +205,28 @@ BAD_PLANS = [
         ("frequency = 0.4", "frequency = 0.5"),
         "weights must sum to 1, got performance 0.3 + time 0.3 + frequency 0.5 = 1.1",
     ),
-    (('parameter = "mean"', 'parameter = "mean"\nhihgpass_hz = 5'), "unknown key(s) hihgpass_hz"),
-    (("segment_s = [10.0, 20.0]", "segmnet_s = [10.0, 20.0]"), "missing required key 'segment_s'"),
+    (
+        ('parameter = "mean"', 'parameter = "mean"\nhihgpass_hz = 5'),
+        "key 'tests[0].hihgpass_hz' = 5: unknown key",
+    ),
+    (
+        ("segment_s = [10.0, 20.0]", "segmnet_s = [10.0, 20.0]"),
+        "key 'tests[0].segmnet_s' = [10.0, 20.0]: unknown key",
+    ),
     (
         ("segment_s = [10.0, 30.0]", "segment_s = [50.0, 70.0]"),
         "segment [50, 70] s is outside the logged span",
     ),
     (('sim_low = "sim_low.csv"', 'sim_low = "missing.csv"'), "missing.csv: log file not found"),
-    (('compare = ["sim_low"]', 'compare = ["sim_x"]'), "uses log role 'sim_x'"),
-    (('parameter = "mean"', 'parameter = "median"'), "parameter = 'median'; expected one of"),
-    (("[plan]", "[plan\n"), "invalid TOML"),
+    (
+        ('compare = ["sim_low"]', 'compare = ["sim_x"]'),
+        "key 'tests[0].compare' = 'sim_x': not in [logs] ['real', 'sim', 'sim_low']",
+    ),
+    (
+        ('parameter = "mean"', 'parameter = "median"'),
+        "key 'tests[0].parameter' = 'median': expected 'mean', 'std'",
+    ),
+    (("[plan]", "[plan\n"), "not valid TOML"),
 ]
 
 

@@ -61,11 +61,11 @@ def test_default_field_is_wmm_at_px4_home_and_passes_px4_check():
 
 
 def test_environment_settings_are_checked():
-    with pytest.raises(EnvironmentConfigError, match=r"intensity_gauss=2.0 is not Earth-like"):
+    with pytest.raises(EnvironmentConfigError, match=r"^intensity_gauss = 2.0: is not Earth-like"):
         MagneticField(declination_deg=0.0, inclination_deg=60.0, intensity_gauss=2.0)
-    with pytest.raises(EnvironmentConfigError, match=r"wind_at_6m_mps=-1.0 is negative"):
+    with pytest.raises(EnvironmentConfigError, match=r"^wind_at_6m_mps = -1.0: is negative"):
         Wind(wind_at_6m_mps=-1.0)
-    with pytest.raises(EnvironmentConfigError, match=r"alt_amsl_m=20000.0 is outside"):
+    with pytest.raises(EnvironmentConfigError, match=r"^home.alt_amsl_m = 20000.0: is outside"):
         Environment(home=GeoPoint(0.0, 0.0, 20000.0))
 
 

@@ -50,36 +50,46 @@ def _edited(tmp_path, old, new):
 @pytest.mark.parametrize(
     ("old", "new", "message"),
     [
-        ("mass_kg = 1.4 ", "", "[body] key 'mass_kg' is missing"),
-        ("mass_kg = 1.4 ", "mass_kg = -1.4 ", "[body] mass_kg = -1.4 must be > 0"),
-        ("mass_kg = 1.4 ", 'mass_kg = "heavy" ', "[body] mass_kg = 'heavy' is not a number"),
-        ("mass_kg = 1.4 ", "mass_kg = 1.4\nmass_lb = 3.1 ", "[body] unknown key 'mass_lb'"),
+        ("mass_kg = 1.4 ", "", "key 'body.mass_kg' is missing"),
+        ("mass_kg = 1.4 ", "mass_kg = -1.4 ", "key 'body.mass_kg' = -1.4: expected a value > 0"),
+        (
+            "mass_kg = 1.4 ",
+            'mass_kg = "heavy" ',
+            "key 'body.mass_kg' = 'heavy': expected a valid number",
+        ),
+        (
+            "mass_kg = 1.4 ",
+            "mass_kg = 1.4\nmass_lb = 3.1 ",
+            "key 'body.mass_lb' = 3.1: unknown key",
+        ),
         (
             "blade_count = 2",
             "blade_count = 2.5",
-            "[propulsion] blade_count = 2.5 is not an integer",
+            "key 'propulsion.blade_count' = 2.5: expected a valid integer",
         ),
         (
             "drag_area_m2 = [0.0898, 0.0898, 0.0898]",
             "drag_area_m2 = [0.0898, 0.0898]",
-            "[body] drag_area_m2 = [0.0898, 0.0898] must be an array of shape 3",
+            "key 'body.drag_area_m2[2]' is missing",
         ),
         (
             "min_throttle = 0.05",
             "min_throttle = 1.5",
-            "[propulsion] min_throttle = 1.5 must be within 0..1",
+            "key 'propulsion.min_throttle' = 1.5: expected a value <= 1",
         ),
         (
             "spin_direction = [1, 1, -1, -1]",
             "spin_direction = [1, 1, -1, 0]",
-            "[propulsion] spin_direction = [1.0, 1.0, -1.0, 0.0] must hold +1 (CCW) or -1 (CW)",
+            "key 'propulsion.spin_direction' = [1.0, 1.0, -1.0, 0.0]: "
+            "must hold +1 (CCW) or -1 (CW)",
         ),
         (
             "[0.0, 0.0, 0.0366]",
             "[0.0, 0.0, -0.0366]",
-            "[body] inertia_kgm2 must be symmetric positive definite",
+            "key 'body.inertia_kgm2' = [[0.0211, 0.0, 0.0], [0.0, 0.0219, 0.0], "
+            "[0.0, 0.0, -0.0366]]: must be symmetric positive definite",
         ),
-        ("[gps]\n", "[gnss]\n", "unknown key 'gnss'"),
+        ("[gps]\n", "[gnss]\n", "key 'gps' is missing"),
     ],
 )
 def test_bad_vehicle_file_names_the_key(tmp_path, old, new, message):
@@ -93,10 +103,10 @@ def test_bad_vehicle_file_names_the_key(tmp_path, old, new, message):
 def test_missing_table_and_unreadable_files(tmp_path):
     text = (VEHICLES_DIR / "f450_high_precision.toml").read_text(encoding="utf-8")
     path = _write(tmp_path, text.split("[mag]")[0])
-    with pytest.raises(VehicleFileError, match=r"bad.toml: table \[mag\] is missing$"):
+    with pytest.raises(VehicleFileError, match=r"bad.toml: key 'mag' is missing$"):
         load_vehicle(path)
     path = _write(tmp_path, "name = 'x'\n[body\n")
-    with pytest.raises(VehicleFileError, match=r"bad.toml: not a readable TOML file \("):
+    with pytest.raises(VehicleFileError, match=r"bad.toml: not valid TOML \("):
         load_vehicle(path)
     with pytest.raises(VehicleFileError, match=r"no_such.toml: no such vehicle file \(bundled: "):
         load_vehicle(tmp_path / "no_such.toml")

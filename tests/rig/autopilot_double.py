@@ -17,6 +17,8 @@ Behaviours:
 - ``close``: answers ``--after`` frames, then closes the link.
 - ``garbage``: answers ``--after`` frames, then sends random bytes instead of answers.
 - ``nan``: answers ``--after`` frames, then sends NaN motor commands while armed.
+- ``twice``: answers ``--after`` frames, then sends every answer twice (PX4 may publish
+  its outputs twice in one lockstep step).
 
 Each received frame is appended to ``--record`` (one JSON line: msg type and fields), so a
 test can check what reached the autopilot.
@@ -108,9 +110,9 @@ def main() -> None:
                 controls, mode = [args.throttle] * 4 + [0.0] * 12, ARMED_MODE
             else:
                 controls, mode = [0.0] * 16, 1
-            sock.sendall(
-                mav.hil_actuator_controls_encode(message.time_usec, controls, mode, 1).pack(mav)
-            )
+            answer = mav.hil_actuator_controls_encode(message.time_usec, controls, mode, 1)
+            copies = 2 if misbehaving and args.behaviour == "twice" else 1
+            sock.sendall(answer.pack(mav) * copies)
 
 
 if __name__ == "__main__":

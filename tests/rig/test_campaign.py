@@ -49,7 +49,7 @@ def test_cases_are_the_cartesian_product_with_severities_and_onsets_applied(tmp_
     assert degraded.onset_s == 2.0
     assert degraded.scenario_document["seed"] == 4
     assert degraded.scenario_document["duration_s"] == 3.0
-    assert degraded.scenario_document["environment"]["wind_steady_ned_mps"] == [3.0, 0.0, 0.0]
+    assert degraded.scenario_document["environment"]["wind"]["steady_ned_mps"] == [3.0, 0.0, 0.0]
     # The F450 file's 1.4 kg, scaled; the inertia untouched.
     assert degraded.vehicle_document["body"]["mass_kg"] == pytest.approx(1.4 * 1.2)
     assert degraded.vehicle_document["body"]["inertia_kgm2"][0][0] == 0.0211
@@ -65,16 +65,39 @@ def test_case_ids_are_stable_so_a_rerun_finds_its_cases(tmp_path):
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
-        ({"axes": {"colour": [1]}}, "c.toml: key 'axes.colour' = [1]: unknown key (known: "),
-        ({"axes": {"seed": [-1]}}, "c.toml: key 'axes.seed' = -1: expected a integer >= 0"),
-        ({"axes": {"fault": ["nope"]}}, "c.toml: key 'axes.fault' = 'nope': expected a fault"),
-        ({"axes": {"mass_scale": []}}, "c.toml: key 'axes.mass_scale' = []: expected a non-empty"),
-        ({"sensor_layer": "fpga"}, "c.toml: key 'sensor_layer' = 'fpga': expected one of tlm, rtl"),
-        ({"criteria": {"crashed": {"max": 1}}}, "c.toml: key 'criteria.crashed' = {'max': 1}"),
-        ({"criteria": {"speed": {"max": 1}}}, "c.toml: key 'criteria.speed' = {'max': 1}: unknown"),
-        ({"case_timeout_s": 0}, "c.toml: key 'case_timeout_s' = 0: expected a number > 0"),
-        ({"instances": 90}, "c.toml: key 'instances' = [20, 90]: first_instance + instances"),
+        ({"axes": {"colour": [1]}}, "c.toml: key 'axes.colour' = [1]: unknown key"),
+        ({"axes": {"seed": [-1]}}, "c.toml: key 'axes.seed[0]' = -1: expected a value >= 0"),
+        (
+            {"axes": {"fault": ["nope"]}},
+            "c.toml: key 'axes.fault' = 'nope': no [faults.nope] table",
+        ),
+        (
+            {"axes": {"mass_scale": []}},
+            "c.toml: key 'axes.mass_scale' = []: expected at least 1 item(s)",
+        ),
+        ({"sensor_layer": "fpga"}, "c.toml: key 'sensor_layer' = 'fpga': expected 'tlm' or 'rtl'"),
+        (
+            {"criteria": {"crashed": {"max": 1}}},
+            "c.toml: key 'criteria.crashed' = {'max': 1.0}: expected {equals = true|false}",
+        ),
+        (
+            {"criteria": {"speed": {"max": 1}}},
+            "c.toml: key 'criteria.speed' = {'max': 1}: expected 'max_tilt_deg', ",
+        ),
+        ({"case_timeout_s": 0}, "c.toml: key 'case_timeout_s' = 0: expected a value > 0"),
+        (
+            {"instances": 90},
+            "c.toml: key 'instances' = 90: first_instance (20) + instances must lie within",
+        ),
         ({"scenario": "no_such"}, "no_such.toml: no such scenario file (bundled: "),
+        (
+            {"faults": {"m0": {"kind": "motor_loss", "motor": 7}}, "axes": {"fault": ["m0"]}},
+            "c.toml: faults.m0: key 'motor' = 7: expected a value <= 3",
+        ),
+        (
+            {"faults": {"m0": {"kind": "motor_loss", "motor": 0, "duration_s": "3"}}},
+            "c.toml: faults.m0: key 'duration_s' = '3': expected a valid number",
+        ),
     ],
 )
 def test_bad_campaign_files_fail_with_one_line_naming_key_and_value(overrides, message):
@@ -156,12 +179,12 @@ def test_credibility_plan_is_found_beside_the_campaign_or_bundled(tmp_path, quad
     ("table", "message"),
     [
         ({"plan": "nope.toml"}, "key 'credibility.plan' = 'nope.toml': no such plan file"),
-        ({"plan": 3}, "key 'credibility.plan' = 3: expected a plan file or a bundled plan name"),
+        ({"plan": 3}, "key 'credibility.plan' = 3: expected a valid string"),
         ({"plan": "plan.toml", "role": "gazebo"},
          "key 'credibility.role' = 'gazebo': not a log role of the plan (real, sim)"),
         ({"plan": "plan.toml", "log": "px4"},
-         "key 'credibility.log' = 'px4': expected one of rig, autopilot"),
-        ({"plan": "plan.toml", "weight": 1}, "key 'credibility.weight' = 1: unknown key (known: "),
+         "key 'credibility.log' = 'px4': expected 'rig' or 'autopilot'"),
+        ({"plan": "plan.toml", "weight": 1}, "key 'credibility.weight' = 1: unknown key"),
         ({"plan": "broken.toml"}, "key 'credibility.plan' = 'broken.toml': "),
     ],
 )  # fmt: skip

@@ -24,7 +24,7 @@ def test_bad_scenario_value_names_file_key_and_value(capsys, tmp_path):
     path.write_text('name = "bad"\nvehicle = "f450_high_precision"\nduration_s = 5\nseed = -1\n')
     assert main(["run", str(path)]) == 1
     err = capsys.readouterr().err
-    assert err == f"rig: error: {path}: key 'seed' = -1: expected an integer >= 0\n"
+    assert err == f"rig: error: {path}: key 'seed' = -1: expected a value >= 0\n"
 
 
 def test_unknown_vehicle_is_a_scenario_error(capsys, tmp_path):

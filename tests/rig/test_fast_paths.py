@@ -24,7 +24,7 @@ from rig.mavlink.px4_api import ActuatorMode, Ports, mavlink
 from rig.mavlink.sim_messages import decode_actuator_controls
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.faults import FaultInjector
-from rig.scenarios.scenario import FaultSpec, scenario_from_dict
+from rig.scenarios.scenario import ChipMute, PwmDropout, SensorBias, scenario_from_dict
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 
@@ -63,7 +63,7 @@ def test_pwm_output_latches_only_the_latest_command_at_each_period():
 
 def test_healthy_frames_pass_the_readings_through_untouched():
     injector = FaultInjector(
-        [FaultSpec("sensor_bias", 1.0, 2.0, {"sensor": "accel", "bias": [1.0, 0.0, 0.0]})],
+        [SensorBias(start_s=1.0, end_s=2.0, sensor="accel", bias=(1.0, 0.0, 0.0))],
         np.random.default_rng(0),
         lambda time_us, text: None,
     )
@@ -81,8 +81,8 @@ def test_healthy_frames_pass_the_readings_through_untouched():
 
 def test_fault_inputs_change_only_when_a_fault_starts_or_ends():
     injector = FaultInjector(
-        [FaultSpec("chip_mute", 1.0, 2.0, {"chip": "ms5611"}),
-         FaultSpec("pwm_dropout", 1.5, None, {"channel": 1})],
+        [ChipMute(start_s=1.0, end_s=2.0, chip="ms5611"),
+         PwmDropout(start_s=1.5, channel=1)],
         np.random.default_rng(0),
         lambda time_us, text: None,
     )  # fmt: skip

@@ -6,7 +6,15 @@ import pytest
 from quad_model.sensors import BaroSample, ImuSample, SensorReadings
 from rig.chips.layer import ChipFault
 from rig.scenarios.faults import FaultInjector
-from rig.scenarios.scenario import FaultSpec
+from rig.scenarios.scenario import (
+    BusBitFlip,
+    ChipMute,
+    MotorDegradation,
+    MotorLoss,
+    NoiseBurst,
+    PwmDropout,
+    SensorStuck,
+)
 
 
 class RecordingModel:
@@ -34,8 +42,8 @@ def make(*faults, seed=0):
 
 def test_motor_faults_act_on_the_model_and_are_announced():
     injector, events = make(
-        FaultSpec("motor_degradation", 1.0, 2.0, {"motor": 2, "efficiency": 0.6}),
-        FaultSpec("motor_loss", 1.5, None, {"motor": 0}),
+        MotorDegradation(start_s=1.0, end_s=2.0, motor=2, efficiency=0.6),
+        MotorLoss(start_s=1.5, motor=0),
     )
     model = RecordingModel()
     for time_us in (500_000, 1_000_000, 1_500_000, 2_000_000, 3_000_000):
@@ -50,7 +58,7 @@ def test_motor_faults_act_on_the_model_and_are_announced():
 
 def test_noise_burst_has_the_configured_std_and_is_seeded():
     def burst(seed):
-        injector, _ = make(FaultSpec("noise_burst", 0.0, None, {"sensor": "accel", "std": 2.0}),
+        injector, _ = make(NoiseBurst(start_s=0.0, sensor="accel", std=2.0),
                            seed=seed)  # fmt: skip
         injector.update(0, RecordingModel())
         return np.array([injector.samples(readings(0.0)).imu.accel_mps2 for _ in range(4000)])
@@ -63,7 +71,7 @@ def test_noise_burst_has_the_configured_std_and_is_seeded():
 
 
 def test_stuck_sensor_repeats_its_last_healthy_value_then_recovers():
-    injector, _ = make(FaultSpec("sensor_stuck", 1.0, 2.0, {"sensor": "baro"}))
+    injector, _ = make(SensorStuck(start_s=1.0, end_s=2.0, sensor="baro"))
     model = RecordingModel()
     injector.update(500_000, model)
     assert injector.samples(readings(0.5, pressure=95_000.0)).baro.pressure_pa == 95_000.0
@@ -75,16 +83,16 @@ def test_stuck_sensor_repeats_its_last_healthy_value_then_recovers():
 
 def test_bus_and_pwm_faults_map_to_chip_inputs_and_channels():
     injector, _ = make(
-        FaultSpec("bus_bit_flip", 0.0, None, {"chip": "mpu6000", "mask": 0x01}),
-        FaultSpec("bus_bit_flip", 0.0, None, {"chip": "mpu6000", "mask": 0x80}),
-        FaultSpec("chip_mute", 0.0, None, {"chip": "ms5611"}),
-        FaultSpec("pwm_dropout", 0.0, None, {"channel": 3}),
+        BusBitFlip(start_s=0.0, chip="mpu6000", mask=0x01),
+        BusBitFlip(start_s=0.0, chip="mpu6000", mask=0x80),
+        ChipMute(start_s=0.0, chip="ms5611"),
+        PwmDropout(start_s=0.0, channel=3),
     )
     injector.update(0, RecordingModel())
     assert injector.chip_faults() == {
         "mpu6000": ChipFault(mute=False, flip=0x81), "ms5611": ChipFault(mute=True, flip=0),
     }  # fmt: skip
     assert injector.pwm_dropped() == {3}
-    everything, _ = make(FaultSpec("pwm_dropout", 0.0, None, {}))
+    everything, _ = make(PwmDropout(start_s=0.0))
     everything.update(0, RecordingModel())
     assert everything.pwm_dropped() == {0, 1, 2, 3}

@@ -121,6 +121,23 @@ def test_killed_autopilot_process_is_named(listening_link, start_double):
         _run_frames(link, 40_000, start=21)
 
 
+def test_an_answer_sent_twice_is_a_repeat_not_malformed(listening_link, start_double):
+    link = listening_link()
+    start_double(link.ports.simulator_tcp, "twice", "--after", "5")
+    link.accept()
+    answers = []
+    while not answers or answers[-1] is None:  # freewheel until the first answer
+        answers += _run_frames(link, 1, start=len(answers) + 1)
+    first = len(answers)
+    answers += _run_frames(link, 50, start=first + 1)
+    # Each frame after the first answer gets its own, once; the copies are counted.
+    assert [a.time_us for a in answers[first - 1 :]] == [
+        k * FRAME_US for k in range(first, first + 51)
+    ]
+    assert link.stats.repeated_answers >= 40
+    assert link.stats.malformed == 0
+
+
 def test_garbage_is_counted_and_ends_in_a_stall(listening_link, start_double):
     link = listening_link(LinkTimeouts(connect_s=10, answer_s=0.3))
     start_double(link.ports.simulator_tcp, "garbage", "--after", "5")

@@ -98,7 +98,7 @@ def test_plan_reads_the_x500_configuration_from_its_log(x500_path):
     assert plan.scenario(Path("x500_v2")).motor_pwm_range_us == (1100.0, 1900.0)
     # the pack at rest before arming: battery_status.voltage_v = 15.19 V (not full 16.8 V)
     assert plan.initial_battery_voltage_v == pytest.approx(15.2, abs=0.2)
-    assert plan.scenario(Path("x500_v2")).initial_battery_voltage_v == (
+    assert plan.scenario(Path("x500_v2")).start.battery_voltage_v == (
         plan.initial_battery_voltage_v
     )
     summary = plan.summary()
@@ -150,7 +150,7 @@ def test_bad_battery_and_pwm_configurations_fail_with_one_line(tmp_path):
 
 def test_plan_window_switches_drives_and_back(x500_path):
     plan = plan_replay(x500_path, ReplayOptions(drive="rates", window_s=CLIMB_WINDOW_S))
-    kinds = [(c.action, c.params["track"].kind if c.action == "track" else None)
+    kinds = [(c.action, c.track.kind if c.action == "track" else None)
              for c in plan.commands]  # fmt: skip
     assert kinds == [("arm", None), ("track", "velocity"), ("track", "rates"),
                      ("track", "velocity"), ("disarm", None)]  # fmt: skip

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from rig.scenarios.scenario import Command
-from rig.scenarios.script import CommandScript, SetpointTrack
+from rig.scenarios.scenario import Arm, Disarm, Land, SetpointTrack, Track
+from rig.scenarios.script import CommandScript
 
 
 class RecordingGround:
@@ -50,7 +50,7 @@ VELOCITY = SetpointTrack(
 
 
 def test_each_sample_goes_out_at_its_time_and_is_held_with_keep_alives():
-    sent = _walk([Command(0.0, "track", {"track": VELOCITY})], 0.55, clock_start_s=400.0)
+    sent = _walk([Track(at_s=0.0, track=VELOCITY)], 0.55, clock_start_s=400.0)
     times = [t for t, _ in sent]
     assert times == [0.0, 0.1, 0.2, 0.25, 0.3, 0.4, 0.5]  # samples, and every 0.1 s between
     values = [conversation[1][1] for _, conversation in sent]
@@ -65,10 +65,10 @@ def test_each_sample_goes_out_at_its_time_and_is_held_with_keep_alives():
 
 def test_arm_and_disarm_keep_the_stream_a_mode_command_ends_it():
     commands = [
-        Command(0.0, "arm"),
-        Command(0.0, "track", {"track": VELOCITY}),
-        Command(0.15, "disarm", {"may_refuse": True}),
-        Command(0.35, "land"),
+        Arm(at_s=0.0),
+        Track(at_s=0.0, track=VELOCITY),
+        Disarm(at_s=0.15, may_refuse=True),
+        Land(at_s=0.35),
     ]
     sent = _walk(commands, 0.6)
     kinds = [(t, conversation[0]) for t, conversation in sent]
@@ -80,7 +80,7 @@ def test_arm_and_disarm_keep_the_stream_a_mode_command_ends_it():
 def test_a_rates_track_started_mid_way_sends_the_sample_in_force():
     rates = SetpointTrack("rates", (0.0, 0.02, 0.04), ((0.1, 0, 0, 0.5), (0.2, 0, 0, 0.5),
                                                        (0.3, 0, 0, 0.6)))  # fmt: skip
-    sent = _walk([Command(0.03, "track", {"track": rates})], 0.05)
+    sent = _walk([Track(at_s=0.03, track=rates)], 0.05)
     assert [(t, c[1][1][0], c[1][2]) for t, c in sent] == [(0.03, 0.2, 0.5), (0.04, 0.3, 0.6)]
 
 
