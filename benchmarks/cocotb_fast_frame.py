@@ -17,12 +17,12 @@ import cocotb
 import numpy as np
 from cocotb.utils import get_sim_time
 
+from fpga_hdl.chips.ist8310.driver import Ist8310Driver
+from fpga_hdl.chips.mpu6000 import regs as mpu
+from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver
+from fpga_hdl.chips.ms5611 import regs as baro
+from fpga_hdl.chips.ms5611.driver import Ms5611Driver
 from fpga_hdl.cosim.peripherals import Harness
-from fpga_hdl.ist8310.driver import Ist8310Driver
-from fpga_hdl.mpu6000 import regs as mpu
-from fpga_hdl.mpu6000.driver import Mpu6000Driver
-from fpga_hdl.ms5611 import regs as baro
-from fpga_hdl.ms5611.driver import Ms5611Driver
 
 FRAMES = int(os.environ.get("BENCH_FRAMES", "200"))
 PWM = os.environ.get("BENCH_PWM", "1") == "1"

@@ -12,11 +12,11 @@ import time
 import cocotb
 import numpy as np
 
+from fpga_hdl.chips.mpu6000 import regs as mpu
+from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver
+from fpga_hdl.chips.ms5611 import regs as baro
+from fpga_hdl.chips.ms5611.driver import Ms5611Driver
 from fpga_hdl.cosim.sensor_top import SensorTopPins
-from fpga_hdl.mpu6000 import regs as mpu
-from fpga_hdl.mpu6000.driver import Mpu6000Driver
-from fpga_hdl.ms5611 import regs as baro
-from fpga_hdl.ms5611.driver import Ms5611Driver
 
 FRAMES = int(os.environ.get("BENCH_FRAMES", "200"))
 

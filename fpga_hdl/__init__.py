@@ -1,1 +1,12 @@
-"""Amaranth cores that impersonate sensor chips (SPI, I2C, PWM capture), co-simulated in cocotb."""
+"""Amaranth cores that impersonate sensor chips (SPI, I2C, PWM capture), co-simulated in cocotb.
+
+- ``chips/``: one folder per chip (register map, core, model, driver);
+- ``buses/``: the bus signatures, shift engines, the MCU-side peripherals and the
+  bus-master models;
+- ``host/``: the host port and clock-domain crossing;
+- ``top.py``: ``SensorTop``, every chip behind one host port (the rig's FPGA);
+- ``cosim/``: the cocotb harness, runner and host access; ``build.py``: Verilog.
+
+Layers (checked by import-linter): cosim, then build (Verilog), then the top, then the
+chips, then buses and host; fpga_hdl never imports the rig.
+"""

@@ -12,7 +12,7 @@ Buses, as on a Pixhawk FMU (e.g. FMUv2/v3, where the MPU-6000 and MS5611 share S
 - eight PWM inputs (``pwm``) into the PWM capture core, which runs in its own slow
   ``pwm`` domain at ``pwm_tick_hz`` (one tick per cycle, so a simulation pays the tick
   rate, not the system clock, to watch the motors). Its width, period and timeout
-  results cross into ``sync`` through a :class:`~fpga_hdl.snapshot_cdc.SnapshotSynchronizer`;
+  results cross into ``sync`` through a :class:`~fpga_hdl.host.snapshot_cdc.SnapshotSynchronizer`;
   a one-cycle ``read_latch`` freezes all of them at once in a result register file,
   which the host then reads word by word (:data:`HOST_MAP`): a read never mixes two
   result sets however long it takes.
@@ -25,7 +25,7 @@ third system clock edge that follows (:data:`PWM_RESULT_COPY_CYCLES`: two synchr
 flip-flops, then the copy), and a ``read_latch`` asserted in any later cycle takes them.
 At the 16 MHz default that is 3 µs plus at most 4 system cycles (250 ns).
 
-The host port (``fpga_hdl.host_port``) loads samples, time and faults; ``now_us`` goes
+The host port (``fpga_hdl.host.host_port``) loads samples, time and faults; ``now_us`` goes
 to every chip with a conversion time. ``pending`` tells a simulation that gates the
 system clock that a chip still waits to take a sample at a transfer's end.
 """
@@ -34,15 +34,15 @@ from amaranth.hdl import ClockDomain, ClockSignal, DomainRenamer, Module, ResetS
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.host_port import HostPort, HostPortMap, host_port_map
-from fpga_hdl.ist8310 import regs as ist8310_regs
-from fpga_hdl.ist8310.core import Ist8310Core
-from fpga_hdl.mpu6000 import regs as mpu6000_regs
-from fpga_hdl.mpu6000.core import Mpu6000
-from fpga_hdl.ms5611 import regs as ms5611_regs
-from fpga_hdl.ms5611.core import Ms5611
-from fpga_hdl.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture, timeout_ticks
-from fpga_hdl.snapshot_cdc import PUBLISH_TICKS, SnapshotSynchronizer
+from fpga_hdl.chips.ist8310 import regs as ist8310_regs
+from fpga_hdl.chips.ist8310.core import Ist8310Core
+from fpga_hdl.chips.mpu6000 import regs as mpu6000_regs
+from fpga_hdl.chips.mpu6000.core import Mpu6000
+from fpga_hdl.chips.ms5611 import regs as ms5611_regs
+from fpga_hdl.chips.ms5611.core import Ms5611
+from fpga_hdl.chips.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture, timeout_ticks
+from fpga_hdl.host.host_port import HostPort, HostPortMap, host_port_map
+from fpga_hdl.host.snapshot_cdc import PUBLISH_TICKS, SnapshotSynchronizer
 
 #: Default system clock: above the SPI chips' 8 MHz floor (see ``spi_target``) and fast
 #: enough for the I2C target's Fast-mode timing, as slow as possible because the system
@@ -55,7 +55,7 @@ SAMPLE_CHANNELS = {
     "mag": ist8310_regs.SAMPLE_LAYOUT,
 }
 FAULT_CHIPS = ("imu", "baro", "mag")
-#: PWM capture tick: 1 µs, the unit PX4 uses for PWM (``fpga_hdl.pwm_capture``).
+#: PWM capture tick: 1 µs, the unit PX4 uses for PWM (``fpga_hdl.chips.pwm_capture``).
 PWM_TICK_HZ = 1e6
 #: No rising edge for this long and a channel is flagged (and reads zero): a usual ESC
 #: signal-loss time.
@@ -199,24 +199,25 @@ class SensorTop(wiring.Component):
             m.d.comb += [
                 chip.sample.eq(getattr(host, name)),
                 chip.sample_stb.eq(getattr(host, f"{name}_stb")),
-                chip.fault_mute.eq(getattr(host, f"{name}_fault_mute")),
-                chip.fault_flip.eq(getattr(host, f"{name}_fault_flip")),
+                chip.fault.mute.eq(getattr(host, f"{name}_fault_mute")),
+                chip.fault.flip.eq(getattr(host, f"{name}_fault_flip")),
             ]
         m.d.comb += [baro.now_us.eq(host.now_us), mag.now_us.eq(host.now_us)]
         m.d.comb += self.pending.eq(imu.sample_pending | baro.sample_pending | mag.sample_pending)
 
         for chip, cs_n in ((imu, self.imu_cs_n), (baro, self.baro_cs_n)):
-            m.d.comb += [chip.sclk.eq(self.spi_sclk), chip.mosi.eq(self.spi_mosi)]
-            m.d.comb += chip.cs_n.eq(cs_n)
+            m.d.comb += [chip.spi.sclk.eq(self.spi_sclk), chip.spi.mosi.eq(self.spi_mosi)]
+            m.d.comb += chip.spi.cs_n.eq(cs_n)
+        imu_spi, baro_spi = imu.spi, baro.spi
         m.d.comb += [
-            self.spi_miso.eq((imu.miso & imu.miso_oe) | (baro.miso & baro.miso_oe)),
-            self.spi_miso_oe.eq(imu.miso_oe | baro.miso_oe),
-            self.spi_contention.eq(imu.miso_oe & baro.miso_oe),
+            self.spi_miso.eq((imu_spi.miso & imu_spi.miso_oe) | (baro_spi.miso & baro_spi.miso_oe)),
+            self.spi_miso_oe.eq(imu_spi.miso_oe | baro_spi.miso_oe),
+            self.spi_contention.eq(imu_spi.miso_oe & baro_spi.miso_oe),
         ]
         m.d.comb += [
-            mag.scl.eq(self.i2c_scl),
-            mag.sda_i.eq(self.i2c_sda_i),
-            self.i2c_sda_oe.eq(mag.sda_oe),
+            mag.i2c.scl.eq(self.i2c_scl),
+            mag.i2c.sda_i.eq(self.i2c_sda_i),
+            self.i2c_sda_oe.eq(mag.i2c.sda_oe),
         ]
         self._capture_results(m, capture)
         return m
@@ -235,7 +236,7 @@ class SensorTop(wiring.Component):
             layout, i_domain="pwm", o_domain="sync", stages=PWM_RESULT_SYNC_STAGES, init=init
         )
         m.d.comb += [
-            capture.pwm.eq(self.pwm),
+            capture.pwm.pulses.eq(self.pwm),
             cdc.data_i.width.eq(capture.width_ticks),
             cdc.data_i.period.eq(capture.period_ticks),
             cdc.data_i.timeout.eq(capture.timeout),

@@ -4,10 +4,10 @@ SensorTop stays exactly the FPGA's pins. Around it this Amaranth top puts what s
 the other side of those pins on the real rig, as gateware, so a whole transaction runs
 inside the simulator and Python only asks and waits once:
 
-- the flight controller MCU's peripherals: :class:`~fpga_hdl.spi_controller.SpiController`
+- the flight controller MCU's peripherals: :class:`~fpga_hdl.buses.spi_controller.SpiController`
   on the shared SPI bus (chip selects ``imu``, ``baro``),
-  :class:`~fpga_hdl.i2c_controller.I2cController` on the IST8310's bus (the wired-AND of
-  SDA resolved here), :class:`~fpga_hdl.pwm_generator.PwmGenerator` on the PWM pins;
+  :class:`~fpga_hdl.buses.i2c_controller.I2cController` on the IST8310's bus (the wired-AND of
+  SDA resolved here), :class:`~fpga_hdl.buses.pwm_generator.PwmGenerator` on the PWM pins;
 - the real-time computer's side of the host port: :class:`HostWriter` writes a list of
   staged words, commits and waits until every chip has taken its sample;
   :class:`HostReader` lets the PWM results settle in ``sync``, freezes them with
@@ -49,10 +49,10 @@ from amaranth.hdl import (
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.host_port import WORD_BITS, HostPortMap
-from fpga_hdl.i2c_controller import I2cController
-from fpga_hdl.pwm_generator import PwmGenerator
-from fpga_hdl.spi_controller import SpiController
+from fpga_hdl.buses.i2c_controller import I2cController
+from fpga_hdl.buses.pwm_generator import PwmGenerator
+from fpga_hdl.buses.spi_controller import SpiController
+from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
 from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, SensorTop
 
 __all__ = [
@@ -372,7 +372,7 @@ class CosimHarness(wiring.Component):
             top.i2c_sda_i.eq(sda),
             i2c.sda_i.eq(sda),
         ]
-        m.d.comb += top.pwm.eq(self.pwm_generator.pwm)
+        m.d.comb += top.pwm.eq(self.pwm_generator.pwm.pulses)
         # Monitor outputs: the pins as a logic analyser on the rig would see them.
         m.d.comb += [
             self.spi_sclk.eq(spi.sclk),
@@ -384,6 +384,6 @@ class CosimHarness(wiring.Component):
             self.baro_cs_n.eq(top.baro_cs_n),
             self.i2c_scl.eq(i2c.scl),
             self.i2c_sda.eq(sda),
-            self.pwm.eq(self.pwm_generator.pwm),
+            self.pwm.eq(self.pwm_generator.pwm.pulses),
         ]
         return m

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 from cocotb.triggers import Timer
 
-from fpga_hdl.host_port import HostPortMap
+from fpga_hdl.host.host_port import HostPortMap
 
 #: Cycles a chip may take to accept a sample after a transfer: synchroniser + copy.
 SETTLE_CYCLES_MAX = 8

@@ -22,13 +22,13 @@ from collections.abc import Mapping, Sequence
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
-from fpga_hdl.buses import I2cNack, UnknownDevice, check_clock_hz
+from fpga_hdl.buses.i2c_controller import RATES_HZ, controller_rate_hz
+from fpga_hdl.buses.spi_controller import divider_for
+from fpga_hdl.buses.transactions import I2cNack, UnknownDevice, check_clock_hz
+from fpga_hdl.chips.pwm_capture.core import CHANNELS
+from fpga_hdl.chips.pwm_capture.model import ChannelCapture
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, SPI_DEVICES
-from fpga_hdl.host_port import WORD_BITS, HostPortMap
-from fpga_hdl.i2c_controller import RATES_HZ, controller_rate_hz
-from fpga_hdl.pwm_capture.core import CHANNELS
-from fpga_hdl.pwm_capture.model import ChannelCapture
-from fpga_hdl.spi_controller import divider_for
+from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
 from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ, sensor_top_host_map
 
 __all__ = [
@@ -75,7 +75,8 @@ def _pack(values: Sequence[int], bits: int) -> int:
 
 
 class HarnessSpiBus:
-    """:class:`fpga_hdl.buses.SpiBus` over the harness's SPI controller (mode 0 or 3)."""
+    """A :class:`~fpga_hdl.buses.transactions.SpiBus` over the harness's SPI controller
+    (mode 0 or 3)."""
 
     def __init__(self, dut, *, mode: int = 0, sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:
         if mode not in (0, 3):
@@ -111,7 +112,7 @@ class HarnessSpiBus:
 
 
 class HarnessI2cBus:
-    """:class:`fpga_hdl.buses.I2cBus` over the harness's I2C controller (100/400 kHz).
+    """:class:`fpga_hdl.buses.transactions.I2cBus` over the harness's I2C controller (100/400 kHz).
 
     A requested rate is rounded down to the controller's rates (:data:`RATES_HZ`).
     """

@@ -57,8 +57,8 @@ from __future__ import annotations
 import socket
 import struct
 
-from fpga_hdl.ist8310.regs import Ist8310Sample
-from fpga_hdl.mpu6000.regs import Mpu6000Sample
+from fpga_hdl.chips.ist8310.regs import Ist8310Sample
+from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from rig.chips.layer import CHIPS, NO_FAULT, ChipFault, ChipFrame, ChipReadout
 from rig.chips.pwm import Pulse
 from rig.errors import CosimError

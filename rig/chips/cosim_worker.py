@@ -40,8 +40,8 @@ import socket
 import cocotb
 from cocotb.utils import get_sim_time
 
+from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.cosim.peripherals import PWM_PHASE_PS, Harness
-from fpga_hdl.pwm_capture.core import CHANNELS
 from rig.chips.channel import (
     ERROR,
     FRAME,

@@ -26,16 +26,16 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, TypeVar
 
-from fpga_hdl.buses import BusError, I2cBus, SpiBus, TlmI2cBus, TlmSpiBus
-from fpga_hdl.ist8310 import regs as ist_regs
-from fpga_hdl.ist8310.driver import Ist8310Driver
-from fpga_hdl.ist8310.model import Ist8310Model
-from fpga_hdl.mpu6000 import regs as mpu_regs
-from fpga_hdl.mpu6000.driver import Mpu6000Driver, decode
-from fpga_hdl.mpu6000.model import Mpu6000Model
-from fpga_hdl.ms5611 import regs as ms_regs
-from fpga_hdl.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
-from fpga_hdl.ms5611.model import Ms5611Model
+from fpga_hdl.buses.transactions import BusError, I2cBus, SpiBus, TlmI2cBus, TlmSpiBus
+from fpga_hdl.chips.ist8310 import regs as ist_regs
+from fpga_hdl.chips.ist8310.driver import Ist8310Driver
+from fpga_hdl.chips.ist8310.model import Ist8310Model
+from fpga_hdl.chips.mpu6000 import regs as mpu_regs
+from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver, decode
+from fpga_hdl.chips.mpu6000.model import Mpu6000Model
+from fpga_hdl.chips.ms5611 import regs as ms_regs
+from fpga_hdl.chips.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
+from fpga_hdl.chips.ms5611.model import Ms5611Model
 from quad_model.sensors import SensorReadings
 from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fpga_hdl.pwm_capture.model import PwmCaptureModel
+from fpga_hdl.chips.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS
 from quad_model.frames import PWM_MAX_US, PWM_MIN_US, pwm_to_throttle
 
@@ -31,7 +31,7 @@ PWM_DISARMED_US = PWM_MIN_US
 DEFAULT_MOTOR_PWM_RANGE_US = (PWM_MIN_US, PWM_MAX_US)
 #: Quad-X: the first four outputs drive the motors (PX4 MOTOR_ORDER).
 MOTOR_CHANNELS = 4
-#: The capture core's tick: 1 µs, the unit PX4 uses for PWM (fpga_hdl.pwm_capture).
+#: The capture core's tick: 1 µs, the unit PX4 uses for PWM (fpga_hdl.chips.pwm_capture).
 PWM_TICK_HZ = 1e6
 #: No rising edge for this long and a channel counts as lost: the capture core's default,
 #: and a usual ESC signal-loss time; the ESC then stops the motor.
@@ -117,7 +117,7 @@ class PwmCapture:
     What SensorTop's host port shows, so with its fixed latency: a pulse edge first
     sampled at tick ``k`` is in a read at tick ``k + PWM_RESULT_LATENCY_TICKS`` (the
     core's input re-timing, then the publication into the system clock domain).
-    :class:`fpga_hdl.pwm_capture.model.PwmCaptureModel` recomputes a channel from its
+    :class:`fpga_hdl.chips.pwm_capture.model.PwmCaptureModel` recomputes a channel from its
     pulse history. Its results depend only on the last two rising edges, the last
     complete pulse and the time since the last rise, so the last three pulses of a
     channel (the newest may still be high) give the same answer as the whole history;

@@ -44,9 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fpga_hdl.ist8310.driver import sample_from_field_gauss
-from fpga_hdl.mpu6000.regs import Mpu6000Sample
-from fpga_hdl.ms5611.model import raw_from_si
+from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
+from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
+from fpga_hdl.chips.ms5611.model import raw_from_si
 from quad_model import QuadModel, SensorSuite, load_vehicle
 from quad_model.frames import ned_to_geodetic, yaw_quat
 from quad_model.model import Mount, VehicleTruth

@@ -16,12 +16,12 @@ from cocotb.handle import HierarchyArrayObject, HierarchyObject, LogicArrayObjec
 from cocotb.utils import get_sim_time
 from transcript import run_script, tlm_transcript_now
 
-from fpga_hdl.buses import I2cNack
+from fpga_hdl.buses.i2c_target import FAST_MODE, STANDARD_MODE
+from fpga_hdl.buses.transactions import I2cNack
+from fpga_hdl.chips.ist8310 import regs as ist
+from fpga_hdl.chips.mpu6000 import regs as mpu
+from fpga_hdl.chips.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.cosim.peripherals import PWM_PHASE_PS, Harness
-from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE
-from fpga_hdl.ist8310 import regs as ist
-from fpga_hdl.mpu6000 import regs as mpu
-from fpga_hdl.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS, PWM_TICK_HZ, PWM_TIMEOUT_S
 
 #: PS-MPU-6000A-00 §6.8: CS setup/hold, SDI setup/hold (ns); the controller's CS idle.

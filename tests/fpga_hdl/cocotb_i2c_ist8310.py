@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from cocotb.triggers import FallingEdge, RisingEdge, Timer
 
-from fpga_hdl.buses import I2cNack, TlmI2cBus
+from fpga_hdl.buses.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
+from fpga_hdl.buses.transactions import I2cNack, TlmI2cBus
+from fpga_hdl.chips.ist8310 import regs
+from fpga_hdl.chips.ist8310.driver import Ist8310Driver, sample_from_field_gauss
+from fpga_hdl.chips.ist8310.model import Ist8310Model
+from fpga_hdl.chips.ist8310.regs import Ist8310Sample, Register
 from fpga_hdl.cosim.sensor_top import SensorTopPins
-from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
-from fpga_hdl.ist8310 import regs
-from fpga_hdl.ist8310.driver import Ist8310Driver, sample_from_field_gauss
-from fpga_hdl.ist8310.model import Ist8310Model
-from fpga_hdl.ist8310.regs import Ist8310Sample, Register
 from fpga_hdl.top import HOST_MAP
 
 SEED = int(os.environ.get("COSIM_SEED", "20240612"))

@@ -9,9 +9,9 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import Timer, with_timeout
 
-from fpga_hdl.cosim.pwm_source import CocotbPwmSource
-from fpga_hdl.pwm_capture.core import CHANNELS, timeout_ticks
-from fpga_hdl.pwm_capture.model import ChannelCapture, PwmCaptureModel
+from fpga_hdl.buses.pwm_source import CocotbPwmSource
+from fpga_hdl.chips.pwm_capture.core import CHANNELS, timeout_ticks
+from fpga_hdl.chips.pwm_capture.model import ChannelCapture, PwmCaptureModel
 
 TICK_HZ = 1e6
 TIMEOUT_S = 0.03
@@ -48,7 +48,7 @@ def read(dut) -> list[ChannelCapture]:
 async def widths_within_one_tick_and_timeout_when_pulses_stop(dut):
     Clock(dut.clk, round(1e12 / TICK_HZ), unit="ps").start(start_high=True)  # edges at k µs
     dut.rst.value = 1
-    source = CocotbPwmSource(dut.pwm)
+    source = CocotbPwmSource(dut.pwm__pulses)
     await Timer(500, unit="ns")
     dut.rst.value = 0
     trains = []

@@ -10,11 +10,11 @@ import pytest
 from amaranth.hdl import Module, Signal
 from amaranth.sim import Simulator
 
-from fpga_hdl.i2c_controller import I2cBitCycles, I2cController, controller_rate_hz
-from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE
-from fpga_hdl.ist8310.core import Ist8310Core
-from fpga_hdl.pwm_generator import PwmGenerator
-from fpga_hdl.spi_controller import SpiController, SpiControllerTiming, divider_for
+from fpga_hdl.buses.i2c_controller import I2cBitCycles, I2cController, controller_rate_hz
+from fpga_hdl.buses.i2c_target import FAST_MODE, STANDARD_MODE
+from fpga_hdl.buses.pwm_generator import PwmGenerator
+from fpga_hdl.buses.spi_controller import SpiController, SpiControllerTiming, divider_for
+from fpga_hdl.chips.ist8310.core import Ist8310Core
 
 SYS_CLK_HZ = 10e6
 
@@ -154,9 +154,9 @@ def i2c_on_ist8310():
     m.submodules.ctrl, m.submodules.chip = ctrl, chip
     sda = Signal()
     m.d.comb += [
-        sda.eq(ctrl.sda_o & ~chip.sda_oe),
-        chip.scl.eq(ctrl.scl),
-        chip.sda_i.eq(sda),
+        sda.eq(ctrl.sda_o & ~chip.i2c.sda_oe),
+        chip.i2c.scl.eq(ctrl.scl),
+        chip.i2c.sda_i.eq(sda),
         ctrl.sda_i.eq(sda),
     ]
     return m, ctrl
@@ -211,7 +211,7 @@ def test_pwm_generator_widths_take_effect_at_the_next_period():
             if cycle == 14:  # mid-period: must not touch the running pulse
                 ctx.set(gen.width_ticks, [7, 0, 10, 5, 0, 0, 0, 1])
             await ctx.tick()
-            levels.append(ctx.get(gen.pwm))
+            levels.append(ctx.get(gen.pwm.pulses))
         return levels
 
     levels = run(gen, bench)

@@ -4,7 +4,7 @@ import asyncio
 
 import pytest
 
-from fpga_hdl.buses import I2cNack, TlmI2cBus, TlmSpiBus, UnknownDevice
+from fpga_hdl.buses.transactions import I2cNack, TlmI2cBus, TlmSpiBus, UnknownDevice
 
 
 class Echo:

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
+from fpga_hdl.chips.pwm_capture.core import PwmCapture
 from fpga_hdl.cosim.runner import SIMULATOR_PARAMS, run_cocotb
-from fpga_hdl.pwm_capture.core import PwmCapture
 
 HERE = Path(__file__).parent
 

@@ -14,13 +14,13 @@ import pytest
 from amaranth.hdl import Module, Signal
 from amaranth.sim import Simulator
 
-from fpga_hdl.buses import I2cNack, TlmI2cBus, combined_transfer
-from fpga_hdl.i2c_target import FAST_MODE, I2cTarget, TargetSampling
-from fpga_hdl.ist8310 import regs
-from fpga_hdl.ist8310.core import Ist8310Core
-from fpga_hdl.ist8310.driver import Ist8310Driver, decode_field_gauss, sample_from_field_gauss
-from fpga_hdl.ist8310.model import Ist8310Model
-from fpga_hdl.ist8310.regs import Ist8310Sample, Register
+from fpga_hdl.buses.i2c_target import FAST_MODE, I2cTarget, TargetSampling
+from fpga_hdl.buses.transactions import I2cNack, TlmI2cBus, combined_transfer
+from fpga_hdl.chips.ist8310 import regs
+from fpga_hdl.chips.ist8310.core import Ist8310Core
+from fpga_hdl.chips.ist8310.driver import Ist8310Driver, decode_field_gauss, sample_from_field_gauss
+from fpga_hdl.chips.ist8310.model import Ist8310Model
+from fpga_hdl.chips.ist8310.regs import Ist8310Sample, Register
 
 SYS_CLK_HZ = 10e6
 
@@ -98,7 +98,11 @@ def simulate(core: Ist8310Core, bench):
     m.submodules.core = core
     scl, sda_ctrl = Signal(init=1), Signal(init=1)
     sda_bus = Signal()
-    m.d.comb += [core.scl.eq(scl), sda_bus.eq(sda_ctrl & ~core.sda_oe), core.sda_i.eq(sda_bus)]
+    m.d.comb += [
+        core.i2c.scl.eq(scl),
+        sda_bus.eq(sda_ctrl & ~core.i2c.sda_oe),
+        core.i2c.sda_i.eq(sda_bus),
+    ]
     sim = Simulator(m)
     sim.add_clock(1 / SYS_CLK_HZ)
     result = {}
@@ -188,7 +192,7 @@ def test_sda_changes_within_the_computed_hold_window():
             await bus.clock_bit((0x0E << 1) >> i & 1)
         # SCL has just fallen after the 8th bit: count cycles until the target pulls SDA.
         waited = 0
-        while not ctx.get(core.sda_oe):
+        while not ctx.get(core.i2c.sda_oe):
             await ctx.tick()
             waited += 1
         ack = await bus.clock_bit(1)
@@ -306,13 +310,13 @@ def test_sample_offered_during_a_read_appears_only_after_stop():
 
 def test_fault_mute_nacks_and_fault_flip_xors_sent_bytes():
     async def bench(ctx, bus, core):
-        ctx.set(core.fault_flip, 0xA5)
+        ctx.set(core.fault.flip, 0xA5)
         flipped = await bus.write_read(0x0E, bytes([Register.WAI]), 1, scl_hz=400e3)
-        ctx.set(core.fault_flip, 0)
-        ctx.set(core.fault_mute, 1)
+        ctx.set(core.fault.flip, 0)
+        ctx.set(core.fault.mute, 1)
         with pytest.raises(I2cNack):
             await bus.write_read(0x0E, bytes([Register.WAI]), 1, scl_hz=400e3)
-        ctx.set(core.fault_mute, 0)
+        ctx.set(core.fault.mute, 0)
         return flipped, await bus.write_read(0x0E, bytes([Register.WAI]), 1, scl_hz=400e3)
 
     assert simulate(Ist8310Core(sys_clk_hz=SYS_CLK_HZ), bench) == (bytes([0x10 ^ 0xA5]), b"\x10")

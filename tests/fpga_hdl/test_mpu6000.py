@@ -6,12 +6,12 @@ import asyncio
 import numpy as np
 import pytest
 
-from fpga_hdl.buses import TlmSpiBus
-from fpga_hdl.cosim.amaranth_spi import AmaranthSpiController, run_spi_testbench
-from fpga_hdl.mpu6000 import regs
-from fpga_hdl.mpu6000.core import Mpu6000
-from fpga_hdl.mpu6000.driver import Mpu6000Driver, decode
-from fpga_hdl.mpu6000.model import Mpu6000Model
+from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
+from fpga_hdl.buses.transactions import TlmSpiBus
+from fpga_hdl.chips.mpu6000 import regs
+from fpga_hdl.chips.mpu6000.core import Mpu6000
+from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver, decode
+from fpga_hdl.chips.mpu6000.model import Mpu6000Model
 
 SYS_CLK_HZ = 50e6
 
@@ -30,7 +30,7 @@ def run_on_rtl(script, *, mode: int = 0):
     result = {}
 
     async def bench(ctx):
-        spi = AmaranthSpiController(ctx, {"imu": dut}, mode=mode)
+        spi = AmaranthSpiController(ctx, {"imu": dut.spi}, mode=mode)
         await spi.idle()
         await ctx.tick().repeat(3)
         result["value"] = await script(spi, ctx, dut)

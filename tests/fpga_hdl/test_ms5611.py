@@ -4,12 +4,12 @@ import asyncio
 
 import pytest
 
-from fpga_hdl.buses import TlmSpiBus
-from fpga_hdl.cosim.amaranth_spi import AmaranthSpiController, run_spi_testbench
-from fpga_hdl.ms5611 import regs
-from fpga_hdl.ms5611.core import Ms5611
-from fpga_hdl.ms5611.driver import Ms5611Driver, Ms5611Error
-from fpga_hdl.ms5611.model import Ms5611Model, raw_from_si
+from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
+from fpga_hdl.buses.transactions import TlmSpiBus
+from fpga_hdl.chips.ms5611 import regs
+from fpga_hdl.chips.ms5611.core import Ms5611
+from fpga_hdl.chips.ms5611.driver import Ms5611Driver, Ms5611Error
+from fpga_hdl.chips.ms5611.model import Ms5611Model, raw_from_si
 
 SYS_CLK_HZ = 50e6
 
@@ -73,7 +73,7 @@ def run_on_rtl(script, *, mode=3, prom=regs.DEFAULT_PROM):
     result = {}
 
     async def bench(ctx):
-        spi = AmaranthSpiController(ctx, {"baro": dut}, mode=mode)
+        spi = AmaranthSpiController(ctx, {"baro": dut.spi}, mode=mode)
         await spi.idle()
 
         async def sleep_us(us):

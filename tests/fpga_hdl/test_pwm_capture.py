@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from fpga_hdl.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture
-from fpga_hdl.pwm_capture.model import ChannelCapture, PwmCaptureModel
+from fpga_hdl.chips.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture
+from fpga_hdl.chips.pwm_capture.model import ChannelCapture, PwmCaptureModel
 
 #: A slow tick keeps the cycle-level Python simulation short; the cocotb tests use 1 MHz.
 TICK_HZ = 100e3
@@ -28,7 +28,9 @@ def run_core(trains: list[list[tuple[float, float]]], ticks: int, probe_every: i
 
     async def bench(ctx):
         for tick in range(ticks):
-            ctx.set(dut.pwm, sum(level_at(train, tick) << ch for ch, train in enumerate(trains)))
+            ctx.set(
+                dut.pwm.pulses, sum(level_at(train, tick) << ch for ch, train in enumerate(trains))
+            )
             await ctx.tick()  # clock edge number `tick` samples that level
             if tick % probe_every == 0 or tick == ticks - 1:
                 widths, periods = ctx.get(dut.width_ticks), ctx.get(dut.period_ticks)

@@ -8,9 +8,9 @@ import pytest
 from amaranth.hdl import ClockDomain, ClockSignal, Module, Signal
 from amaranth.sim import Simulator
 
+from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.cosim.harness import HostReader
-from fpga_hdl.pwm_capture.core import CHANNELS
-from fpga_hdl.snapshot_cdc import COUNT_BITS, PUBLISH_TICKS, SnapshotSynchronizer
+from fpga_hdl.host.snapshot_cdc import COUNT_BITS, PUBLISH_TICKS, SnapshotSynchronizer
 from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, SensorTop
 
 SYS_CLK_HZ = 10e6

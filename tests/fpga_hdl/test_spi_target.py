@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from fpga_hdl.cosim.amaranth_spi import AmaranthSpiController, run_spi_testbench
-from fpga_hdl.mpu6000 import regs
-from fpga_hdl.mpu6000.core import Mpu6000
-from fpga_hdl.spi_target import check_sys_clk_for_spi
+from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
+from fpga_hdl.buses.spi_target import check_sys_clk_for_spi
+from fpga_hdl.chips.mpu6000 import regs
+from fpga_hdl.chips.mpu6000.core import Mpu6000
 
 SYS_CLK_HZ = 50e6
 
@@ -24,20 +24,20 @@ def test_transfer_aborted_mid_byte_leaves_the_core_ready(mode, abort_after_bits)
     result = {}
 
     async def bench(ctx):
-        spi = AmaranthSpiController(ctx, {"imu": dut}, mode=mode)
+        spi = AmaranthSpiController(ctx, {"imu": dut.spi}, mode=mode)
         await spi.idle()
         # A write of 0xFF to GYRO_CONFIG, cut after some bits by CS rising.
-        ctx.set(dut.cs_n, 0)
+        ctx.set(dut.spi.cs_n, 0)
         await ctx.delay(50e-9)
         bits = [int(b) for b in f"{0x1B:08b}{0xFF:08b}"][:abort_after_bits]
         for bit in bits:
-            ctx.set(dut.sclk, 0)
-            ctx.set(dut.mosi, bit)
+            ctx.set(dut.spi.sclk, 0)
+            ctx.set(dut.spi.mosi, bit)
             await ctx.delay(25e-9)
-            ctx.set(dut.sclk, 1)
+            ctx.set(dut.spi.sclk, 1)
             await ctx.delay(25e-9)
-        ctx.set(dut.cs_n, 1)
-        ctx.set(dut.sclk, 1 if mode == 3 else 0)
+        ctx.set(dut.spi.cs_n, 1)
+        ctx.set(dut.spi.sclk, 1 if mode == 3 else 0)
         await ctx.delay(100e-9)
         result["who"] = await spi.transfer("imu", bytes([0xF5, 0]), sclk_hz=1e6)
         result["gyro_config"] = await spi.transfer("imu", bytes([0x9B, 0]), sclk_hz=1e6)
@@ -53,7 +53,7 @@ def test_back_to_back_transfers_at_20_mhz(mode):
     out = []
 
     async def bench(ctx):
-        spi = AmaranthSpiController(ctx, {"imu": dut}, mode=mode, cs_setup_s=8e-9, cs_hold_s=0)
+        spi = AmaranthSpiController(ctx, {"imu": dut.spi}, mode=mode, cs_setup_s=8e-9, cs_hold_s=0)
         await spi.idle()
         for _ in range(3):
             out.append(await spi.transfer("imu", bytes([0xF5, 0, 0]), sclk_hz=20e6))
@@ -79,7 +79,7 @@ def test_read_racing_an_update_is_never_mixed():
         rx = {}
 
         async def reader(ctx, dut=dut, rx=rx):
-            spi = AmaranthSpiController(ctx, {"imu": dut}, mode=0, cs_setup_s=8e-9)
+            spi = AmaranthSpiController(ctx, {"imu": dut.spi}, mode=0, cs_setup_s=8e-9)
             await spi.idle()
             await spi.transfer("imu", bytes([0x6B, 0x01]), sclk_hz=1e6)  # wake up
             ctx.set(dut.sample, old.fields())
@@ -90,7 +90,7 @@ def test_read_racing_an_update_is_never_mixed():
             rx["data"] = (await spi.transfer("imu", bytes([0xBB]) + bytes(14), sclk_hz=20e6))[1:]
 
         async def host(ctx, dut=dut, offset_s=offset_s):
-            await ctx.posedge(dut.cs_n)  # end of the wake-up write
+            await ctx.posedge(dut.spi.cs_n)  # end of the wake-up write
             # The burst starts half a 1 MHz period plus six system cycles later.
             await ctx.delay(0.5e-6 + 6 * 20e-9 + offset_s)
             await ctx.tick()

@@ -11,13 +11,13 @@ import asyncio
 
 import pytest
 
-from fpga_hdl.buses import TlmI2cBus
-from fpga_hdl.ist8310 import regs as ist
-from fpga_hdl.ist8310.model import Ist8310Model
-from fpga_hdl.mpu6000 import regs as mpu
-from fpga_hdl.mpu6000.model import Mpu6000Model
-from fpga_hdl.ms5611 import regs as ms
-from fpga_hdl.ms5611.model import ADC_MAX, Ms5611Model, _nearest, raw_from_si
+from fpga_hdl.buses.transactions import TlmI2cBus
+from fpga_hdl.chips.ist8310 import regs as ist
+from fpga_hdl.chips.ist8310.model import Ist8310Model
+from fpga_hdl.chips.mpu6000 import regs as mpu
+from fpga_hdl.chips.mpu6000.model import Mpu6000Model
+from fpga_hdl.chips.ms5611 import regs as ms
+from fpga_hdl.chips.ms5611.model import ADC_MAX, Ms5611Model, _nearest, raw_from_si
 
 READ = mpu.READ_FLAG
 

@@ -12,14 +12,14 @@ from typing import Protocol
 
 import numpy as np
 
-from fpga_hdl.buses import I2cBus, I2cNack, SpiBus, TlmI2cBus, TlmSpiBus
-from fpga_hdl.ist8310 import regs as ist
-from fpga_hdl.ist8310.model import Ist8310Model
-from fpga_hdl.mpu6000 import regs as mpu
-from fpga_hdl.mpu6000.driver import SPI_SPEED_HZ, SPI_SPEED_SENSOR_HZ
-from fpga_hdl.mpu6000.model import Mpu6000Model
-from fpga_hdl.ms5611 import regs as baro
-from fpga_hdl.ms5611.model import Ms5611Model
+from fpga_hdl.buses.transactions import I2cBus, I2cNack, SpiBus, TlmI2cBus, TlmSpiBus
+from fpga_hdl.chips.ist8310 import regs as ist
+from fpga_hdl.chips.ist8310.model import Ist8310Model
+from fpga_hdl.chips.mpu6000 import regs as mpu
+from fpga_hdl.chips.mpu6000.driver import SPI_SPEED_HZ, SPI_SPEED_SENSOR_HZ
+from fpga_hdl.chips.mpu6000.model import Mpu6000Model
+from fpga_hdl.chips.ms5611 import regs as baro
+from fpga_hdl.chips.ms5611.model import Ms5611Model
 
 SEED = 20240613
 FRAMES = 6

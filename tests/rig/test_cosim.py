@@ -9,9 +9,9 @@ The RTL is read at the frame time, whatever the pulses do; nothing steers it.
 import numpy as np
 import pytest
 
-from fpga_hdl.ist8310.driver import sample_from_field_gauss
-from fpga_hdl.mpu6000.regs import Mpu6000Sample
-from fpga_hdl.ms5611.model import raw_from_si
+from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
+from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
+from fpga_hdl.chips.ms5611.model import raw_from_si
 from rig.chips.channel import (
     decode_frame,
     decode_readout,

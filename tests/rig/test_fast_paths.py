@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fpga_hdl.pwm_capture.model import PwmCaptureModel
+from fpga_hdl.chips.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS as HOST_LATENCY
 from quad_model.sensors import ImuSample, SensorReadings
 from rig.chips.layer import ChipFault

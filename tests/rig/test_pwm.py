@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fpga_hdl.pwm_capture.model import PwmCaptureModel
+from fpga_hdl.chips.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS as HOST_LATENCY
 from rig.chips.pwm import PWM_TIMEOUT_S, Pulse, PwmCapture, PwmOutput, throttle_from_capture
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
-from fpga_hdl.buses import BusError, SpiBus
-from fpga_hdl.ms5611 import regs
+from fpga_hdl.buses.transactions import BusError, SpiBus
+from fpga_hdl.chips.ms5611 import regs
 
 SPI_SPEED_HZ = 20e6  # PX4 MS5611_SPI: 20 MHz, mode 3
 RESET_WAIT_US = 3000  # PX4 _read_prom(): "wait for PROM contents ... (2.8 ms)"

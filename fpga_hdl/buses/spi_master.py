@@ -1,4 +1,4 @@
-"""Pin-level SPI controller for cocotb, implementing :class:`fpga_hdl.buses.SpiBus`.
+"""Pin-level SPI controller for cocotb, implementing :class:`fpga_hdl.buses.transactions.SpiBus`.
 
 It drives SensorTop's shared SPI pins the way a flight controller's SPI peripheral
 does: chip select low, ``cs_setup_s``, eight SCLK periods per byte (MOSI changes on the
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from cocotb.triggers import Timer
 
-from fpga_hdl.buses import UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import UnknownDevice, check_clock_hz
 
 
 @dataclass(frozen=True)

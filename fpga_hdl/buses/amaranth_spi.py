@@ -12,11 +12,12 @@ from collections.abc import Mapping
 
 from amaranth.sim import Simulator
 
-from fpga_hdl.buses import UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import UnknownDevice, check_clock_hz
 
 
 class AmaranthSpiController:
-    """Drives ``sclk``/``cs_n``/``mosi`` of the chips in ``devices``; mode 0 or 3.
+    """Drives ``sclk``/``cs_n``/``mosi`` of the SPI pins in ``devices`` (name → a chip's
+    ``spi`` interface, :data:`~fpga_hdl.buses.signatures.SPI`); mode 0 or 3.
 
     ``cs_setup_s`` runs from CS falling to the first SCLK edge, ``cs_hold_s`` from the
     last SCLK edge to CS rising (PS-MPU-6000A-00 §6.8 t_SU.CS, t_HD.CS). An undriven SDO

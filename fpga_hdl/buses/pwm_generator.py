@@ -16,7 +16,7 @@ from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.pwm_capture.core import CHANNELS
+from fpga_hdl.buses.signatures import PWM, PWM_CHANNELS
 
 __all__ = ["PwmGenerator"]
 
@@ -35,8 +35,8 @@ class PwmGenerator(wiring.Component):
         Period of every channel; 0 stops the generator (all outputs low).
     width_ticks : In(ArrayLayout(unsigned(counter_bits), 8))
         Pulse width per channel, taken at each period start.
-    pwm : Out(8)
-        The outputs, one bit per channel.
+    pwm : Out(PWM)
+        ``pulses``: the outputs, one bit per channel.
     """
 
     def __init__(self, *, counter_bits: int = 16) -> None:
@@ -46,24 +46,25 @@ class PwmGenerator(wiring.Component):
         super().__init__(
             {
                 "period_ticks": In(counter_bits),
-                "width_ticks": In(data.ArrayLayout(counter_bits, CHANNELS)),
-                "pwm": Out(CHANNELS),
+                "width_ticks": In(data.ArrayLayout(counter_bits, PWM_CHANNELS)),
+                "pwm": Out(PWM),
             }
         )
 
     def elaborate(self, platform) -> Module:
         m = Module()
         count = Signal(self.counter_bits)
-        active = [Signal(self.counter_bits, name=f"active_width_{ch}") for ch in range(CHANNELS)]
+        channels = range(PWM_CHANNELS)
+        active = [Signal(self.counter_bits, name=f"active_width_{ch}") for ch in channels]
         running = self.period_ticks != 0
         # Update event: each period starts at count 0 with the widths written by then.
         at_start = count == 0
-        widths = [Mux(at_start, self.width_ticks[ch], active[ch]) for ch in range(CHANNELS)]
+        widths = [Mux(at_start, self.width_ticks[ch], active[ch]) for ch in range(PWM_CHANNELS)]
         with m.If(at_start):
-            m.d.sync += [active[ch].eq(self.width_ticks[ch]) for ch in range(CHANNELS)]
+            m.d.sync += [active[ch].eq(self.width_ticks[ch]) for ch in range(PWM_CHANNELS)]
         with m.If(~running | (count + 1 >= self.period_ticks)):
             m.d.sync += count.eq(0)
         with m.Else():
             m.d.sync += count.eq(count + 1)
-        m.d.sync += self.pwm.eq(Cat(*((count < width) & running for width in widths)))
+        m.d.sync += self.pwm.pulses.eq(Cat(*((count < width) & running for width in widths)))
         return m

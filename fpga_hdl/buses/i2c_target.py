@@ -15,6 +15,8 @@ from amaranth.lib import enum, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.signatures import BUS_FAULT, I2C
+
 __all__ = [
     "FAST_MODE",
     "STANDARD_MODE",
@@ -191,16 +193,12 @@ class I2cTarget(wiring.Component):
 
     Attributes
     ----------
-    scl : In(1)
-        SCL as seen on the bus.
-    sda_i : In(1)
-        SDA as seen on the bus (the wired-AND of every driver, this one included).
-    sda_oe : Out(1)
-        1 pulls SDA low (open drain); 0 releases it.
-    fault_mute : In(1)
-        While 1 the target never drives SDA: no ACK, no data; it looks absent.
-    fault_flip : In(8)
-        XOR mask applied to every data byte the target sends while it is non-zero.
+    i2c : In(I2C)
+        The bus (:data:`~fpga_hdl.buses.signatures.I2C`): SCL and SDA as seen on the bus
+        (the wired-AND of every driver, this one included); ``sda_oe`` = 1 pulls SDA low.
+    fault : In(BUS_FAULT)
+        While ``mute`` is 1 the target never drives SDA: no ACK, no data; it looks
+        absent. ``flip`` is XORed into every data byte the target sends.
     start : Out(1)
         One-cycle strobe: a START or repeated START was seen (any address).
     stop : Out(1)
@@ -219,11 +217,8 @@ class I2cTarget(wiring.Component):
         Next byte to send, presented by the chip before the engine asks for it.
     """
 
-    scl: In(1)
-    sda_i: In(1)
-    sda_oe: Out(1)
-    fault_mute: In(1)
-    fault_flip: In(8)
+    i2c: In(I2C)
+    fault: In(BUS_FAULT)
     start: Out(1)
     stop: Out(1)
     busy: Out(1)
@@ -242,7 +237,7 @@ class I2cTarget(wiring.Component):
     def elaborate(self, platform) -> Module:
         m = Module()
 
-        scl, sda = self._filtered(m, self.scl, "scl"), self._filtered(m, self.sda_i, "sda")
+        scl, sda = self._filtered(m, self.i2c.scl, "scl"), self._filtered(m, self.i2c.sda_i, "sda")
         scl_prev = Signal(init=1)
         sda_prev = Signal(init=1)
         m.d.sync += [scl_prev.eq(scl), sda_prev.eq(sda)]
@@ -262,7 +257,7 @@ class I2cTarget(wiring.Component):
         hold_pending = Signal()
 
         m.d.comb += [
-            self.sda_oe.eq(sda_drive & ~self.fault_mute),
+            self.i2c.sda_oe.eq(sda_drive & ~self.fault.mute),
             self.start.eq(start_cond),
             self.stop.eq(stop_cond),
             self.write_data.eq(shift),
@@ -284,7 +279,7 @@ class I2cTarget(wiring.Component):
 
         def send_next_byte() -> None:
             m.d.comb += self.read_stb.eq(1)
-            byte = self.read_data ^ self.fault_flip
+            byte = self.read_data ^ self.fault.flip
             m.d.sync += [
                 state.eq(_State.READ),
                 shift.eq(Cat(Const(0, 1), byte[:7])),
@@ -307,7 +302,7 @@ class I2cTarget(wiring.Component):
                         m.d.comb += self.write_stb.eq(1)
                         m.d.sync += state.eq(_State.WRITE_ACK)
                         drive_after_fall(1)
-                    with m.Elif((shift[1:] == self.address) & ~self.fault_mute):
+                    with m.Elif((shift[1:] == self.address) & ~self.fault.mute):
                         m.d.sync += [
                             state.eq(_State.ADDRESS_ACK),
                             reading.eq(shift[0]),

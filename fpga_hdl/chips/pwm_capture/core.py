@@ -7,9 +7,11 @@ from amaranth.lib import data, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.signatures import PWM, PWM_CHANNELS
+
 __all__ = ["CHANNELS", "LATENCY_TICKS", "PwmCapture", "timeout_ticks"]
 
-CHANNELS = 8
+CHANNELS = PWM_CHANNELS
 #: Two flip-flops re-time the asynchronous PWM inputs.
 SYNC_STAGES = 2
 #: Clock edges from the one that first samples a PWM edge to the one that updates the
@@ -53,8 +55,8 @@ class PwmCapture(wiring.Component):
 
     Attributes
     ----------
-    pwm : In(8)
-        PWM inputs, one bit per channel (asynchronous).
+    pwm : In(PWM)
+        ``pulses``: the PWM inputs, one bit per channel (asynchronous).
     width_ticks : Out(ArrayLayout(unsigned(counter_bits), 8))
         Pulse width per channel, in ticks.
     period_ticks : Out(ArrayLayout(unsigned(counter_bits), 8))
@@ -71,7 +73,7 @@ class PwmCapture(wiring.Component):
         counts = data.ArrayLayout(self.counter_bits, CHANNELS)
         super().__init__(
             {
-                "pwm": In(CHANNELS),
+                "pwm": In(PWM),
                 "width_ticks": Out(counts),
                 "period_ticks": Out(counts),
                 "timeout": Out(CHANNELS, init=(1 << CHANNELS) - 1),
@@ -81,7 +83,7 @@ class PwmCapture(wiring.Component):
     def elaborate(self, platform) -> Module:
         m = Module()
         level = Signal(CHANNELS)
-        m.submodules.sync_pwm = FFSynchronizer(self.pwm, level, stages=SYNC_STAGES)
+        m.submodules.sync_pwm = FFSynchronizer(self.pwm.pulses, level, stages=SYNC_STAGES)
         previous = Signal(CHANNELS)
         m.d.sync += previous.eq(level)
 

@@ -1,13 +1,13 @@
 """Transaction-level IST8310: the register behaviour of ``core.py`` in plain Python.
 
-Used by :class:`fpga_hdl.buses.TlmI2cBus` for fast campaigns; the tests run the same
+Used by :class:`fpga_hdl.buses.transactions.TlmI2cBus` for fast campaigns; the tests run the same
 driver over this model and over the RTL and compare every byte. The six data bytes are
 computed once per loaded sample and resolution, not once per byte read.
 """
 
-from fpga_hdl.buses import I2cNack
-from fpga_hdl.ist8310 import regs
-from fpga_hdl.ist8310.regs import Ist8310Sample, Register
+from fpga_hdl.buses.transactions import I2cNack
+from fpga_hdl.chips.ist8310 import regs
+from fpga_hdl.chips.ist8310.regs import Ist8310Sample, Register
 
 __all__ = ["Ist8310Model"]
 

@@ -11,7 +11,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from fpga_hdl.pwm_capture.core import LATENCY_TICKS, timeout_ticks
+from fpga_hdl.chips.pwm_capture.core import LATENCY_TICKS, timeout_ticks
 
 __all__ = ["ChannelCapture", "PwmCaptureModel"]
 

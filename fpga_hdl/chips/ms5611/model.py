@@ -11,14 +11,14 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 
-from fpga_hdl.ms5611 import regs
+from fpga_hdl.chips.ms5611 import regs
 
 IDLE_BYTE = 0xFF  # an undriven SDO reads as the pull-up
 ADC_MAX = (1 << 24) - 1
 
 
 class Ms5611Model:
-    """MS5611 behind an SPI transfer (:class:`fpga_hdl.buses.SpiDeviceModel`).
+    """MS5611 behind an SPI transfer (:class:`fpga_hdl.buses.transactions.SpiDeviceModel`).
 
     ``now_us`` is the simulated time, set by the rig as it advances.
     """

@@ -1,8 +1,8 @@
-"""Pin-level I2C controller for cocotb, implementing :class:`fpga_hdl.buses.I2cBus`.
+"""Pin-level I2C controller for cocotb, implementing :class:`fpga_hdl.buses.transactions.I2cBus`.
 
 It drives SCL and its side of the open-drain SDA the way a flight controller's I2C
 peripheral does (UM10204 section 3.1), with every duration taken from an
-:class:`~fpga_hdl.i2c_target.I2cTiming`, so a test can put one field at the
+:class:`~fpga_hdl.buses.i2c_target.I2cTiming`, so a test can put one field at the
 specification's limit. It also checks the target: each bit the target sends must be
 valid t_VD;DAT after SCL falls and stay stable until SCL falls again; a violation raises
 :class:`I2cTimingViolation`.
@@ -21,9 +21,9 @@ from cocotb.clock import Clock
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
-from fpga_hdl.buses import combined_transfer
-from fpga_hdl.i2c_controller import timing_for  # one place for the stretched timing
-from fpga_hdl.i2c_target import FAST_MODE, I2cTiming
+from fpga_hdl.buses.i2c_controller import timing_for  # one place for the stretched timing
+from fpga_hdl.buses.i2c_target import FAST_MODE, I2cTiming
+from fpga_hdl.buses.transactions import combined_transfer
 
 __all__ = ["CocotbI2cMaster", "I2cTimingViolation", "timing_for"]
 

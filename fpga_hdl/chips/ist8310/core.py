@@ -4,16 +4,17 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.host_port import CoherentLatch
-from fpga_hdl.i2c_target import I2cTarget, TargetSampling
-from fpga_hdl.ist8310 import regs
-from fpga_hdl.ist8310.regs import Register
+from fpga_hdl.buses.i2c_target import I2cTarget, TargetSampling
+from fpga_hdl.buses.signatures import BUS_FAULT, I2C
+from fpga_hdl.chips.ist8310 import regs
+from fpga_hdl.chips.ist8310.regs import Register
+from fpga_hdl.host.host_port import CoherentLatch
 
 __all__ = ["Ist8310Core"]
 
 
 class Ist8310Core(wiring.Component):
-    """IST8310 register file behind an :class:`~fpga_hdl.i2c_target.I2cTarget`.
+    """IST8310 register file behind an :class:`~fpga_hdl.buses.i2c_target.I2cTarget`.
 
     Behaviour emulated: WAI reads 0x10; writing CNTL1 = single measurement starts a
     measurement that completes ``regs.MEASUREMENT_TIME_US`` later in simulated time
@@ -32,12 +33,8 @@ class Ist8310Core(wiring.Component):
 
     Attributes
     ----------
-    scl : In(1)
-        I2C clock from the bus.
-    sda_i : In(1)
-        I2C data as seen on the bus (wired-AND, resolved by the top or testbench).
-    sda_oe : Out(1)
-        1 pulls SDA low.
+    i2c : In(I2C)
+        The I2C bus (SDA resolved by the top or testbench; ``sda_oe`` = 1 pulls it low).
     sample : In(regs.SAMPLE_LAYOUT)
         Field in 16-bit-mode counts, chip axes. Must hold from ``sample_stb`` until the
         next one (the host port's staging register).
@@ -50,21 +47,17 @@ class Ist8310Core(wiring.Component):
         gates the system clock keeps it running while this is 1).
     now_us : In(32)
         Simulated time in microseconds, written by the host; wraps modulo 2**32.
-    fault_mute : In(1)
-        While 1 the chip does not answer (no ACK).
-    fault_flip : In(8)
-        XOR mask applied to every byte the chip sends while it is non-zero.
+    fault : In(BUS_FAULT)
+        While ``mute`` is 1 the chip does not answer (no ACK); ``flip`` is XORed into
+        every byte the chip sends.
     """
 
-    scl: In(1)
-    sda_i: In(1)
-    sda_oe: Out(1)
+    i2c: In(I2C)
     sample: In(regs.SAMPLE_LAYOUT)
     sample_stb: In(1)
     sample_pending: Out(1)
     now_us: In(32)
-    fault_mute: In(1)
-    fault_flip: In(8)
+    fault: In(BUS_FAULT)
 
     def __init__(self, *, sys_clk_hz: float, address: int = regs.DEFAULT_ADDRESS) -> None:
         if address not in regs.ADDRESSES:
@@ -79,13 +72,8 @@ class Ist8310Core(wiring.Component):
         m.submodules.target = target = I2cTarget(
             address=self.address, sys_clk_hz=self.sampling.sys_clk_hz
         )
-        m.d.comb += [
-            target.scl.eq(self.scl),
-            target.sda_i.eq(self.sda_i),
-            self.sda_oe.eq(target.sda_oe),
-            target.fault_mute.eq(self.fault_mute),
-            target.fault_flip.eq(self.fault_flip),
-        ]
+        wiring.connect(m, wiring.flipped(self.i2c), target.i2c)
+        wiring.connect(m, wiring.flipped(self.fault), target.fault)
 
         # Double buffer: the visible sample changes only between transactions.
         m.submodules.latch = latch = CoherentLatch(regs.SAMPLE_LAYOUT)

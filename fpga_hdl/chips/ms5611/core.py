@@ -16,9 +16,10 @@ from amaranth.hdl import Array, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.host_port import CoherentLatch
-from fpga_hdl.ms5611 import regs
-from fpga_hdl.spi_target import add_spi_engine, check_sys_clk_for_spi
+from fpga_hdl.buses.signatures import BUS_FAULT, SPI
+from fpga_hdl.buses.spi_target import add_spi_engine, check_sys_clk_for_spi
+from fpga_hdl.chips.ms5611 import regs
+from fpga_hdl.host.host_port import CoherentLatch
 
 
 class Ms5611(wiring.Component):
@@ -33,10 +34,9 @@ class Ms5611(wiring.Component):
 
     Attributes
     ----------
-    sclk, cs_n, mosi : In(1)
-        SPI pins (SCLK, CSB, SDI).
-    miso, miso_oe : Out(1)
-        SDO and its driver enable (high-Z while deselected or muted).
+    spi : In(SPI)
+        SPI pins (SCLK, CSB, SDI, SDO) and SDO's driver enable (high-Z while deselected
+        or muted).
     sample : In(regs.SAMPLE_LAYOUT)
         The raw ADC values D1 (pressure) and D2 (temperature) a conversion returns;
         stable from ``sample_stb`` until copied.
@@ -45,25 +45,18 @@ class Ms5611(wiring.Component):
     now_us : In(32)
         Simulated time in microseconds; the chip takes a new value only between
         transfers, and needs no clock in between to let time pass.
-    fault_mute : In(1)
-        The chip stops driving SDO.
-    fault_flip : In(8)
-        XOR mask on every data byte sent while non-zero.
+    fault : In(BUS_FAULT)
+        ``mute``: the chip stops driving SDO; ``flip``: XOR mask on every data byte sent.
     sample_pending : Out(1)
         A sample waits for the current transfer to end; a simulation that gates the
         system clock keeps it running until this falls.
     """
 
-    sclk: In(1)
-    cs_n: In(1)
-    mosi: In(1)
-    miso: Out(1)
-    miso_oe: Out(1)
+    spi: In(SPI)
     sample: In(regs.SAMPLE_LAYOUT)
     sample_stb: In(1)
     now_us: In(32)
-    fault_mute: In(1)
-    fault_flip: In(8)
+    fault: In(BUS_FAULT)
     sample_pending: Out(1)
 
     def __init__(self, *, sys_clk_hz: float, prom: tuple[int, ...] = regs.DEFAULT_PROM) -> None:

@@ -17,9 +17,9 @@ frame is forward-right-down. :func:`decode_field_gauss` returns that frame and
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from fpga_hdl.buses import I2cBus
-from fpga_hdl.ist8310 import regs
-from fpga_hdl.ist8310.regs import Ist8310Sample, Register
+from fpga_hdl.buses.transactions import I2cBus
+from fpga_hdl.chips.ist8310 import regs
+from fpga_hdl.chips.ist8310.regs import Ist8310Sample, Register
 
 __all__ = [
     "PX4_REGISTER_CONFIG",
@@ -82,7 +82,7 @@ def sample_from_field_gauss(field_frd_gauss: Sequence[float]) -> Ist8310Sample:
 
 
 class Ist8310Driver:
-    """PX4's IST8310 transaction sequence over any :class:`~fpga_hdl.buses.I2cBus`."""
+    """PX4's IST8310 transaction sequence over any :class:`~fpga_hdl.buses.transactions.I2cBus`."""
 
     def __init__(
         self, bus: I2cBus, *, address: int = regs.DEFAULT_ADDRESS, scl_hz: float = PX4_SCL_HZ

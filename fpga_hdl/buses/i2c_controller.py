@@ -27,8 +27,8 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.buses import check_clock_hz
-from fpga_hdl.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
+from fpga_hdl.buses.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
+from fpga_hdl.buses.transactions import check_clock_hz
 
 __all__ = ["I2cBitCycles", "I2cController", "controller_rate_hz", "timing_for"]
 

@@ -13,7 +13,7 @@ recomputing every byte per byte read cost half of a TLM frame.
 
 from __future__ import annotations
 
-from fpga_hdl.mpu6000 import regs
+from fpga_hdl.chips.mpu6000 import regs
 
 #: What a controller reads from an undriven SDO line: the pull-up.
 IDLE_BYTE = 0xFF
@@ -23,7 +23,8 @@ _REGISTERS = {r.address: r for r in regs.CONFIG_REGISTERS}
 
 
 class Mpu6000Model:
-    """MPU-6000 registers behind an SPI transfer (:class:`fpga_hdl.buses.SpiDeviceModel`)."""
+    """MPU-6000 registers behind an SPI transfer
+    (a :class:`~fpga_hdl.buses.transactions.SpiDeviceModel`)."""
 
     def __init__(self) -> None:
         self._config = {r.address: r.reset_value for r in regs.CONFIG_REGISTERS}

@@ -36,6 +36,8 @@ from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.signatures import BUS_FAULT, SPI
+
 __all__ = ["CS_SYNC_STAGES", "SpiTarget", "add_spi_engine", "check_sys_clk_for_spi"]
 
 #: Flip-flops between CS and the ``sync`` domain's ``busy`` (see :func:`check_sys_clk_for_spi`).
@@ -72,20 +74,12 @@ class SpiTarget(wiring.Component):
 
     Attributes
     ----------
-    sclk : In(1)
-        SPI clock pin.
-    cs_n : In(1)
-        Chip select pin, active low. High resets the bit and byte counters at once.
-    mosi : In(1)
-        Controller-out target-in data pin (the datasheets' SDI).
-    miso : Out(1)
-        Target-out data pin (SDO); meaningful only while ``miso_oe`` is high.
-    miso_oe : Out(1)
-        SDO driver enable: high while selected and not muted, else SDO is high-Z.
-    fault_mute : In(1)
-        Fault injection: never drive SDO (the chip looks absent).
-    fault_flip : In(8)
-        Fault injection: XOR mask applied to every data byte sent while non-zero.
+    spi : In(SPI)
+        The bus pins (:data:`~fpga_hdl.buses.signatures.SPI`). CS high resets the bit and
+        byte counters at once; ``miso_oe`` is high while selected and not muted.
+    fault : In(BUS_FAULT)
+        ``mute`` never drives SDO (the chip looks absent); ``flip`` is XORed into every
+        data byte sent.
     rx_data : Out(8)
         The byte completing at this rising SCLK edge (combinational).
     rx_stb : Out(1)
@@ -98,13 +92,8 @@ class SpiTarget(wiring.Component):
         CS asserted, synchronised into the ``sync`` domain (lags CS by 2..3 cycles).
     """
 
-    sclk: In(1)
-    cs_n: In(1)
-    mosi: In(1)
-    miso: Out(1)
-    miso_oe: Out(1)
-    fault_mute: In(1)
-    fault_flip: In(8)
+    spi: In(SPI)
+    fault: In(BUS_FAULT)
     rx_data: Out(8)
     rx_stb: Out(1)
     rx_first: Out(1)
@@ -113,20 +102,21 @@ class SpiTarget(wiring.Component):
 
     def elaborate(self, platform) -> Module:
         m = Module()
+        pins = self.spi
         for name, edge in (("spi_rx", "pos"), ("spi_tx", "neg")):
             domain = ClockDomain(name, clk_edge=edge, async_reset=True, local=True)
             m.domains += domain
-            m.d.comb += [domain.clk.eq(self.sclk), domain.rst.eq(self.cs_n)]
+            m.d.comb += [domain.clk.eq(pins.sclk), domain.rst.eq(pins.cs_n)]
 
         bit_count = Signal(3)
         shift_in = Signal(7)
         first_byte = Signal(init=1)
-        m.d.spi_rx += [shift_in.eq(Cat(self.mosi, shift_in[:6])), bit_count.eq(bit_count + 1)]
+        m.d.spi_rx += [shift_in.eq(Cat(pins.mosi, shift_in[:6])), bit_count.eq(bit_count + 1)]
         with m.If(bit_count == 7):
             m.d.spi_rx += first_byte.eq(0)
         m.d.comb += [
-            self.rx_data.eq(Cat(self.mosi, shift_in)),
-            self.rx_stb.eq((bit_count == 7) & ~self.cs_n),
+            self.rx_data.eq(Cat(pins.mosi, shift_in)),
+            self.rx_stb.eq((bit_count == 7) & ~pins.cs_n),
             self.rx_first.eq(first_byte),
         ]
 
@@ -134,32 +124,25 @@ class SpiTarget(wiring.Component):
         with m.If(bit_count != 0):
             m.d.spi_tx += shift_out.eq(shift_out << 1)
         with m.Elif(~first_byte):  # a byte boundary has passed: start the next data byte
-            m.d.spi_tx += shift_out.eq(self.tx_data ^ self.fault_flip)
+            m.d.spi_tx += shift_out.eq(self.tx_data ^ self.fault.flip)
         m.d.comb += [
-            self.miso.eq(shift_out[7]),
-            self.miso_oe.eq(~self.cs_n & ~self.fault_mute),
+            pins.miso.eq(shift_out[7]),
+            pins.miso_oe.eq(~pins.cs_n & ~self.fault.mute),
         ]
 
         m.submodules.cs_sync = FFSynchronizer(
-            ~self.cs_n, self.busy, o_domain="sync", stages=CS_SYNC_STAGES
+            ~pins.cs_n, self.busy, o_domain="sync", stages=CS_SYNC_STAGES
         )
         return m
 
 
 def add_spi_engine(m: Module, chip: wiring.Component) -> SpiTarget:
     """Give a chip core its SPI engine: the local ``spi`` domain (SCLK rising edge, chip
-    reset) and a :class:`SpiTarget` wired to the chip's bus pins and fault inputs."""
+    reset) and a :class:`SpiTarget` on the chip's ``spi`` pins and ``fault`` inputs."""
     spi = ClockDomain("spi", async_reset=True, local=True)
     m.domains += spi
-    m.d.comb += [spi.clk.eq(chip.sclk), spi.rst.eq(ResetSignal("sync"))]
+    m.d.comb += [spi.clk.eq(chip.spi.sclk), spi.rst.eq(ResetSignal("sync"))]
     m.submodules.engine = engine = SpiTarget()
-    m.d.comb += [
-        engine.sclk.eq(chip.sclk),
-        engine.cs_n.eq(chip.cs_n),
-        engine.mosi.eq(chip.mosi),
-        chip.miso.eq(engine.miso),
-        chip.miso_oe.eq(engine.miso_oe),
-        engine.fault_mute.eq(chip.fault_mute),
-        engine.fault_flip.eq(chip.fault_flip),
-    ]
+    wiring.connect(m, wiring.flipped(chip.spi), engine.spi)
+    wiring.connect(m, wiring.flipped(chip.fault), engine.fault)
     return engine

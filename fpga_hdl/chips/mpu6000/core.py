@@ -19,9 +19,10 @@ from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.host_port import CoherentLatch
-from fpga_hdl.mpu6000 import regs
-from fpga_hdl.spi_target import add_spi_engine, check_sys_clk_for_spi
+from fpga_hdl.buses.signatures import BUS_FAULT, SPI
+from fpga_hdl.buses.spi_target import add_spi_engine, check_sys_clk_for_spi
+from fpga_hdl.chips.mpu6000 import regs
+from fpga_hdl.host.host_port import CoherentLatch
 
 
 def _saturate_int16(value):
@@ -39,34 +40,26 @@ class Mpu6000(wiring.Component):
 
     Attributes
     ----------
-    sclk, cs_n, mosi : In(1)
-        SPI pins (the datasheet's SCLK, /CS, SDI).
-    miso, miso_oe : Out(1)
-        SDO and its driver enable (high-Z while deselected or muted).
+    spi : In(SPI)
+        SPI pins (the datasheet's SCLK, /CS, SDI, SDO) and SDO's driver enable
+        (high-Z while deselected or muted).
     sample : In(regs.SAMPLE_LAYOUT)
         Raw accel/gyro at the finest resolution (±2 g, ±250 °/s scale, 20-bit signed)
         and raw TEMP_OUT; must stay stable from ``sample_stb`` until copied.
     sample_stb : In(1)
         One ``sync`` cycle: a new sample is offered. It becomes visible at the first
         cycle with no transfer in progress, else when the transfer ends.
-    fault_mute : In(1)
-        The chip stops driving SDO.
-    fault_flip : In(8)
-        XOR mask on every data byte sent while non-zero.
+    fault : In(BUS_FAULT)
+        ``mute``: the chip stops driving SDO; ``flip``: XOR mask on every data byte sent.
     sample_pending : Out(1)
         A sample waits for the current transfer to end; a simulation that gates the
         system clock keeps it running until this falls.
     """
 
-    sclk: In(1)
-    cs_n: In(1)
-    mosi: In(1)
-    miso: Out(1)
-    miso_oe: Out(1)
+    spi: In(SPI)
     sample: In(regs.SAMPLE_LAYOUT)
     sample_stb: In(1)
-    fault_mute: In(1)
-    fault_flip: In(8)
+    fault: In(BUS_FAULT)
     sample_pending: Out(1)
 
     def __init__(self, *, sys_clk_hz: float) -> None:

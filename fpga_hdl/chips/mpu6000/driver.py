@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fpga_hdl.buses import BusError, SpiBus
-from fpga_hdl.mpu6000 import regs
+from fpga_hdl.buses.transactions import BusError, SpiBus
+from fpga_hdl.chips.mpu6000 import regs
 
 SPI_SPEED_HZ = 1e6  # PX4 InvenSense_MPU6000::SPI_SPEED
 SPI_SPEED_SENSOR_HZ = 5e6  # PX4 InvenSense_MPU6000::SPI_SPEED_SENSOR
