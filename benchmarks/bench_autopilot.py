@@ -17,10 +17,12 @@ import math
 import tempfile
 import time
 import tracemalloc
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.figures import Figure
 from quad_model.frames import ned_to_geodetic
 from rig.autopilots.reference import FlightController, GpsFix, Parameters, SensorFrame
 from rig.autopilots.reference.flight_log import open_flight_log
@@ -69,27 +71,22 @@ def _flying_controller(log_path: Path | None) -> tuple[FlightController, int]:
     return controller, 1 + len(warmup) * (1_000_000 // IMU_RATE_HZ)
 
 
-def main() -> None:
+def figures() -> Iterator[Figure]:
     frames = _frames(FRAMES, np.random.default_rng(2))
     with tempfile.TemporaryDirectory() as folder:
         for label, log_path in (("no log", None), ("with ULog", Path(folder) / "bench.ulg")):
             controller, start_us = _flying_controller(log_path)
             seconds = _run(controller, frames, start_us)
             rate = FRAMES / seconds
-            print(f"FlightController.update ({label}): {rate:,.0f} frames/s, "
-                  f"{1e6 / rate:.0f} µs/frame, {rate / IMU_RATE_HZ:.1f}× real time at "
-                  f"{IMU_RATE_HZ} Hz")  # fmt: skip
+            detail = f"{1e6 / rate:.0f} µs/frame, {rate / IMU_RATE_HZ:.1f}× real time at 1 kHz"
             if controller.log is not None:
                 controller.log.close()
                 size_kib = log_path.stat().st_size / 1024
-                print(f"  ULog: {size_kib / (FRAMES / IMU_RATE_HZ):.0f} KiB per simulated second")
+                detail += f"; ULog {size_kib / (FRAMES / IMU_RATE_HZ):.0f} KiB per simulated s"
+            yield Figure(f"FlightController.update, {label}", rate, "frames/s", detail=detail)
     controller, start_us = _flying_controller(None)
     tracemalloc.start()
     _run(controller, frames[:5000], start_us)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    print(f"  peak Python memory over 5000 frames: {peak / 1024:.0f} KiB")
-
-
-if __name__ == "__main__":
-    main()
+    yield Figure("peak Python memory over 5000 frames", peak / 1024, "KiB")

@@ -6,21 +6,22 @@ issue: ≥ 1.8× from 1 to 2 workers). On 2 cores the ceiling is lower than the 
 count suggests: one case is already two processes (the rig and its autopilot) that take
 turns in lockstep, so a single case keeps more than one core partly busy.
 
-``python -m benchmarks.bench_campaign [CASES]`` (default 4 cases per configuration).
+Four cases per configuration.
 """
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from dask.distributed import LocalCluster
 
+from benchmarks.figures import Figure
 from rig.apps.campaign import campaign_executor, campaign_from_dict, run_campaign
 
-DEFAULT_CASES = 4
+CASES = 4
 
 
 def _campaign(cases: int):
@@ -31,35 +32,32 @@ def _campaign(cases: int):
     )  # fmt: skip
 
 
-def _rate(cases: int, workers: int | None, scheduler: str | None = None) -> tuple[float, float]:
-    """(cases per wall minute, mean case wall time in s) for one fresh campaign run."""
+def _rate(
+    cases: int, workers: int | None, scheduler: str | None = None
+) -> tuple[float, float, int]:
+    """(cases per wall minute, mean case wall time in s, cases that did not run) for one
+    fresh campaign run."""
     with tempfile.TemporaryDirectory() as folder:
         started = time.monotonic()
         with campaign_executor(scheduler, workers) as executor:
             results = run_campaign(_campaign(cases), Path(folder), executor)
         wall_s = time.monotonic() - started
-    bad = [r for r in results if r.status not in ("ok", "failed")]
-    if bad:
-        print(f"  ({len(bad)} cases did not run: {bad[0].reason})")
-    return len(results) / wall_s * 60.0, sum(r.wall_s for r in results) / len(results)
+    bad = sum(r.status not in ("ok", "failed") for r in results)
+    return len(results) / wall_s * 60.0, sum(r.wall_s for r in results) / len(results), bad
 
 
-def main(argv: list[str] | None = None) -> None:
-    args = sys.argv[1:] if argv is None else argv
-    cases = int(args[0]) if args else DEFAULT_CASES
-    print(f"{cases} cases of takeoff_hover_land (30 s, TLM) per configuration")
-    figures = {}
+def figures() -> Iterator[Figure]:
+    rates = {}
     for label, workers in (("local pool, 1 worker", 1), ("local pool, 2 workers", 2)):
-        figures[label] = _rate(cases, workers)
+        rates[label] = _rate(CASES, workers)
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                            dashboard_address=None)  # fmt: skip
     with cluster:
-        figures["Dask LocalCluster, 2 workers"] = _rate(cases, None, cluster.scheduler_address)
-    for label, (per_minute, case_s) in figures.items():
-        print(f"{label:30s} {per_minute:6.2f} cases/min   mean case wall {case_s:5.1f} s")
-    one, two = figures["local pool, 1 worker"][0], figures["local pool, 2 workers"][0]
-    print(f"scaling 1 -> 2 workers (local pool): {two / one:.2f}x (target >= 1.8x)")
-
-
-if __name__ == "__main__":
-    main()
+        rates["Dask LocalCluster, 2 workers"] = _rate(CASES, None, cluster.scheduler_address)
+    for label, (per_minute, case_s, bad) in rates.items():
+        detail = f"{CASES} cases of takeoff_hover_land (30 s, TLM); mean case wall {case_s:.1f} s"
+        if bad:
+            detail += f"; {bad} did not run"
+        yield Figure(f"campaign, {label}", per_minute, "cases/min", detail=detail)
+    one, two = rates["local pool, 1 worker"][0], rates["local pool, 2 workers"][0]
+    yield Figure("campaign scaling, 1 → 2 workers (local pool)", two / one, "×", goal="≥ 1.8×")

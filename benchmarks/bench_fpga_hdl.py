@@ -12,10 +12,14 @@ IMU burst, baro every 20th frame; no I2C, no PWM, simulated time not advanced.
 Numbers only; nothing passes or fails on time.
 """
 
+from __future__ import annotations
+
 import json
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
+from benchmarks.figures import Figure
 from fpga_hdl.cosim.harness import GATED_CLOCK_VERILOG, HARNESS_TOPLEVEL, CosimHarness
 from fpga_hdl.cosim.runner import SIMULATORS, missing_simulator_reason, run_cocotb
 from fpga_hdl.top import SensorTop
@@ -40,53 +44,45 @@ def run_frames(simulator: str, module: str, **env: str) -> dict:
         return json.loads(out.read_text())
 
 
-def print_fast(simulator: str, f: dict) -> None:
+def _fast(simulator: str, f: dict) -> Figure:
     frames, wall_s = f["frames"], f["wall_s"]
     transfers = f["spi_transfers"] + f["i2c_transfers"]
-    label = f"{simulator} fast{'' if f['pwm'] else ' (no PWM)'}"
-    print(
-        f"{label:<24} {1e6 * wall_s / frames:>9.0f} {f['sim_s'] / wall_s:>6.2f} "
-        f"{transfers / wall_s:>12.0f} {f['sync_cycles'] / frames:>11.0f} "
-        f"{f['pwm_cycles'] / frames:>10.0f} "
-        f"{(f['sync_cycles'] + f['pwm_cycles']) / wall_s / 1e6:>8.2f}"
-    )
+    cycles_per_s = (f["sync_cycles"] + f["pwm_cycles"]) / wall_s / 1e6
+    return Figure(
+        f"{simulator}, harness (fast path){'' if f['pwm'] else ', PWM clock off'}",
+        f["sim_s"] / wall_s, "× real time",
+        detail=f"{1e6 * wall_s / frames:.0f} µs/frame, {transfers / wall_s:.0f} transfers/s, "
+        f"{f['sync_cycles'] / frames:.0f} sys + {f['pwm_cycles'] / frames:.0f} pwm cycles/frame, "
+        f"{cycles_per_s:.2f} M cycles/s",
+    )  # fmt: skip
 
 
-def print_budget(f: dict) -> None:
-    """Cycles per simulated second and wall time per simulated second, per part."""
+def _budget(simulator: str, f: dict) -> Iterator[Figure]:
+    """Wall time per simulated second and cycles, per part of the frame."""
     sim_s = f["sim_s"]
-    print(f"  budget per simulated second ({f['frames']} frames):")
     for name, (wall_s, sync, pwm) in f["parts"].items():
-        sync_k, pwm_k = sync / sim_s / 1e3, pwm / sim_s / 1e3
-        print(
-            f"    {name:<5} sync {sync_k:>7.0f} k cycles  pwm {pwm_k:>6.0f} k cycles  "
-            f"wall {wall_s / sim_s:>6.3f} s"
-        )
+        yield Figure(
+            f"{simulator}, harness: {name} part", wall_s / sim_s, "wall s per simulated s",
+            detail=f"sync {sync / sim_s / 1e3:.0f} k + pwm {pwm / sim_s / 1e3:.0f} k cycles "
+            "per simulated s",
+        )  # fmt: skip
 
 
-def main() -> None:
-    print(
-        f"{'path':<24} {'frame µs':>9} {'RTF':>6} {'transfers/s':>12} "
-        f"{'sys cyc/fr':>11} {'pwm cyc/fr':>10} {'Mcyc/s':>8}"
-    )
+def figures() -> Iterator[Figure]:
     for simulator in SIMULATORS:
         reason = missing_simulator_reason(simulator)
         if reason is not None:
-            print(f"{simulator:<24} skipped: {reason}")
+            yield Figure(simulator, float("nan"), "", detail=f"skipped: {reason}")
             continue
         with_pwm = run_frames(simulator, "cocotb_fast_frame")
-        print_fast(simulator, with_pwm)
-        print_fast(simulator, run_frames(simulator, "cocotb_fast_frame", BENCH_PWM="0"))
+        yield _fast(simulator, with_pwm)
+        yield _fast(simulator, run_frames(simulator, "cocotb_fast_frame", BENCH_PWM="0"))
         old = run_frames(simulator, "cocotb_fpga_frame")
-        label = f"{simulator} pin-level"
-        print(
-            f"{label:<24} {1e6 * old['wall_s'] / old['frames']:>9.0f} {'-':>6} "
-            f"{old['transfers'] / old['wall_s']:>12.0f} "
-            f"{old['sys_cycles'] / old['frames']:>11.0f} {'-':>10} "
-            f"  (+{old['sclk_edges'] / old['frames']:.0f} SCLK edges/frame from Python)"
-        )
-        print_budget(with_pwm)
-
-
-if __name__ == "__main__":
-    main()
+        yield Figure(
+            f"{simulator}, pin-level masters (IMU + baro)", 1e6 * old["wall_s"] / old["frames"],
+            "µs/frame",
+            detail=f"{old['transfers'] / old['wall_s']:.0f} transfers/s, "
+            f"{old['sys_cycles'] / old['frames']:.0f} sys cycles + "
+            f"{old['sclk_edges'] / old['frames']:.0f} SCLK edges from Python per frame",
+        )  # fmt: skip
+        yield from _budget(simulator, with_pwm)

@@ -4,26 +4,20 @@ cost, and RotorPy (a peer simulator) on a comparable hover. Figures only, no pas
 Targets from the issue: one vehicle ≥ 100× real time; batched ≥ 10,000 vehicle-s/s.
 """
 
+from __future__ import annotations
+
 import math
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
+from benchmarks.figures import Figure
 from quad_model import Environment, QuadBatch, QuadModel, SensorSuite, load_vehicle
 from quad_model.model import PARALLEL_MIN_VEHICLES, VehicleTruth
 from quad_model.sensors import BaroModel, GpsModel, ImuModel, MagModel
 
 FRAME_S = 0.001  # the rig's lockstep frame: 5 physics substeps
-#: µs per ``sample()`` call at commit abaed09, before the sensor speed work (numpy per sample,
-#: one generator call per draw): medians of 3 runs of :func:`sensors` alternating with the
-#: block-draw/numba code on the shared 2-core machine (load average < 1).
-SENSORS_BEFORE_US = {
-    "ImuModel.sample": 43.6,
-    "MagModel.sample": 6.8,
-    "BaroModel.sample": 3.1,
-    "GpsModel.sample": 1.2,
-    "SensorSuite.sample": 49.6,
-}
 
 
 def _hovering_model(vehicle, count=None):
@@ -49,7 +43,7 @@ def _best_of(repeats: int, run) -> float:
     return min(times)
 
 
-def single_vehicle(vehicle) -> float:
+def single_vehicle(vehicle) -> Iterator[Figure]:
     model, throttle = _hovering_model(vehicle)
     command = [throttle] * 4
     model.advance(command, FRAME_S)  # compile or load the cache outside the timing
@@ -68,13 +62,13 @@ def single_vehicle(vehicle) -> float:
     one_call = _best_of(3, lambda: model.advance(command, sim_s))
     per_frame = _best_of(3, frames_only)
     with_truth = _best_of(3, frames_with_truth)
-    print(f"one vehicle, 5 kHz RK4, {sim_s:g} s hover:")
     step_us = one_call / sim_s / 5000 * 1e6
-    frame_us = per_frame / frames * 1e6
-    print(f"  one advance() call    RTF {sim_s / one_call:7.0f}×  ({step_us:.2f} µs/step)")
-    print(f"  1 ms frames           RTF {sim_s / per_frame:7.0f}×  ({frame_us:.1f} µs/frame)")
-    print(f"  1 ms frames + truth   RTF {sim_s / with_truth:7.0f}×  (target ≥ 100×)")
-    return sim_s / per_frame
+    yield Figure("one vehicle, 5 kHz RK4, one advance() call", sim_s / one_call, "× real time",
+                 detail=f"{step_us:.2f} µs/step")  # fmt: skip
+    yield Figure("one vehicle, 1 ms frames", sim_s / per_frame, "× real time",
+                 detail=f"{per_frame / frames * 1e6:.1f} µs/frame")  # fmt: skip
+    yield Figure("one vehicle, 1 ms frames + truth (as the rig)", sim_s / with_truth,
+                 "× real time", goal="≥ 100×")  # fmt: skip
 
 
 def _hover_truths(vehicle, frames: int) -> list[VehicleTruth]:
@@ -101,7 +95,9 @@ def _sampling_us(make, truths: list[VehicleTruth], repeats: int = 3) -> float:
     return best / len(truths) * 1e6
 
 
-def sensors(vehicle) -> None:
+def sensors(vehicle) -> Iterator[Figure]:
+    """Sensor physics on a 2 s hover, one call per 1 ms frame; the suite samples IMU 1 kHz,
+    mag 100 Hz, baro 50 Hz, GPS 10 Hz, so its figure is a rig frame's sensor physics."""
     truths = _hover_truths(vehicle, 2000)
     env = Environment()
     rates = {"imu_rate_hz": 1000.0, "mag_rate_hz": 100.0, "baro_rate_hz": 50.0}
@@ -113,16 +109,13 @@ def sensors(vehicle) -> None:
         "SensorSuite.sample": lambda: SensorSuite(vehicle, env, np.random.default_rng(1), **rates),
     }
     _sampling_us(cases["SensorSuite.sample"], truths[:10], repeats=1)  # compile/load kernels
-    print("sensor physics on a 2 s hover, one call per 1 ms frame; the suite samples IMU 1 kHz,")
-    print("mag 100 Hz, baro 50 Hz, GPS 10 Hz, so its figure is the rig frame's sensor physics:")
-    print(f"  {'µs per sample() call':<22}{'before':>8}{'now':>8}{'speed-up':>10}")
     for name, make in cases.items():
-        before, now = SENSORS_BEFORE_US[name], _sampling_us(make, truths)
-        print(f"  {name:<22}{before:8.1f}{now:8.2f}{before / now:9.1f}×")
+        detail = "a rig frame's sensor physics" if name == "SensorSuite.sample" else ""
+        yield Figure(name, _sampling_us(make, truths), "µs/call", detail=detail)
 
 
-def batched(vehicle) -> None:
-    print("batched, 1 ms frames, 0.5 s simulated per vehicle (target ≥ 10,000 vehicle-s/s):")
+def batched(vehicle) -> Iterator[Figure]:
+    """QuadBatch, 1 ms frames, 0.5 s simulated per vehicle."""
     for count in (1, 100, 1000):
         batch, throttle = _hovering_model(vehicle, count)
         commands = np.full((count, 4), throttle)
@@ -136,16 +129,17 @@ def batched(vehicle) -> None:
 
         wall = _best_of(2, run)
         kernel = "all cores" if count >= PARALLEL_MIN_VEHICLES else "one core"
-        print(f"  N = {count:5d}: {count * sim_s / wall:8.0f} vehicle-s/s ({kernel})")
+        yield Figure(f"QuadBatch, N = {count}", count * sim_s / wall, "vehicle-s/s",
+                     goal="≥ 10,000" if count == 1000 else "", detail=kernel)  # fmt: skip
 
 
 def rotorpy_hover() -> float | None:
-    """RotorPy's Multirotor (scipy solve_ivp per step) hovering at the same 5 kHz step."""
+    """RotorPy's Multirotor (scipy solve_ivp per step) hovering at the same 5 kHz step;
+    None when RotorPy (the ``bench`` extra) is not installed."""
     try:
         from rotorpy.vehicles.hummingbird_params import quad_params
         from rotorpy.vehicles.multirotor import Multirotor
-    except ImportError as error:
-        print(f"RotorPy not available ({error}); install the 'bench' extra")
+    except ImportError:
         return None
     hover = math.sqrt(quad_params["mass"] * 9.81 / (4 * quad_params["k_eta"]))
     state = {
@@ -165,21 +159,20 @@ def rotorpy_hover() -> float | None:
         for _ in range(steps):
             s = vehicle.step(s, control, dt)
 
-    wall = _best_of(1, run)
-    rtf = steps * dt / wall
-    print(f"RotorPy Multirotor hover, 5 kHz steps: RTF {rtf:.2f}×")
-    return rtf
+    return steps * dt / _best_of(1, run)
 
 
-def main() -> None:
+def figures() -> Iterator[Figure]:
     vehicle = load_vehicle("f450_high_precision")
-    rtf = single_vehicle(vehicle)
-    sensors(vehicle)
-    batched(vehicle)
+    single = list(single_vehicle(vehicle))
+    yield from single
+    yield from sensors(vehicle)
+    yield from batched(vehicle)
     peer = rotorpy_hover()
-    if peer:
-        print(f"quad_model / RotorPy (1 ms frames): {rtf / peer:.0f}×")
-
-
-if __name__ == "__main__":
-    main()
+    if peer is None:
+        yield Figure("anchor: RotorPy hover, 5 kHz", float("nan"), "× real time",
+                     detail="RotorPy not installed (the 'bench' extra)")  # fmt: skip
+        return
+    yield Figure("anchor: RotorPy Multirotor hover, 5 kHz steps", peer, "× real time",
+                 detail="a peer simulator, measured in this run")  # fmt: skip
+    yield Figure("quad_model / RotorPy (1 ms frames)", single[1].value / peer, "×")

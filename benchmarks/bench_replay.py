@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
+from benchmarks.figures import Figure, budget_detail
 from rig.apps.replay import ReplayOptions, plan_replay, run_replay
 from rig.lockstep.loop import RunOptions
 from rig.mavlink.px4_api import free_instance
@@ -28,23 +30,18 @@ WINDOW_S = (415.0, 416.0)
 PLANS = 5
 
 
-def main() -> None:
+def figures() -> Iterator[Figure]:
     started = time.perf_counter()
     for _ in range(PLANS):
         plan_replay(X500_LOG)
-    print(f"plan_replay (whole X500 log, 3.5 MB): {(time.perf_counter() - started) / PLANS:.2f} s")
+    planning = (time.perf_counter() - started) / PLANS
+    yield Figure("plan_replay, the whole X500 log (3.5 MB)", planning, "s")
     with tempfile.TemporaryDirectory() as folder:
         for drive in ("velocity", "rates", "attitude"):
             window = None if drive == "velocity" else WINDOW_S
             plan = plan_replay(X500_LOG, ReplayOptions(drive=drive, end_s=END_S, window_s=window))
             options = RunOptions(instance=free_instance(60, 40), out_dir=Path(folder) / drive)
             result = run_replay(plan, options)
-            print(f"{drive:8s} drive: {result.simulated_s:.1f} s simulated in "
-                  f"{result.wall_s:.1f} s, RTF {result.real_time_factor:.2f}x, frame "
-                  f"{result.budget.total_us:.0f} µs (autopilot wait "
-                  f"{result.budget.autopilot_wait_us:.0f} µs, ground link and commands "
-                  f"{result.budget.other_us:.0f} µs)")  # fmt: skip
-
-
-if __name__ == "__main__":
-    main()
+            yield Figure(f"replay, {drive} drive", result.real_time_factor, "× real time",
+                         detail=f"{result.simulated_s:.1f} s simulated; "
+                         f"{budget_detail(result.budget)}")  # fmt: skip
