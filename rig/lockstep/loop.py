@@ -302,7 +302,8 @@ class _Loop:
                                clock_start_s=self.scenario.start.clock_s)  # fmt: skip
         if reference:
             self._start_reference_autopilot()
-            link.accept("the reference autopilot (python -m rig.autopilots.reference)")
+            link.accept("the reference autopilot (python -m rig.autopilots.reference)",
+                        answers_every_frame=True)  # fmt: skip
         else:
             self._accept_px4(link)
         self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")

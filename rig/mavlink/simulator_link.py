@@ -129,8 +129,16 @@ class SimulatorLink:
     def endpoint(self) -> str:
         return f"TCP 127.0.0.1:{self.ports.simulator_tcp}"
 
-    def accept(self, waiting_for: str = "the autopilot") -> None:
-        """Wait (bounded) for the autopilot to connect, then read what it sends first."""
+    def accept(
+        self, waiting_for: str = "the autopilot", *, answers_every_frame: bool = False
+    ) -> None:
+        """Wait (bounded) for the autopilot to connect, then read what it sends first.
+
+        ``answers_every_frame``: the peer answers every frame from the first (the reference
+        autopilot), so the link is in lockstep at once. Freewheeling until a first answer
+        (PX4 boots) lets wall time decide how many frames pass unanswered: a run would not
+        give the same log twice.
+        """
         deadline = time.monotonic() + self.timeouts.connect_s
         while self._conn is None:
             remaining = deadline - time.monotonic()
@@ -151,6 +159,7 @@ class SimulatorLink:
                 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 self._conn = conn
         self._server.close()  # one autopilot per link: PX4 does not reconnect anyway
+        self.lockstep = answers_every_frame
 
     def send(self, *messages: mavlink.MAVLink_message) -> None:
         """Write messages to the autopilot (MAVLink 2 frames)."""
