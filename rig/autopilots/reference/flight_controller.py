@@ -222,10 +222,7 @@ class FlightController:
         self.armed_time_us = self.time_us
         self.land_detector.arm(float(self.position.position_ned_m[2]))
         self._landed_since_us = self.time_us
-        lat, lon, alt = self.global_position()
-        self.home = (lat, lon, alt)
-        self.navigator.home_ned = self.position.position_ned_m.copy()
-        self.navigator.home_alt_amsl_m = alt
+        self._set_home()
         self._enter(self.nav_state)
         if self.nav_state == NavState.AUTO_TAKEOFF:
             self._prepare_takeoff()
@@ -473,6 +470,10 @@ class FlightController:
     def _commander(self, time_us: int) -> None:
         self._report_sensor_faults(time_us)
         if not self.armed:
+            # As PX4's commander: home is set once the global position is valid (ground
+            # stations and MAVSDK wait for it before arming), and again at arming.
+            if self.home is None and self.position_valid():
+                self._set_home()
             return
         imu_fault = self.monitors["gyro"].fault(time_us) or self.monitors["accel"].fault(time_us)
         if imu_fault:
@@ -489,6 +490,12 @@ class FlightController:
             self._enter(NavState.AUTO_LOITER)
             self.notify(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: offboard signal lost, Hold")
         self._land_detector(time_us)
+
+    def _set_home(self) -> None:
+        lat, lon, alt = self.global_position()
+        self.home = (lat, lon, alt)
+        self.navigator.home_ned = self.position.position_ned_m.copy()
+        self.navigator.home_alt_amsl_m = alt
 
     def _report_sensor_faults(self, time_us: int) -> None:
         """One status text per sensor that goes bad after having worked."""

@@ -485,7 +485,9 @@ class GroundStation:
                 mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
                 custom_mode(fc.nav_state), status, 3)  # fmt: skip
         if name == "SYS_STATUS":
-            present = healthy = 0
+            # The pre-arm check bit, as PX4 sets it: MAVSDK's ``is_armable`` reads it.
+            present = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+            healthy = present if fc.armed or fc.preflight_failure() is None else 0
             for bit, key in zip(_SENSORS, _MONITOR_KEYS, strict=True):
                 present |= bit if fc.monitors[key].last_time_us is not None else 0
                 healthy |= bit if fc.monitors[key].healthy(fc.time_us) else 0

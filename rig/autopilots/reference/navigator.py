@@ -127,6 +127,8 @@ _DO_COMMANDS = {mavlink.MAV_CMD_DO_CHANGE_SPEED}
 
 def check_mission_item(item: MissionItem) -> int:
     """MAV_MISSION_RESULT for an uploaded item: accepted, or why not."""
+    if item.command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+        return mavlink.MAV_MISSION_ACCEPTED  # no position: home is the target, any frame
     if item.command in _NAV_COMMANDS:
         if item.frame not in _GLOBAL_FRAMES:
             return mavlink.MAV_MISSION_UNSUPPORTED_FRAME
@@ -350,8 +352,13 @@ class Navigator:
         else:
             self._mission_finished = True
             return self.hold(dt_s)
-        target = self._item_target(item, position)
-        if item.command == mavlink.MAV_CMD_NAV_LAND:
+        if item.command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            # Home at the current altitude, then land there (PX4 first climbs to
+            # RTL_RETURN_ALT; the rig's missions fly low, so that climb is not emulated).
+            target = np.array([self.home_ned[0], self.home_ned[1], position[2]])
+        else:
+            target = self._item_target(item, position)
+        if item.command in (mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH):
             above = np.array([target[0], target[1], position[2]])
             if math.hypot(*(position[:2] - target[:2])) > self._acceptance_radius(item):
                 self._turn_towards(position, above, dt_s)

@@ -1,0 +1,154 @@
+"""MAVSDK-Python (the real ``mavsdk`` package, gRPC, its ``mavsdk_server`` from the wheel)
+drives the reference autopilot through the rig as its own examples do.
+
+The clients below make the calls, in the order and with the arguments, of MAVSDK-Python's
+``examples/takeoff_and_land.py`` and ``examples/mission.py``: wait for the connection, wait
+for ``is_global_position_ok`` and ``is_home_position_ok``, arm, fly, land. Those examples
+used to wait forever: the home position only existed after arming, and SYS_STATUS had no
+pre-arm bit. The examples themselves also run unchanged (README, "MAVSDK").
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import threading
+
+import numpy as np
+import pytest
+import pyulog
+from mavsdk import System
+from mavsdk.mission import MissionItem, MissionPlan
+
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.px4_api import Ports
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
+
+pytestmark = pytest.mark.closed_loop
+#: Sim time runs this much faster than the wall clock the clients sleep on.
+SPEED = 4.0
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+class RigInBackground:
+    """A scenario without commands flown by the rig in a thread: the client commands it."""
+
+    def __init__(self, tmp_path, instance: int, duration_s: float) -> None:
+        scenario = scenario_from_dict({"name": "mavsdk", "vehicle": "f450_high_precision",
+                                       "duration_s": duration_s, "seed": 5,
+                                       "rates": {"imu_hz": 250}})  # fmt: skip
+        options = RunOptions(instance=instance, out_dir=tmp_path / "run", speed=SPEED,
+                             timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
+        self.result = None
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._fly, args=(scenario, options), daemon=True)
+        self._thread.start()
+
+    def _fly(self, scenario, options) -> None:
+        try:
+            self.result = run_scenario(scenario, options)
+        except BaseException as error:  # reported by the test, not lost in the thread
+            self.error = error
+
+    def finish(self, timeout_s: float):
+        self._thread.join(timeout_s)
+        assert not self._thread.is_alive(), "the rig run did not end"
+        assert self.error is None, self.error
+        return self.result
+
+
+async def _connected_and_healthy(instance: int):
+    """``System().connect`` on the API port and the examples' two waits; returns the drone
+    and the health that ended the wait."""
+    drone = System(port=_free_tcp_port())
+    await drone.connect(system_address=f"udpin://0.0.0.0:{Ports(instance).api_remote_udp}")
+    async for state in drone.core.connection_state():
+        if state.is_connected:
+            break
+    async for health in drone.telemetry.health():
+        if health.is_global_position_ok and health.is_home_position_ok:
+            return drone, health
+    raise AssertionError("the health stream ended")
+
+
+def _all_ok(health) -> None:
+    """Every flag MAVSDK reports, as PX4 SITL reports them before arming."""
+    for flag in ("is_gyrometer_calibration_ok", "is_accelerometer_calibration_ok",
+                 "is_magnetometer_calibration_ok", "is_local_position_ok",
+                 "is_global_position_ok", "is_home_position_ok", "is_armable"):  # fmt: skip
+        assert getattr(health, flag), (flag, health)
+
+
+def _altitude(rig_log) -> tuple[np.ndarray, np.ndarray]:
+    truth = rig_log.get_dataset("vehicle_local_position_groundtruth").data
+    return truth["timestamp"] / 1e6, -truth["z"]
+
+
+def test_takeoff_and_land_as_the_example(tmp_path, free_instance):
+    instance = free_instance()
+    rig = RigInBackground(tmp_path, instance, duration_s=70.0)
+
+    async def takeoff_and_land():
+        drone, health = await _connected_and_healthy(instance)
+        _all_ok(health)
+        await drone.action.arm()
+        await drone.action.takeoff()
+        await asyncio.sleep(10)
+        await drone.action.land()
+        async for in_air in drone.telemetry.in_air():  # the example stops here; we watch
+            if not in_air:
+                break
+        return health
+
+    asyncio.run(takeoff_and_land())
+    result = rig.finish(timeout_s=60)
+    _, altitude_m = _altitude(pyulog.ULog(str(result.rig_log)))
+    # MIS_TAKEOFF_ALT 2.5 m, reached; the climb overshoots by up to 0.4 m (no take-off ramp)
+    assert 2.4 < altitude_m.max() < 2.9
+    assert altitude_m[-1] < 0.1  # landed
+
+
+def test_mission_as_the_example(tmp_path, free_instance):
+    """Three waypoints at 25 m and 10 m/s, RTL after the mission, wait until landed."""
+    instance = free_instance()
+    rig = RigInBackground(tmp_path, instance, duration_s=150.0)
+    waypoints = ((47.398039859999997, 8.5455725400000002), (47.398036222362471, 8.5450146439425509),
+                 (47.397825620791885, 8.5450092830163271))  # fmt: skip
+    reached: list[int] = []
+
+    async def mission():
+        drone, _ = await _connected_and_healthy(instance)
+        items = [
+            MissionItem(lat, lon, 25, 10, True, float("nan"), float("nan"),
+                        MissionItem.CameraAction.NONE, float("nan"), float("nan"), float("nan"),
+                        float("nan"), float("nan"), MissionItem.VehicleAction.NONE)
+            for lat, lon in waypoints
+        ]  # fmt: skip
+        await drone.mission.set_return_to_launch_after_mission(True)
+        await drone.mission.upload_mission(MissionPlan(items))
+        await drone.action.arm()
+        await drone.mission.start_mission()
+        was_in_air = False
+        async for in_air in drone.telemetry.in_air():
+            was_in_air |= in_air
+            if was_in_air and not in_air:
+                break
+        async for progress in drone.mission.mission_progress():
+            reached.append(progress.current)
+            break
+
+    asyncio.run(mission())
+    result = rig.finish(timeout_s=120)
+    assert reached == [len(waypoints)]
+    rig_log = pyulog.ULog(str(result.rig_log))
+    _, altitude_m = _altitude(rig_log)
+    assert 24.5 < altitude_m.max() < 28.0  # the waypoints' 25 m, with the climb's overshoot
+    truth = rig_log.get_dataset("vehicle_local_position_groundtruth").data
+    assert np.hypot(truth["x"][-1], truth["y"][-1]) < 2.0  # back home (RTL), on the ground
+    assert altitude_m[-1] < 0.1
