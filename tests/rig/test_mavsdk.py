@@ -28,6 +28,8 @@ from rig.scenarios.scenario import scenario_from_dict
 pytestmark = pytest.mark.closed_loop
 #: Sim time runs this much faster than the wall clock the clients sleep on.
 SPEED = 4.0
+#: Wall seconds a client may take before the test fails instead of waiting forever.
+CLIENT_TIMEOUT_S = 120.0
 
 
 def _free_tcp_port() -> int:
@@ -106,7 +108,7 @@ def test_takeoff_and_land_as_the_example(tmp_path, free_instance):
                 break
         return health
 
-    asyncio.run(takeoff_and_land())
+    asyncio.run(asyncio.wait_for(takeoff_and_land(), CLIENT_TIMEOUT_S))
     result = rig.finish(timeout_s=60)
     _, altitude_m = _altitude(pyulog.ULog(str(result.rig_log)))
     # MIS_TAKEOFF_ALT 2.5 m, reached; the climb overshoots by up to 0.4 m (no take-off ramp)
@@ -143,7 +145,7 @@ def test_mission_as_the_example(tmp_path, free_instance):
             reached.append(progress.current)
             break
 
-    asyncio.run(mission())
+    asyncio.run(asyncio.wait_for(mission(), CLIENT_TIMEOUT_S))
     result = rig.finish(timeout_s=120)
     assert reached == [len(waypoints)]
     rig_log = pyulog.ULog(str(result.rig_log))
