@@ -26,7 +26,9 @@ from pydantic.json_schema import SkipJsonSchema
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
 from hil_config import (
     FieldError,
+    Integer,
     NonNegative,
+    NonNegativeInteger,
     Number,
     Positive,
     PositiveInteger,
@@ -76,8 +78,8 @@ class Sensor(StrEnum):
     BARO = "baro"
 
 
-Motor = Annotated[int, Field(strict=True, ge=0, le=3)]
-BitMask = Annotated[int, Field(strict=True, ge=1, le=255)]
+Motor = Annotated[Integer, Field(ge=0, le=3)]
+BitMask = Annotated[Integer, Field(ge=1, le=255)]
 
 
 def model_rate_for(imu_hz: int) -> int:
@@ -405,7 +407,7 @@ class Scenario:
     vehicle: Text
     duration_s: Positive
     #: Seed of every random source: the same seed gives the same rig.ulg.
-    seed: Annotated[int, Field(strict=True, ge=0)]
+    seed: NonNegativeInteger
     description: str = ""
     constraint: Constraint = Constraint.FREE
     environment: Environment = Environment()
