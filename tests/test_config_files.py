@@ -70,3 +70,19 @@ def test_the_json_schema_refuses_what_the_loader_refuses(schemas):
                    {"commands": [{"at_s": 1.0, "action": "takeoff"}]}):  # fmt: skip
         with pytest.raises(jsonschema.ValidationError):
             jsonschema.validate(scenario | change, schemas["scenario"])
+
+
+def test_rig_schema_writes_the_files_and_an_unwritable_folder_is_one_line(tmp_path, capsys):
+    from rig.apps.cli import main
+
+    assert main(["schema", "--out", str(tmp_path / "schemas")]) == 0
+    assert sorted(p.name for p in (tmp_path / "schemas").iterdir()) == sorted(
+        f"{kind}.schema.json" for kind in FILE_KINDS
+    )
+    capsys.readouterr()  # the written paths
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    assert main(["schema", "--out", str(blocker / "schemas")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"rig: error: {blocker / 'schemas'}: cannot write the schemas (")
+    assert err.count("\n") == 1

@@ -193,7 +193,7 @@ class CredibilityTable:
 
     plan: Text
     role: Text = "sim"
-    log: Literal["rig", "autopilot"] = "autopilot"
+    log: Literal[CASE_LOGS] = "autopilot"
 
 
 @table
@@ -544,7 +544,7 @@ def run_case(spec: CaseSpec) -> CaseResult:
         reason = "; ".join([*violations, *outcome.get("notes", [])])
     logs = {
         name: str(run_dir / f"{name}.ulg")
-        for name in ("rig", "autopilot")
+        for name in CASE_LOGS
         if (run_dir / f"{name}.ulg").is_file()
     }
     return CaseResult(

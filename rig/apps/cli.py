@@ -120,7 +120,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     console = Console(stderr=True)
     if args.command == "schema":
-        for path in write_schemas(args.out):
+        try:
+            written = write_schemas(args.out)
+        except OSError as error:
+            print(f"rig: error: {args.out}: cannot write the schemas ({error.strerror})",
+                  file=sys.stderr)  # fmt: skip
+            return 1
+        for path in written:
             console.print(str(path), highlight=False)
         return 0
     if args.command == "campaign":

@@ -386,19 +386,11 @@ class PwmDropout(_Fault):
     channel: Motor | None = None
 
 
-FAULT_TYPES = (
-    MotorLoss, MotorDegradation, SensorStuck, SensorBias, NoiseBurst,
-    BusBitFlip, ChipMute, GpsLoss, PwmDropout,
-)  # fmt: skip
 FaultSpec = Annotated[
     MotorLoss | MotorDegradation | SensorStuck | SensorBias | NoiseBurst | BusBitFlip
     | ChipMute | GpsLoss | PwmDropout,
     Field(discriminator="kind"),
 ]  # fmt: skip
-#: Fault kind → its table.
-FAULT_KINDS: dict[str, type[_Fault]] = {
-    cls.__dataclass_fields__["kind"].default: cls for cls in FAULT_TYPES
-}
 
 
 @table
