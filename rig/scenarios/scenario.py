@@ -16,6 +16,7 @@ boot time.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -453,8 +454,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return scenario_from_dict(document, str(path))
 
 
-def scenario_from_dict(document: Any, source: str = "<dict>") -> Scenario:
-    """Check and convert a parsed scenario document; raises :class:`ScenarioError`."""
-    if isinstance(document, dict) and "source" in document:  # the loader's key, not the file's
+def scenario_from_dict(document: Mapping[str, Any], source: str = "<dict>") -> Scenario:
+    """Check and convert a parsed scenario document (a TOML table); raises
+    :class:`ScenarioError`."""
+    if "source" in document:  # the loader's key, not the file's
         raise ScenarioError(f"{source}: key 'source' = {document['source']!r}: unknown key")
     return parse(Scenario, {**document, "source": source}, source, ScenarioError)
