@@ -60,7 +60,7 @@ X_CHARGE_USED = _x.add(1)  # C drawn from the battery
 X_DYN = _x.size
 X_TURBULENCE = _x.add(5)  # Dryden shaping-filter states: u, v (2), w (2)
 X_ON_GROUND = _x.add(1)  # 1 while resting on the ground
-X_TIME = _x.add(1)  # simulated time, s
+X_TIME_US = _x.add(1)  # simulated time, µs: a whole number (float64 holds it exactly for 285 years)
 X_SIZE = _x.size
 
 # Outputs computed at the end of each advance() (not integrated).
@@ -416,7 +416,6 @@ def _advance_one(x, aux, params, throttle, noise, n_steps, dt):
         _rk4_step(x, params, throttle, wind, dt, k1, k2, k3, k4, xt, aux)
         if free:
             _ground_contact(x)
-        x[X_TIME] += dt
     # Outputs at the final state.
     _turbulence_step(x, params, zero_noise, 0.0, wind)
     derivative(x, params, throttle, wind, k1, aux)

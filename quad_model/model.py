@@ -3,6 +3,10 @@
 Both hold ESC throttles constant over ``advance(command, duration_s)`` and run the compiled
 5 kHz RK4 loop in one call, the way the rig's lockstep holds PX4's motor outputs for one
 autopilot frame. Ground truth comes back as :class:`VehicleTruth` with named SI fields.
+
+Time is counted in whole physics steps, never summed from float durations: a float sum
+drifts by more than a nanosecond within minutes and a sensor slot on the frame grid would
+then be missed (it was, at 575 s). Frames and sensor slots are whole microseconds.
 """
 
 import enum
@@ -17,7 +21,7 @@ from quad_model.environment import Environment
 from quad_model.frames import STANDARD_GRAVITY_MPS2
 from quad_model.vehicle import ROTOR_COUNT, BatteryParams, Vehicle
 
-DEFAULT_PHYSICS_RATE_HZ = 5000.0
+DEFAULT_PHYSICS_RATE_HZ = 5000
 #: Above this many vehicles the batch runs on all cores (thread start-up costs ~10 µs).
 PARALLEL_MIN_VEHICLES = 32
 
@@ -60,8 +64,13 @@ class VehicleTruth:
         )
 
     @property
+    def time_us(self) -> int:
+        """Simulated time in whole µs (exact at frame ends, which fall on whole µs)."""
+        return round(self._state[dyn.X_TIME_US])
+
+    @property
     def time_s(self) -> float:
-        return float(self._state[dyn.X_TIME])
+        return float(self._state[dyn.X_TIME_US]) / 1e6
 
     @property
     def position_ned_m(self) -> NDArray[np.float64]:
@@ -214,7 +223,7 @@ class QuadBatch:
         rng: np.random.Generator,
         environment: Environment | None = None,
         mount: Mount = Mount.FREE,
-        physics_rate_hz: float = DEFAULT_PHYSICS_RATE_HZ,
+        physics_rate_hz: int = DEFAULT_PHYSICS_RATE_HZ,
     ) -> None:
         if count < 1:
             raise ModelInputError(f"count={count} must be at least 1")
@@ -222,12 +231,16 @@ class QuadBatch:
             vehicles = [vehicles] * count
         if len(vehicles) != count:
             raise ModelInputError(f"got {len(vehicles)} vehicles for count={count}")
-        if not physics_rate_hz > 0:
-            raise ModelInputError(f"physics_rate_hz={physics_rate_hz} must be > 0")
+        if not physics_rate_hz > 0 or physics_rate_hz != int(physics_rate_hz):
+            raise ModelInputError(f"physics_rate_hz={physics_rate_hz} must be a whole number > 0")
+        self.physics_rate_hz = int(physics_rate_hz)
         self.vehicles = tuple(vehicles)
         self.environment = environment or Environment()
         self.mount = Mount(mount)
         self.physics_dt_s = 1.0 / physics_rate_hz
+        #: Time = start + steps / rate, both whole numbers (see the module docstring).
+        self._start_us = 0
+        self._steps = 0
         self._rng = rng
         rows = {id(v): pack_params(v, self.environment, self.mount) for v in self.vehicles}
         self.params = np.array([rows[id(v)] for v in self.vehicles])
@@ -253,7 +266,7 @@ class QuadBatch:
         attitude_quat: ArrayLike = (1.0, 0.0, 0.0, 0.0),
         angular_rate_frd_radps: ArrayLike = (0.0, 0.0, 0.0),
         rotor_speed_radps: ArrayLike = (0.0, 0.0, 0.0, 0.0),
-        time_s: float = 0.0,
+        time_us: int = 0,
         battery_voltage_v: ArrayLike | None = None,
     ) -> None:
         """Put every vehicle in the given state (each argument broadcasts over vehicles).
@@ -276,7 +289,8 @@ class QuadBatch:
         if np.any(speeds < 0):
             raise ModelInputError(f"rotor_speed_radps={rotor_speed_radps} must be >= 0")
         s[:, dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + ROTOR_COUNT] = speeds
-        s[:, dyn.X_TIME] = time_s
+        self._start_us, self._steps = int(time_us), 0
+        s[:, dyn.X_TIME_US] = self._start_us
         if battery_voltage_v is not None:
             voltages = np.broadcast_to(np.asarray(battery_voltage_v, dtype=float), (n,))
             s[:, dyn.X_CHARGE_USED] = [
@@ -335,6 +349,9 @@ class QuadBatch:
             raise ModelInputError(
                 f"throttles contain a non-finite value: {self.throttles.tolist()}"
             )
+        self._steps += n_steps
+        elapsed_us = self._steps * 1_000_000 / self.physics_rate_hz  # exact on whole µs
+        self.states[:, dyn.X_TIME_US] = self._start_us + elapsed_us
 
     def set_motor_health(self, vehicle_index: int, motor: int, thrust_fraction: float) -> None:
         """Degrade (0 < f < 1) or kill (0) one motor-propeller unit; 1 restores it.
@@ -376,8 +393,8 @@ class QuadModel:
     >>> from quad_model import QuadModel, load_vehicle
     >>> model = QuadModel(load_vehicle("f450_high_precision"), np.random.default_rng(1))
     >>> model.advance([0.7, 0.7, 0.7, 0.7], 0.001)  # one 1 ms autopilot frame
-    >>> round(model.truth.time_s, 6)
-    0.001
+    >>> model.truth.time_us
+    1000
     """
 
     def __init__(
@@ -386,7 +403,7 @@ class QuadModel:
         rng: np.random.Generator,
         environment: Environment | None = None,
         mount: Mount = Mount.FREE,
-        physics_rate_hz: float = DEFAULT_PHYSICS_RATE_HZ,
+        physics_rate_hz: int = DEFAULT_PHYSICS_RATE_HZ,
     ) -> None:
         self._batch = QuadBatch(vehicle, 1, rng, environment, mount, physics_rate_hz)
         self.vehicle = vehicle

@@ -16,6 +16,7 @@ numbers as the plain numpy formulation (a test compares the two).
 import math
 from collections import deque
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +40,7 @@ class SensorConfigError(ValueError):
 
 @dataclass(frozen=True)
 class ImuSample:
-    time_s: float
+    time_us: int
     #: Specific force, FRD (level at rest ≈ (0, 0, -9.81)).
     accel_mps2: NDArray[np.float64]
     gyro_radps: NDArray[np.float64]
@@ -48,21 +49,21 @@ class ImuSample:
 
 @dataclass(frozen=True)
 class BaroSample:
-    time_s: float
+    time_us: int
     pressure_pa: float
     temperature_degc: float
 
 
 @dataclass(frozen=True)
 class MagSample:
-    time_s: float
+    time_us: int
     field_gauss: NDArray[np.float64]  # FRD
 
 
 @dataclass(frozen=True)
 class GpsSample:
     #: When the receiver outputs the fix (its measurement epoch + latency).
-    time_s: float
+    time_us: int
     lat_deg: float
     lon_deg: float
     alt_amsl_m: float
@@ -183,13 +184,13 @@ class ImuModel:
             weight = np.asarray(amplitude)[:, None, None]
             quadrature[: len(amplitude), ..., 0] = weight * np.cos(phase)
             quadrature[: len(amplitude), ..., 1] = weight * np.sin(phase)
-        self._last_time_s: float | None = None
+        self._last_time_us: int | None = None
 
     def sample(self, truth: VehicleTruth) -> ImuSample:
         """One IMU reading of ``truth`` (call at ``rate_hz`` for the stated noise)."""
-        now = truth.time_s
-        dt = 1.0 / self.rate_hz if self._last_time_s is None else now - self._last_time_s
-        self._last_time_s = now
+        now = truth.time_us
+        dt = 1.0 / self.rate_hz if self._last_time_us is None else (now - self._last_time_us) / 1e6
+        self._last_time_us = now
         if dt > 0:
             sqrt_dt = math.sqrt(dt)
             normals = self._normals.take(_kernels.WALK_DRAWS + _kernels.SAMPLE_DRAWS)
@@ -229,19 +230,18 @@ class BaroModel:
         self._environment = environment
         self._normals = NormalBlocks(rng)  # per sample: drift step (when time advanced), noise
         self._drift_pa = 0.0
-        self._last_time_s: float | None = None
+        self._last_time_us: int | None = None
 
     def sample(self, truth: VehicleTruth) -> BaroSample:
         baro = self._baro
-        now = truth.time_s
-        if self._last_time_s is not None and now > self._last_time_s:
+        now = truth.time_us
+        if self._last_time_us is not None and now > self._last_time_us:
             step, noise = self._normals.take(2)
-            self._drift_pa += (
-                baro.drift_random_walk_pa_per_sqrts * math.sqrt(now - self._last_time_s) * step
-            )
+            elapsed_s = (now - self._last_time_us) / 1e6
+            self._drift_pa += baro.drift_random_walk_pa_per_sqrts * math.sqrt(elapsed_s) * step
         else:
             (noise,) = self._normals.take(1)
-        self._last_time_s = now
+        self._last_time_us = now
         altitude = self._environment.altitude_amsl_m(truth.position_ned_m)
         pressure = (
             self._environment.static_pressure_pa(altitude)
@@ -271,7 +271,7 @@ class MagModel:
             self._mag.noise_std_gauss,
             self._normals.take(3),
         )
-        return MagSample(truth.time_s, field)
+        return MagSample(truth.time_us, field)
 
 
 class GpsModel:
@@ -295,25 +295,27 @@ class GpsModel:
         )
         self._error_m = self._error_std * rng.standard_normal(3)
         self._normals = NormalBlocks(rng)
-        self._next_epoch_s = 0.0
-        self._next_output_s = gps.latency_s
+        self._epochs = SlotGrid(gps.fix_rate_hz)
+        self._latency_us = round(gps.latency_s * 1e6)
+        self._next_epoch = 0  # the epoch whose fix is output next
+        self._next_output_us = self._latency_us
         # Truths are read-only snapshots: keeping them is cheaper than copying two vectors.
         self._history: deque[VehicleTruth] = deque()
 
     def sample(self, truth: VehicleTruth) -> GpsSample | None:
         self._history.append(truth)
-        now = truth.time_s
-        if now + 1e-9 < self._next_output_s:
+        now = truth.time_us
+        if now < self._next_output_us:
             return None
         gps = self._gps
-        epoch = self._next_epoch_s
-        # Skip epochs that were missed entirely (caller slower than the fix rate).
-        while epoch + self._period_s + gps.latency_s <= now + 1e-9:
-            epoch += self._period_s
-        self._next_epoch_s = epoch + self._period_s
-        self._next_output_s = self._next_epoch_s + gps.latency_s
+        # The latest epoch whose fix is out by now (later than the next one if the caller
+        # was slower than the fix rate: the missed fixes are skipped).
+        epoch = max(self._next_epoch, self._epochs.slot_at(now - self._latency_us))
+        epoch_us = self._epochs.time_of(epoch)
+        self._next_epoch = epoch + 1
+        self._next_output_us = self._epochs.time_of(epoch + 1) + self._latency_us
         history = self._history
-        while len(history) > 1 and history[1].time_s <= epoch + 1e-9:
+        while len(history) > 1 and history[1].time_us <= epoch_us:
             history.popleft()
         at_epoch = history[0]
         decay = math.exp(-self._period_s / gps.error_correlation_time_s)
@@ -328,7 +330,7 @@ class GpsModel:
         )
         velocity = at_epoch.velocity_ned_mps + gps.velocity_noise_std_mps * self._normals.take(3)
         return GpsSample(
-            time_s=now,
+            time_us=now,
             lat_deg=lat,
             lon_deg=lon,
             alt_amsl_m=alt,
@@ -340,30 +342,41 @@ class GpsModel:
         )
 
 
-class _SlotGrid:
-    """A sensor's sampling slots k/rate: due once the time reaches the next slot; a late
-    call skips the slots it missed.
+class SlotGrid:
+    """Sampling slots k = 0, 1, 2, … at ⌈k·10⁶/rate⌉ µs, in whole numbers.
 
-    The model's time is a float sum of physics steps, which drifts from the exact frame
-    times by more than a nanosecond within minutes (at 250 Hz an IMU slot was missed after
-    575 s). The tolerance is a thousandth of the period: far above that drift even over
-    days, far below the spacing of frames, which fall on the slots.
+    Integer arithmetic on the rate as an exact fraction: a float grid drifts (at 250 Hz an
+    IMU slot was once missed after 575 s), this one stays on its slots for ever.
     """
 
-    __slots__ = ("_next_s", "_period_s")
-
-    #: Tolerance as a fraction of the period.
-    TOLERANCE = 1e-3
+    __slots__ = ("_den", "_num")
 
     def __init__(self, rate_hz: float) -> None:
-        self._period_s = 1.0 / rate_hz
-        self._next_s = 0.0
+        rate = Fraction(rate_hz)  # a float's exact value
+        self._num, self._den = rate.numerator, rate.denominator  # rate = num/den Hz
 
-    def __call__(self, time_s: float) -> bool:
-        slots = time_s / self._period_s
-        if slots + self.TOLERANCE < self._next_s / self._period_s:
+    def slot_at(self, time_us: int) -> int:
+        """The last slot at or before ``time_us`` (-1 before slot 0)."""
+        return (time_us * self._num) // (1_000_000 * self._den)
+
+    def time_of(self, slot: int) -> int:
+        """When slot ``slot`` is due (µs)."""
+        return -(-slot * 1_000_000 * self._den // self._num)
+
+
+class _Due:
+    """Due once the time reaches the grid's next slot; a late call skips the slots missed."""
+
+    __slots__ = ("_grid", "_next_us")
+
+    def __init__(self, rate_hz: float) -> None:
+        self._grid = SlotGrid(rate_hz)
+        self._next_us = 0
+
+    def __call__(self, time_us: int) -> bool:
+        if time_us < self._next_us:
             return False
-        self._next_s = (math.floor(slots + self.TOLERANCE) + 1) * self._period_s
+        self._next_us = self._grid.time_of(self._grid.slot_at(time_us) + 1)
         return True
 
 
@@ -398,12 +411,12 @@ class SensorSuite:
         self.mag = MagModel(vehicle, environment, mag_rng)
         self.baro = BaroModel(vehicle, environment, baro_rng)
         self.gps = GpsModel(vehicle, environment, gps_rng)
-        self._imu_due = _SlotGrid(self.imu.rate_hz)
-        self._mag_due = _SlotGrid(_check_rate(mag_rate_hz, "mag_rate_hz"))
-        self._baro_due = _SlotGrid(_check_rate(baro_rate_hz, "baro_rate_hz"))
+        self._imu_due = _Due(self.imu.rate_hz)
+        self._mag_due = _Due(_check_rate(mag_rate_hz, "mag_rate_hz"))
+        self._baro_due = _Due(_check_rate(baro_rate_hz, "baro_rate_hz"))
 
     def sample(self, truth: VehicleTruth) -> SensorReadings:
-        t = truth.time_s
+        t = truth.time_us
         return SensorReadings(
             self.imu.sample(truth) if self._imu_due(t) else None,
             self.mag.sample(truth) if self._mag_due(t) else None,
@@ -425,4 +438,5 @@ __all__ = [
     "SensorConfigError",
     "SensorReadings",
     "SensorSuite",
+    "SlotGrid",
 ]

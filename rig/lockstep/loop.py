@@ -337,7 +337,7 @@ class _Loop:
                 if result is not None:
                     self._event(result)
             if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
-                pending.extend(script.due(time_s))
+                pending.extend(script.due(self.run_us))
                 pending = self._run_actions(pending, time_s, reference)
             link.send_frame(self.time_us, messages)
             # While the autopilot computes its answer, do what does not depend on it: log

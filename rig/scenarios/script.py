@@ -46,11 +46,20 @@ class Action:
 @dataclass
 class _Stream:
     command: Goto | PitchSweep | Track
-    started_s: float
-    next_s: float
-    period_s: float
+    started_us: int
+    next_us: int
+    period_us: int
     announced: bool = False
     sample: int = 0  # a track's latest sample due
+
+
+def _us(time_s: float) -> int:
+    """A file's time (s) on the frames' whole-µs grid."""
+    return round(time_s * 1e6)
+
+
+#: The keep-alive period of a setpoint stream (µs).
+_KEEPALIVE_US = _us(OFFBOARD_KEEPALIVE_S)
 
 
 #: Commands that leave the flight mode, and so a running setpoint stream, as they are.
@@ -60,8 +69,10 @@ _KEEP_STREAM = frozenset({"arm", "disarm", "set_param"})
 class CommandScript:
     """Walks the scenario's commands in time order and yields the actions due.
 
-    Times are run seconds; setpoints are stamped ``clock_start_s`` later (the autopilot's
-    boot clock, which a replay starts at the real log's first timestamp).
+    Times are run microseconds, whole numbers like every clock of the rig (a float sum of
+    stream periods would drift over a long run); setpoints are stamped ``clock_start_s``
+    later (the autopilot's boot clock, which a replay starts at the real log's first
+    timestamp).
     """
 
     def __init__(
@@ -76,27 +87,29 @@ class CommandScript:
         self.barrier = barrier
         self.clock_start_s = clock_start_s
         self._commands = list(commands)
+        self._due_us = [_us(command.at_s) for command in self._commands]
         self._next = 0
         self._stream: _Stream | None = None
 
-    def due(self, time_s: float) -> Iterator[Action]:
-        while self._next < len(self._commands) and self._commands[self._next].at_s <= time_s + 1e-9:
+    def due(self, time_us: int) -> Iterator[Action]:
+        """The actions due at run time ``time_us``."""
+        while self._next < len(self._commands) and self._due_us[self._next] <= time_us:
             command = self._commands[self._next]
             self._next += 1
-            yield from self._start(command, time_s)
+            yield from self._start(command, time_us)
         stream = self._stream
-        if stream is not None and time_s + 1e-9 >= stream.next_s:
-            action = self._stream_action(stream, time_s)
+        if stream is not None and time_us >= stream.next_us:
+            action = self._stream_action(stream, time_us)
             if action is not None:
                 yield action
 
-    def _start(self, command: ScriptCommand, time_s: float) -> Iterator[Action]:
+    def _start(self, command: ScriptCommand, time_us: int) -> Iterator[Action]:
         g, c, name = self.ground, command, f"{command.action} at t={command.at_s:g} s"
         if command.action not in _KEEP_STREAM:
             self._stream = None  # a mode command takes over from a running setpoint stream
         if isinstance(command, Goto | PitchSweep | Track):
-            period = 1.0 / command.rate_hz if isinstance(command, PitchSweep) else None
-            self._stream = _Stream(command, time_s, time_s, period or OFFBOARD_KEEPALIVE_S)
+            period = _us(1.0 / command.rate_hz) if isinstance(command, PitchSweep) else None
+            self._stream = _Stream(command, time_us, time_us, period or _KEEPALIVE_US)
             return
         conversations = {
             # PX4 (not the barrier) is asked again until its pre-flight checks pass
@@ -111,18 +124,18 @@ class CommandScript:
         }
         yield Action(name, conversations[command.action]())
 
-    def _stream_action(self, stream: _Stream, time_s: float) -> Action | None:
+    def _stream_action(self, stream: _Stream, time_us: int) -> Action | None:
         command = stream.command
-        stream.next_s += stream.period_s
-        stamp_s = self.clock_start_s + time_s
+        stream.next_us += stream.period_us
+        stamp_s = self.clock_start_s + time_us / 1e6
         if isinstance(command, Goto):
             setpoint = self.ground.position_setpoint(
                 command.position_ned_m, command.yaw_deg, stamp_s
             )
         elif isinstance(command, Track):
-            setpoint = self._track_setpoint(stream, command.track, time_s, stamp_s)
+            setpoint = self._track_setpoint(stream, command.track, time_us, stamp_s)
         else:
-            elapsed = time_s - stream.started_s
+            elapsed = (time_us - stream.started_us) / 1e6
             if elapsed > command.duration_s:
                 self._stream = None
                 return None
@@ -139,15 +152,18 @@ class CommandScript:
         return Action(name, unacknowledged=(setpoint,), logged=False)
 
     def _track_setpoint(
-        self, stream: _Stream, track: SetpointTrack, time_s: float, stamp_s: float
+        self, stream: _Stream, track: SetpointTrack, time_us: int, stamp_s: float
     ) -> mavlink.MAVLink_message:
-        """The track's latest sample at ``time_s`` as a message; schedules the next send: the
+        """The track's latest sample at ``time_us`` as a message; schedules the next send: the
         next sample's time, or the keep-alive if that comes first."""
         times = track.times_s
-        while stream.sample + 1 < len(times) and times[stream.sample + 1] <= time_s + 1e-9:
+        while stream.sample + 1 < len(times) and _us(times[stream.sample + 1]) <= time_us:
             stream.sample += 1
-        following = times[stream.sample + 1] if stream.sample + 1 < len(times) else math.inf
-        stream.next_s = min(following, time_s + OFFBOARD_KEEPALIVE_S)
+        keepalive_us = time_us + _KEEPALIVE_US
+        if stream.sample + 1 < len(times):
+            stream.next_us = min(_us(times[stream.sample + 1]), keepalive_us)
+        else:
+            stream.next_us = keepalive_us
         value, ground = track.values[stream.sample], self.ground
         if track.kind == "velocity":
             yaw = value[3] if math.isfinite(value[3]) else None

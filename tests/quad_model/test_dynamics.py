@@ -350,7 +350,7 @@ def test_bad_model_inputs_are_refused(f450, rng):
         model.reset(position_ned_m=(0, 0, 1))
     with pytest.raises(ModelInputError, match=r"not a unit quaternion"):
         model.reset(attitude_quat=(1, 1, 0, 0))
-    assert model.truth.time_s == 0.0
+    assert model.truth.time_us == 0
 
 
 def test_initial_state_rests_level_on_the_ground(f450, rng):

@@ -54,7 +54,7 @@ class ReferenceImu:
         harmonics_g = len(vib.gyro_harmonic_amplitude_radps)
         self.accel_phase = rng.uniform(0, 2 * np.pi, (harmonics_a, 4, 3))
         self.gyro_phase = rng.uniform(0, 2 * np.pi, (harmonics_g, 4, 3))
-        self.last_time_s = None
+        self.last_time_us = None
 
     def vibration(self, truth, amplitudes, phases, broadband_std, gain):
         """Σ over harmonics and rotors of A·(ω/ω_ref)²·sin(hθ + φ), plus broadband noise."""
@@ -76,8 +76,9 @@ class ReferenceImu:
 
     def sample(self, truth):
         imu, vib, rng = self.imu, self.vib, self.rng
-        dt = self.period_s if self.last_time_s is None else truth.time_s - self.last_time_s
-        self.last_time_s = truth.time_s
+        last = self.last_time_us
+        dt = self.period_s if last is None else (truth.time_us - last) / 1e6
+        self.last_time_us = truth.time_us
         if dt > 0:
             gyro_walk = imu.gyro_bias_random_walk_radps2_per_sqrthz * math.sqrt(dt)
             self.gyro_bias = self.gyro_bias + gyro_walk * rng.standard_normal(3)
@@ -161,7 +162,7 @@ def test_imu_equals_reference_for_the_same_seed(
         np.testing.assert_allclose(sample.accel_mps2, accel, **ROUNDING)
         np.testing.assert_allclose(sample.gyro_radps, gyro, **ROUNDING)
         assert sample.temperature_degc == pytest.approx(temperature, rel=1e-12)
-        assert sample.time_s == truth.time_s
+        assert sample.time_us == truth.time_us
 
 
 def test_baro_equals_reference_for_the_same_seed(f450):
@@ -169,12 +170,12 @@ def test_baro_equals_reference_for_the_same_seed(f450):
     baro = f450.baro
     fast = BaroModel(f450, env, np.random.default_rng(8))
     rng = np.random.default_rng(8)
-    drift_pa, last_time_s = 0.0, None
+    drift_pa, last_time_us = 0.0, None
     for truth in _irregular(_climbing_truths(f450, 2500)):  # > 2048 draws
-        if last_time_s is not None and truth.time_s > last_time_s:
-            step = math.sqrt(truth.time_s - last_time_s)
+        if last_time_us is not None and truth.time_us > last_time_us:
+            step = math.sqrt((truth.time_us - last_time_us) / 1e6)
             drift_pa += baro.drift_random_walk_pa_per_sqrts * step * rng.standard_normal()
-        last_time_s = truth.time_s
+        last_time_us = truth.time_us
         altitude = env.home.alt_amsl_m - truth.position_ned_m[2]
         pressure = (
             env.static_pressure_pa(altitude)

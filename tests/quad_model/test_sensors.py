@@ -1,6 +1,7 @@
 """Sensor physics: noise levels from datasheet densities, vibration, bias, fields, GPS timing."""
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ from quad_model import dynamics as dyn
 from quad_model.environment import isa_pressure_pa
 from quad_model.frames import STANDARD_GRAVITY_MPS2, ned_to_geodetic, quat_from_euler
 from quad_model.model import VehicleTruth
-from quad_model.sensors import BaroModel, GpsModel, ImuModel, MagModel
+from quad_model.sensors import BaroModel, GpsModel, ImuModel, MagModel, SlotGrid
 
 G = STANDARD_GRAVITY_MPS2
 
@@ -182,10 +183,18 @@ def test_magnetometer_rotates_earth_field_into_the_body(f450, variant):
     )
 
 
+def _truth_at_us(time_us: int) -> VehicleTruth:
+    """A vehicle at rest on the ground at ``time_us``."""
+    state = np.zeros(dyn.X_SIZE)
+    state[dyn.X_TIME_US] = time_us
+    state[dyn.X_QUAT] = 1.0
+    return VehicleTruth(state, np.zeros(dyn.A_SIZE))
+
+
 def _moving_truth(time_s: float) -> VehicleTruth:
     """Level flight east at 5 m/s, 10 m up: a truth with known position at every time."""
     state = np.zeros(dyn.X_SIZE)
-    state[dyn.X_TIME] = time_s
+    state[dyn.X_TIME_US] = round(time_s * 1e6)
     state[dyn.X_POS : dyn.X_POS + 3] = [0.0, 5.0 * time_s, -10.0]
     state[dyn.X_VEL : dyn.X_VEL + 3] = [0.0, 5.0, 0.0]
     state[dyn.X_QUAT] = 1.0
@@ -208,9 +217,9 @@ def test_gps_latency_fix_rate_and_position(f450, variant):
     assert len(delivered) == 29  # 10 Hz, each 110 ms after its epoch: 0.11 … 2.91 s
     k, fix = delivered[0]
     assert k == 110
-    assert fix.time_s == pytest.approx(0.110)
+    assert fix.time_us == 110_000
     k, fix = delivered[5]
-    assert fix.time_s == pytest.approx(0.610)
+    assert fix.time_us == 610_000
     # The fix describes where the vehicle was at its epoch (0.5 s), not where it is now.
     lat, lon, alt = ned_to_geodetic(
         [0.0, 2.5, -10.0], env.home.lat_deg, env.home.lon_deg, env.home.alt_amsl_m
@@ -231,16 +240,37 @@ def test_gps_position_error_has_configured_spread(f450):
     assert np.std(errors) == pytest.approx(f450.gps.vertical_error_std_m, rel=0.15)
 
 
-def test_slot_grid_keeps_every_slot_when_the_float_clock_drifts():
-    """The model's clock is a float sum of 5 kHz steps; at 250 Hz it drifted past a 1 ns
-    tolerance after 575 s and an IMU sample went missing. Over 700 s every frame is due."""
-    from quad_model.sensors import _SlotGrid
+def test_model_time_is_exact_whole_microseconds_at_every_frame(f450):
+    """13 steps of 192.3 µs (a 5200 Hz model under a 400 Hz IMU) end each 2.5 ms frame on a
+    whole µs: the model counts steps, it does not sum float durations (a float sum drifted
+    past a sensor slot after 575 s and an IMU sample went missing)."""
+    model = QuadModel(f450, np.random.default_rng(0), physics_rate_hz=5200)
+    model.reset(time_us=86_400_000_000)  # a day in: float seconds would have drifted by now
+    for frame in range(1, 2001):
+        model.advance([0.0] * 4, 0.0025)
+        assert model.truth.time_us == 86_400_000_000 + frame * 2500
+    assert model.truth.time_s == 86_405.0
 
-    grid, time_s, step_s = _SlotGrid(250.0), 0.0, 1.0 / 5000
-    missed = 0
-    for _frame in range(700 * 250):
-        for _ in range(20):
-            time_s += step_s
-        missed += not grid(time_s)
-    assert missed == 0
-    assert abs(time_s - 700.0) > 1e-9  # the clock did drift
+
+@pytest.mark.parametrize("rate_hz", [250.0, 400.0, 1000.0, 8.5, 7.0, 3.0])
+def test_slot_grid_keeps_its_slots_for_a_day(rate_hz):
+    """Slot k is due at ⌈k·10⁶/rate⌉ µs, also after 24 h and for rates that do not divide 1 s."""
+    grid = SlotGrid(rate_hz)
+    for slot in (0, 1, 2, 3, round(86_400 * rate_hz) - 1, round(86_400 * rate_hz)):
+        due_us = grid.time_of(slot)
+        assert due_us == math.ceil(Fraction(slot) * 1_000_000 / Fraction(rate_hz))
+        assert grid.slot_at(due_us) == slot
+        assert grid.slot_at(due_us - 1) == slot - 1
+    assert grid.time_of(round(86_400 * rate_hz)) == 86_400_000_000
+
+
+def test_every_imu_slot_is_sampled_at_frames_a_day_into_a_run(f450):
+    suite = SensorSuite(f450, Environment(), np.random.default_rng(0), imu_rate_hz=250.0,
+                        mag_rate_hz=100.0, baro_rate_hz=50.0)  # fmt: skip
+    start_us = 86_400_000_000
+    due = {"imu": 0, "mag": 0, "baro": 0}
+    for frame in range(1000):  # 4 s of 4 ms frames
+        readings = suite.sample(_truth_at_us(start_us + frame * 4000))
+        for name in due:
+            due[name] += getattr(readings, name) is not None
+    assert due == {"imu": 1000, "mag": 400, "baro": 200}

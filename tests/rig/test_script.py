@@ -37,9 +37,10 @@ def _walk(commands, until_s, clock_start_s=0.0, frame_s=0.001):
     script = CommandScript(tuple(commands), RecordingGround(), barrier=True,
                            clock_start_s=clock_start_s)  # fmt: skip
     sent = []
+    frame_us = round(frame_s * 1e6)
     for frame in range(round(until_s / frame_s) + 1):
-        time_s = frame * frame_s
-        sent += [(round(time_s, 6), action.conversation) for action in script.due(time_s)]
+        time_us = frame * frame_us
+        sent += [(time_us / 1e6, action.conversation) for action in script.due(time_us)]
     return sent
 
 

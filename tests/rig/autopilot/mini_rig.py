@@ -59,7 +59,7 @@ class MiniRig:
         for _ in range(round(seconds * 1e6 / self.frame_us)):
             self.model.advance(self.throttle, self.frame_us * 1e-6)
             truth = self.model.truth
-            time_us = round(truth.time_s * 1e6)
+            time_us = truth.time_us
             readings = self.sensors.sample(truth)
             imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
             data = b""

@@ -87,7 +87,7 @@ class Flight:
             self.model.advance(self.throttle, FRAME_US * 1e-6)
             truth = self.model.truth
             frame = sensor_frame(self.sensors.sample(truth))
-            controls = self.controller.update(frame, round(truth.time_s * 1e6))
+            controls = self.controller.update(frame, truth.time_us)
             self.throttle = np.array(controls.motors) if controls.armed else np.zeros(4)
             if on_frame is not None:
                 on_frame(self)
