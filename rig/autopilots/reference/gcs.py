@@ -3,14 +3,18 @@
 Three links per instance (``Ports``), as PX4 SITL opens them: the GCS link binds 18570+i
 and talks to 14550 (QGroundControl, MAVProxy), the API link binds 14580+i and talks to
 14540+i (MAVSDK, scripts), the onboard link binds 14280+i and talks to 14030+i (the rig's
-scenario commands, as a companion computer's). Each answers whoever last talked to it.
-Telemetry is paced by simulated time (the autopilot's only clock), so a run's messages do
-not depend on the wall clock.
+scenario commands, as a companion computer's). Answers go to the sender of the request;
+telemetry to whoever last talked to the link and to every other station heard lately, so a
+second sender (a fuzzer, a second ground station) cannot take a ground station's telemetry
+away. Telemetry is paced by simulated time (the autopilot's only clock), so a run's messages
+do not depend on the wall clock.
 
 Protocols follow PX4's ``mavlink`` module and MAVLink's ``common.xml``: commands with
 COMMAND_ACK, the mission protocol (upload and download, MISSION_CURRENT and
-MISSION_ITEM_REACHED), the parameter protocol with PX4's bytewise int32 encoding, and
-offboard set-points. Malformed or unexpected messages are counted and ignored.
+MISSION_ITEM_REACHED; empty geofence and rally lists), the parameter protocol with PX4's
+bytewise int32 encoding and its ``_HASH_CHECK``, MAVLink FTP refused as PX4 refuses a
+missing file, and offboard set-points. Malformed or unexpected messages are counted and
+ignored; malformed ones are reported on stderr, at most once a minute.
 """
 
 from __future__ import annotations
@@ -19,7 +23,9 @@ import contextlib
 import math
 import socket
 import struct
+import sys
 import time
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -61,13 +67,66 @@ _RATES_IGNORED = (
     | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
     | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
 )
+#: PX4 v1.14's AUTOPILOT_VERSION.capabilities less what the reference autopilot lacks: MAVLink
+#: FTP, MISSION_ITEM (float) uploads, flight termination, the reserved bit.
 _CAPABILITIES = (
-    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
 )  # fmt: skip
+#: AUTOPILOT_VERSION.flight_sw_version: the PX4 release whose protocol it speaks, 1.14.0 (a
+#: ground station picks PX4's parameter metadata and features by it).
+_FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | mavlink.FIRMWARE_VERSION_TYPE_DEV
+#: The parameter set's hash (QGroundControl's cache key), sent first, as PX4 sends it.
+HASH_PARAM = "_HASH_CHECK"
+_NO_INDEX = 65535  # PARAM_VALUE.param_index of the hash: PX4's -1 in the uint16 field
+#: A link reads at most this many datagrams per call, so a flood cannot starve the simulator.
+MAX_DATAGRAMS_PER_POLL = 64
+#: Besides the last sender, stations heard within this many (wall) seconds get telemetry.
+PEER_TIMEOUT_S, MAX_PEERS = 5.0, 4
+#: Malformed input is reported on stderr at most this often (wall seconds).
+GARBAGE_REPORT_S = 60.0
+#: MAVLink FTP (``FILE_TRANSFER_PROTOCOL.payload``): header, opcodes and error codes.
+#: The header: seq, session, opcode, size, req_opcode, burst_complete, padding, offset.
+_FTP_HEADER = struct.Struct("<HBBBBBBI")
+_FTP_PAYLOAD_LEN = 251
+_FTP_ACK, _FTP_NAK = 128, 129
+_FTP_RESET_SESSIONS = 2
+_FTP_SESSION_OPS = {1, 5, 7, 15}  # terminate, read, write, burst read
+_FTP_PATH_OPS = {3, 4, 6, 8, 9, 10, 11, 12, 13, 14, 16}  # list, open, create, remove, ...
+_FTP_ERR_INVALID_SESSION, _FTP_ERR_UNKNOWN_COMMAND, _FTP_ERR_FILE_NOT_FOUND = 4, 7, 10
+#: Commands that ask for one message, as PX4 maps them onto REQUEST_MESSAGE.
+_REQUESTS_OF_ONE_MESSAGE = {
+    mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+    mavlink.MAV_CMD_REQUEST_PROTOCOL_VERSION: 300,  # PROTOCOL_VERSION
+    mavlink.MAV_CMD_GET_HOME_POSITION: mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+}
+#: MISSION_CLEAR_ALL.mission_type: every list.
+_MISSION_TYPE_ALL = 255
+_MISSION_TYPES = (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_FENCE,
+                  mavlink.MAV_MISSION_TYPE_RALLY)  # fmt: skip
+
+Address = tuple[str, int]
+
+
+class ProtocolVersion(mavlink.MAVLink_message):
+    """PROTOCOL_VERSION (id 300, CRC extra 217), which pymavlink's ``common`` dialect no
+    longer has: QGroundControl asks for it on connect and falls back to MAVLink 1 when it
+    gets no answer. MAVLink 2 (200), down to MAVLink 1 (100); spec hashes unknown (zero)."""
+
+    MESSAGE_ID, CRC_EXTRA = 300, 217
+
+    def __init__(self) -> None:
+        super().__init__(self.MESSAGE_ID, "PROTOCOL_VERSION")
+        self.version, self.min_version, self.max_version = 200, 100, 200
+
+    def pack(self, mav: mavlink.MAVLink, force_mavlink1: bool = False) -> bytes:
+        payload = struct.pack("<HHH8s8s", self.version, self.min_version, self.max_version,
+                              bytes(8), bytes(8))  # fmt: skip
+        return self._pack(mav, self.CRC_EXTRA, payload, force_mavlink1)
 
 
 @dataclass
@@ -76,52 +135,98 @@ class _Upload:
 
     count: int
     peer: tuple[int, int]  # the uploader's system and component ids
+    address: Address | None  # where the uploader listens (None: the link's last sender)
     items: list[MissionItem] = field(default_factory=list)
     last_request_s: float = 0.0
     retries: int = 0
 
 
 class MavlinkLink:
-    """One UDP endpoint: a bound socket, the peer it answers, and its own stream rates."""
+    """One UDP endpoint: a bound socket, the stations it serves, and its own stream rates."""
 
     def __init__(self, name: str, bind_port: int, remote_port: int, system_id: int) -> None:
         self.name = name
+        self.port = bind_port
+        self.system_id = system_id
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", bind_port))
         self.sock.setblocking(False)
-        self.peer: tuple[str, int] = ("127.0.0.1", remote_port)
+        self.peer: Address = ("127.0.0.1", remote_port)  # the last station that talked
+        self._heard: dict[Address, float] = {}  # station → when it last talked (monotonic)
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=1)
-        self.mav.robust_parsing = True
+        self._parser = _parser()
         self.intervals_us = dict(DEFAULT_INTERVALS_US)
         self.next_send_us = dict.fromkeys(DEFAULT_INTERVALS_US, 0)
         self.upload: _Upload | None = None
 
-    def receive(self) -> list[object]:
-        """All messages waiting on the socket (bad data included, as ``BAD_DATA``).
+    def receive(self) -> list[tuple[object, Address]]:
+        """Messages waiting on the socket with their senders (bad data as ``BAD_DATA``).
 
-        The link answers the sender of the last valid message: garbage from elsewhere (a
-        port scan, a fuzzer) does not steal the ground station's telemetry.
+        Each datagram is parsed on its own: a frame cut off at its end is bad data, not the
+        start of the next datagram's frame (which would swallow a good command after it).
+        Only a valid message addressed to this system makes its sender a station served.
         """
-        messages: list[object] = []
-        while True:
+        received: list[tuple[object, Address]] = []
+        for _ in range(MAX_DATAGRAMS_PER_POLL):
             try:
                 data, address = self.sock.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
-                return messages
+                break
             except OSError:  # e.g. ICMP port unreachable reported on a later call
                 continue
-            parsed = self.mav.parse_buffer(data) or []
-            if any(message.get_type() != "BAD_DATA" for message in parsed):
-                self.peer = address
-            messages.extend(parsed)
+            messages = self._parse(data)
+            if any(_addressed_to(message, self.system_id) for message in messages):
+                self._hear(address)
+            received.extend((message, address) for message in messages)
+        return received
 
-    def send(self, message) -> None:
-        # nobody listening (yet) is fine: UDP telemetry is fire-and-forget, as in PX4
-        with contextlib.suppress(OSError):
-            self.sock.sendto(message.pack(self.mav), self.peer)
+    def _parse(self, data: bytes) -> list:
+        messages = self._parser.parse_buffer(data) or []
+        if self._parser.buf_len():
+            rest = self._parser.buf[self._parser.buf_index :]
+            messages.append(mavlink.MAVLink_bad_data(rest, "frame cut off by the datagram's end"))
+            self._parser = _parser()
+        return messages
+
+    def _hear(self, address: Address) -> None:
+        now = time.monotonic()
+        self.peer = address
+        self._heard[address] = now
+        for station, heard in list(self._heard.items()):
+            if now - heard > PEER_TIMEOUT_S:
+                del self._heard[station]
+        while len(self._heard) > MAX_PEERS:
+            del self._heard[min(self._heard, key=self._heard.__getitem__)]
+
+    def stations(self) -> list[Address]:
+        """Where telemetry goes: the last sender, and every other station heard lately."""
+        now = time.monotonic()
+        others = [a for a, t in self._heard.items() if a != self.peer and now - t <= PEER_TIMEOUT_S]
+        return [self.peer, *others]
+
+    def send(self, message, to: Address | None = None) -> None:
+        """To ``to`` (an answer), else as telemetry to :meth:`stations`."""
+        data = message.pack(self.mav)
+        for address in [to] if to is not None else self.stations():
+            # nobody listening (yet) is fine: UDP telemetry is fire-and-forget, as in PX4
+            with contextlib.suppress(OSError):
+                self.sock.sendto(data, address)
 
     def close(self) -> None:
         self.sock.close()
+
+
+def _parser() -> mavlink.MAVLink:
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    return parser
+
+
+def _addressed_to(message, system_id: int) -> bool:
+    """Valid, and for this system (or for every system, or with no target at all)."""
+    if message.get_type() == "BAD_DATA":
+        return False
+    return getattr(message, "target_system", 0) in (0, system_id)
 
 
 class GroundStation:
@@ -132,6 +237,8 @@ class GroundStation:
         self.links = links
         self.malformed = 0
         self.unexpected = 0
+        self._reply_to: Address | None = None  # the sender of the message being handled
+        self._garbage_reported_s: float | None = None
         self._handlers: dict[str, Callable[[MavlinkLink, object], None]] = {
             "HEARTBEAT": lambda link, msg: None,
             "COMMAND_LONG": self._command_long,
@@ -149,28 +256,48 @@ class GroundStation:
             "MISSION_ACK": lambda link, msg: None,
             "SET_POSITION_TARGET_LOCAL_NED": self._set_position_target,
             "SET_ATTITUDE_TARGET": self._set_attitude_target,
+            "FILE_TRANSFER_PROTOCOL": self._file_transfer,
         }
 
     # ------------------------------------------------------------------ receive
-    def handle(self, link: MavlinkLink, message) -> None:
-        """Dispatch one message; anything malformed or unknown is counted, never raised."""
+    def handle(self, link: MavlinkLink | None, message, sender: Address | None = None) -> None:
+        """Dispatch one message; anything malformed or unknown is counted, never raised.
+        Answers go to ``sender`` (None: the link's last sender)."""
         kind = message.get_type()
         if kind == "BAD_DATA":
-            self.malformed += 1
+            self._malformed(link, sender)
             return
         handler = self._handlers.get(kind)
-        if handler is None or not self._for_us(message):
+        if handler is None or not _addressed_to(message, self.fc.params["MAV_SYS_ID"]):
             self.unexpected += 1
             return
+        self._reply_to = sender
         try:
             handler(link, message)
         except (ValueError, TypeError, OverflowError, struct.error, UnicodeError):
-            self.malformed += 1  # e.g. NaN where an integer is needed: a broken sender
+            self._malformed(link, sender)  # e.g. NaN where an integer is needed
+        finally:
+            self._reply_to = None
         self.flush_events()
 
-    def _for_us(self, message) -> bool:
-        target = getattr(message, "target_system", 0)
-        return target in (0, self.fc.params["MAV_SYS_ID"])
+    def _reply(self, link: MavlinkLink, message) -> None:
+        link.send(message, self._reply_to)
+
+    def _malformed(self, link: MavlinkLink | None, sender: Address | None) -> None:
+        """Count it; say so on stderr once, then at most every GARBAGE_REPORT_S seconds, so a
+        flood leaves one line in the console instead of one per datagram."""
+        self.malformed += 1
+        now = time.monotonic()
+        last = self._garbage_reported_s
+        if last is not None and now - last < GARBAGE_REPORT_S:
+            return
+        self._garbage_reported_s = now
+        where = f" on the {link.name} link (UDP {link.port})" if link is not None else ""
+        source = f" from {sender[0]}:{sender[1]}" if sender is not None else ""
+        print(f"rig.autopilots.reference: ignoring malformed MAVLink{where}{source} (bytes that "
+              f"are not MAVLink, bad CRC, cut-off frames or invalid fields): {self.malformed} so "
+              f"far, counted in SYS_STATUS.errors_comm; said again at most once a minute",
+              file=sys.stderr, flush=True)  # fmt: skip
 
     # ------------------------------------------------------------------ commands
     def _command_long(self, link: MavlinkLink, msg) -> None:
@@ -187,17 +314,19 @@ class GroundStation:
         try:
             result = self._run_command(link, command, p)
         except (ValueError, OverflowError):  # NaN or ∞ where a mode or index was needed
-            self.malformed += 1
+            self._malformed(link, self._reply_to)
             result = CommandResult(mavlink.MAV_RESULT_DENIED)
         self.flush_events()  # a refusal's reason goes out before its ACK
-        link.send(mavlink.MAVLink_command_ack_message(
+        self._reply(link, mavlink.MAVLink_command_ack_message(
             command, result.result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))  # fmt: skip
 
     def _run_command(self, link: MavlinkLink, command: int, p: tuple[float, ...]):
         fc = self.fc
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p[0] not in (0.0, 1.0):  # PX4's commander: "Unsupported ARM_DISARM param"
+                return CommandResult(mavlink.MAV_RESULT_UNSUPPORTED)
             force = round(p[1]) == 21196 if math.isfinite(p[1]) else False
-            result = fc.arm(force) if p[0] > 0.5 else fc.disarm(force)
+            result = fc.arm(force) if p[0] == 1.0 else fc.disarm(force)
         elif command == mavlink.MAV_CMD_NAV_TAKEOFF:
             result = fc.takeoff(p[6])
         elif command == mavlink.MAV_CMD_NAV_LAND:
@@ -211,12 +340,10 @@ class GroundStation:
             result = fc.set_mode(NavState.AUTO_MISSION)
         elif command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             result = self._set_interval(link, int(p[0]), p[1])
-        elif command in (mavlink.MAV_CMD_REQUEST_MESSAGE,
-                         mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):  # fmt: skip
-            wanted = mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION
-            if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
-                wanted = int(p[0])
-            result = self._send_once(link, wanted)
+        elif command == mavlink.MAV_CMD_REQUEST_MESSAGE:
+            result = self._send_once(link, int(p[0]))
+        elif command in _REQUESTS_OF_ONE_MESSAGE:
+            result = self._send_once(link, _REQUESTS_OF_ONE_MESSAGE[command])
         elif command == mavlink.MAV_CMD_DO_MOTOR_TEST:
             result = fc.motor_test(int(p[0]) - 1, p[2] / 100.0, p[3])
         else:
@@ -244,16 +371,20 @@ class GroundStation:
         return CommandResult(mavlink.MAV_RESULT_ACCEPTED)
 
     def _send_once(self, link: MavlinkLink, message_id: int) -> CommandResult:
+        """The message, to the requester, before the ACK; DENIED when there is none to send
+        (unknown, or no data yet such as home before a position fix), as PX4 answers."""
         if message_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            link.send(mavlink.MAVLink_autopilot_version_message(
-                _CAPABILITIES, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
-                self.fc.params["MAV_SYS_ID"]))  # fmt: skip
-            return CommandResult(mavlink.MAV_RESULT_ACCEPTED)
-        name = _NAMES_BY_ID.get(message_id)
-        message = self._telemetry(name) if name else None
+            message = mavlink.MAVLink_autopilot_version_message(
+                _CAPABILITIES, _FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
+                self.fc.params["MAV_SYS_ID"])  # fmt: skip
+        elif message_id == ProtocolVersion.MESSAGE_ID:
+            message = ProtocolVersion()
+        else:
+            name = _NAMES_BY_ID.get(message_id)
+            message = self._telemetry(name) if name else None
         if message is None:
-            return CommandResult(mavlink.MAV_RESULT_UNSUPPORTED)
-        link.send(message)
+            return CommandResult(mavlink.MAV_RESULT_DENIED)
+        self._reply(link, message)
         return CommandResult(mavlink.MAV_RESULT_ACCEPTED)
 
     # ------------------------------------------------------------------ parameters
@@ -270,19 +401,38 @@ class GroundStation:
         )
 
     def _param_request_list(self, link: MavlinkLink, msg) -> None:
-        for name in self.fc.params:
-            link.send(self._param_value(name))
+        """The hash first (QGroundControl loads its cache when it matches), then each one."""
+        params = self.fc.params
+        hash_bits = struct.unpack("<f", struct.pack("<I", self.parameter_hash()))[0]
+        self._reply(link, mavlink.MAVLink_param_value_message(
+            HASH_PARAM.encode(), hash_bits, mavlink.MAV_PARAM_TYPE_UINT32, len(params),
+            _NO_INDEX))  # fmt: skip
+        for name in params:
+            self._reply(link, self._param_value(name))
+
+    def parameter_hash(self) -> int:
+        """PX4's ``param_hash_check`` as QGroundControl recomputes it from its cache: CRC-32
+        (no pre- or post-inversion) over each name and its 4 value bytes, in name order."""
+        crc = 0
+        params = self.fc.params
+        for name in sorted(params):
+            kind = "<i" if params.spec(name).is_int else "<f"
+            data = name.encode() + struct.pack(kind, params[name])
+            crc = zlib.crc32(data, crc ^ 0xFFFFFFFF) ^ 0xFFFFFFFF
+        return crc
 
     def _param_request_read(self, link: MavlinkLink, msg) -> None:
         try:
             name = (self.fc.params.name_at(msg.param_index) if msg.param_index >= 0
                     else _param_id(msg.param_id))  # fmt: skip
-            link.send(self._param_value(name))
+            self._reply(link, self._param_value(name))
         except ParameterError as error:
             self.fc.notify(mavlink.MAV_SEVERITY_WARNING, str(error))
 
     def _param_set(self, link: MavlinkLink, msg) -> None:
         name = _param_id(msg.param_id)
+        if name == HASH_PARAM:
+            return  # QGroundControl's "cache matched, stop": the list is already sent
         value = msg.param_value
         if msg.param_type == mavlink.MAV_PARAM_TYPE_INT32:
             value = struct.unpack("<i", struct.pack("<f", value))[0]
@@ -292,29 +442,42 @@ class GroundStation:
             self.fc.notify(mavlink.MAV_SEVERITY_WARNING, str(error))
             if name not in self.fc.params:
                 return
-        link.send(self._param_value(name))  # the value it holds now, as PX4 answers
+        self._reply(link, self._param_value(name))  # the value it holds now, as PX4 answers
 
     # ------------------------------------------------------------------ missions
     def _mission_count(self, link: MavlinkLink, msg) -> None:
-        if getattr(msg, "mission_type", 0) != mavlink.MAV_MISSION_TYPE_MISSION:
-            self._mission_ack(link, msg, mavlink.MAV_MISSION_UNSUPPORTED)
+        """An upload. Geofence and rally lists stay empty: clearing them is accepted, items
+        are refused with a reason (there is no geofence or rally point to fly)."""
+        kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        if kind in (mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY):
+            if msg.count:
+                self.fc.notify(mavlink.MAV_SEVERITY_WARNING,
+                               "Geofence and rally points are not supported")  # fmt: skip
+                self.flush_events()
+            verdict = mavlink.MAV_MISSION_UNSUPPORTED if msg.count else mavlink.MAV_MISSION_ACCEPTED
+            self._mission_ack(link, msg, verdict, kind)
+            return
+        if kind != mavlink.MAV_MISSION_TYPE_MISSION:
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_UNSUPPORTED, kind)
             return
         if msg.count == 0:
             self.fc.set_mission([])
             self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
             return
-        link.upload = _Upload(msg.count, (msg.get_srcSystem(), msg.get_srcComponent()))
+        link.upload = _Upload(msg.count, (msg.get_srcSystem(), msg.get_srcComponent()),
+                              self._reply_to)  # fmt: skip
         self._request_item(link)
 
     def _request_item(self, link: MavlinkLink) -> None:
         upload = link.upload
         upload.last_request_s = time.monotonic()
-        link.send(mavlink.MAVLink_mission_request_int_message(
-            *upload.peer, len(upload.items), mavlink.MAV_MISSION_TYPE_MISSION))  # fmt: skip
+        request = mavlink.MAVLink_mission_request_int_message(
+            *upload.peer, len(upload.items), mavlink.MAV_MISSION_TYPE_MISSION)  # fmt: skip
+        link.send(request, upload.address)
 
     def _mission_item_int(self, link: MavlinkLink, msg) -> None:
         upload = link.upload
-        if upload is None:
+        if upload is None or msg.mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
             self.unexpected += 1
             return
         if msg.seq != len(upload.items):  # a duplicate or out of order: ask again
@@ -342,30 +505,42 @@ class GroundStation:
         self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
         link.send(self._telemetry("MISSION_CURRENT"))
 
-    def _mission_ack(self, link: MavlinkLink, msg, result: int) -> None:
-        link.send(mavlink.MAVLink_mission_ack_message(
-            msg.get_srcSystem(), msg.get_srcComponent(), result,
-            mavlink.MAV_MISSION_TYPE_MISSION))  # fmt: skip
+    def _mission_ack(self, link: MavlinkLink, msg, result: int,
+                     kind: int = mavlink.MAV_MISSION_TYPE_MISSION) -> None:  # fmt: skip
+        self._reply(link, mavlink.MAVLink_mission_ack_message(
+            msg.get_srcSystem(), msg.get_srcComponent(), result, kind))  # fmt: skip
 
     def _mission_request_list(self, link: MavlinkLink, msg) -> None:
-        link.send(mavlink.MAVLink_mission_count_message(
-            msg.get_srcSystem(), msg.get_srcComponent(), len(self.fc.navigator.mission),
-            mavlink.MAV_MISSION_TYPE_MISSION))  # fmt: skip
+        """The mission's length; the geofence and rally lists are empty (PX4 with none)."""
+        kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        if kind not in _MISSION_TYPES:
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_UNSUPPORTED, kind)
+            return
+        count = len(self.fc.navigator.mission) if kind == mavlink.MAV_MISSION_TYPE_MISSION else 0
+        self._reply(link, mavlink.MAVLink_mission_count_message(
+            msg.get_srcSystem(), msg.get_srcComponent(), count, kind))  # fmt: skip
 
     def _mission_request(self, link: MavlinkLink, msg) -> None:
-        mission = self.fc.navigator.mission
+        kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        mission = self.fc.navigator.mission if kind == mavlink.MAV_MISSION_TYPE_MISSION else []
         if not 0 <= msg.seq < len(mission):
-            self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE)
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE, kind)
             return
         i = mission[msg.seq]
-        link.send(mavlink.MAVLink_mission_item_int_message(
+        self._reply(link, mavlink.MAVLink_mission_item_int_message(
             msg.get_srcSystem(), msg.get_srcComponent(), i.seq, i.frame, i.command,
             int(i.seq == self.fc.navigator.mission_seq), i.autocontinue, i.param1, i.param2,
             i.param3, i.param4, i.x, i.y, i.z, mavlink.MAV_MISSION_TYPE_MISSION))  # fmt: skip
 
     def _mission_clear_all(self, link: MavlinkLink, msg) -> None:
-        self.fc.set_mission([])
-        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
+        """Clears the mission (type MISSION or ALL); the other lists are empty already."""
+        kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        if kind in (mavlink.MAV_MISSION_TYPE_MISSION, _MISSION_TYPE_ALL):
+            self.fc.set_mission([])
+        elif kind not in _MISSION_TYPES:
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_UNSUPPORTED, kind)
+            return
+        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, kind)
 
     def _mission_set_current(self, link: MavlinkLink, msg) -> None:
         if not self.fc.set_mission_current(msg.seq):
@@ -384,6 +559,30 @@ class GroundStation:
                 continue
             upload.retries += 1
             self._request_item(link)
+
+    # ------------------------------------------------------------------ file transfer
+    def _file_transfer(self, link: MavlinkLink, msg) -> None:
+        """MAVLink FTP answered as by a PX4 without the file: a NAK at once, never silence, so
+        MAVProxy and QGroundControl fall back to the parameter protocol without a time-out.
+        There is no file system: every path is missing (PX4's answer to MAVProxy's
+        ``@PARAM/param.pck``), no session is open, a session reset is acknowledged."""
+        request = bytes(msg.payload)
+        seq, session, opcode = _FTP_HEADER.unpack_from(request)[:3]
+        if opcode in (_FTP_ACK, _FTP_NAK):
+            self.unexpected += 1  # an answer: nothing was asked
+            return
+        if opcode == _FTP_RESET_SESSIONS:
+            reply, data = _FTP_ACK, b""
+        elif opcode in _FTP_PATH_OPS:
+            reply, data = _FTP_NAK, bytes([_FTP_ERR_FILE_NOT_FOUND])
+        elif opcode in _FTP_SESSION_OPS:
+            reply, data = _FTP_NAK, bytes([_FTP_ERR_INVALID_SESSION])
+        else:
+            reply, data = _FTP_NAK, bytes([_FTP_ERR_UNKNOWN_COMMAND])
+        answer = _FTP_HEADER.pack((seq + 1) & 0xFFFF, session, reply, len(data), opcode, 0, 0, 0)
+        payload = (answer + data).ljust(_FTP_PAYLOAD_LEN, b"\0")
+        self._reply(link, mavlink.MAVLink_file_transfer_protocol_message(
+            0, msg.get_srcSystem(), msg.get_srcComponent(), list(payload)))  # fmt: skip
 
     # ------------------------------------------------------------------ offboard
     def _set_position_target(self, link: MavlinkLink, msg) -> None:
@@ -485,9 +684,12 @@ class GroundStation:
                 mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
                 custom_mode(fc.nav_state), status, 3)  # fmt: skip
         if name == "SYS_STATUS":
-            # The pre-arm check bit, as PX4 sets it: MAVSDK's ``is_armable`` reads it.
+            # The pre-arm check bit, as PX4 sets it: MAVSDK's ``is_armable`` reads it. The
+            # geofence is absent but healthy (nothing breached): PX4 v1.14 leaves that bit
+            # clear, which MAVProxy announces as "fence breach" at connect.
             present = mavlink.MAV_SYS_STATUS_PREARM_CHECK
             healthy = present if fc.armed or fc.preflight_failure() is None else 0
+            healthy |= mavlink.MAV_SYS_STATUS_GEOFENCE
             for bit, key in zip(_SENSORS, _MONITOR_KEYS, strict=True):
                 present |= bit if fc.monitors[key].last_time_us is not None else 0
                 healthy |= bit if fc.monitors[key].healthy(fc.time_us) else 0

@@ -169,8 +169,8 @@ class Autopilot:
                 self.ground.heartbeat()
             for link in self.links:
                 if link.sock in readable:
-                    for message in link.receive():
-                        self.ground.handle(link, message)
+                    for message, sender in link.receive():
+                        self.ground.handle(link, message, sender)
             self.ground.retry_uploads()
             if self.sim in readable:
                 data = self.sim.recv(65536)
