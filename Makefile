@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install hil-sim test bench credibility lint clean
+.PHONY: install hil-sim test bench soak fuzz credibility lint clean
 
 install: $(STAMP)
 
@@ -22,6 +22,17 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
+
+# A day of simulated flight in one run: memory per simulated hour, logs read back whole
+# (about 3 hours here; SOAK_HOURS=1 for a quick look).
+SOAK_HOURS ?= 24
+soak: $(STAMP)
+	$(BIN)/python -m benchmarks.soak --hours $(SOAK_HOURS)
+
+# Every input path (logs, TOML, MAVLink ports) fuzzed coverage-guided for FUZZ_MINUTES.
+FUZZ_MINUTES ?= 10
+fuzz: $(STAMP)
+	$(BIN)/python -m benchmarks.fuzz --minutes $(FUZZ_MINUTES)
 
 # The paper's section-4 study on the real X500 flight (README "How credible is this rig?"):
 # the flight replayed by the high- (x500_v2) and low-precision (x500_v2_low_precision) models

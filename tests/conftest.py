@@ -1,9 +1,17 @@
-"""Shared pytest fixtures: where the real flight logs are."""
+"""Shared pytest fixtures: where the real flight logs are; hypothesis's profiles."""
 
 import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
+
+#: Property tests (tests/fuzz): a few dozen inputs each in `make test`, no per-input
+#: deadline (a log parse takes tens of ms on a busy machine); `make fuzz` runs them longer.
+settings.register_profile(
+    "test", max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "test"))
 
 REPO = Path(__file__).resolve().parent.parent
 #: Real flight logs carried with the project (MIT, see data/flight_logs/README.md).

@@ -1,0 +1,68 @@
+"""Files a user hands the rig: flight logs (cut short, corrupted, reordered) and TOML
+configuration of every kind (any keys, any value types, raw text). Each is read, or
+refused with one line that names the problem; nothing else may escape."""
+
+from __future__ import annotations
+
+import functools
+import tempfile
+from pathlib import Path
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from credibility.errors import CredibilityError
+from credibility.logs import open_log
+from credibility.plan import load_plan
+from quad_model.vehicle import VehicleFileError, load_vehicle
+from rig.apps.campaign import load_campaign
+from rig.apps.identify import identify_vehicle
+from rig.apps.replay import plan_replay
+from rig.errors import RigError
+from rig.scenarios.scenario import load_scenario
+from tests.fuzz.inputs import SEED_TOPICS, damaged_logs, one_line, seed_log, toml_documents
+
+#: Each kind of configuration file: its loader, and the one error it may raise.
+LOADERS = {
+    "scenario": load_scenario,
+    "vehicle": load_vehicle,
+    "campaign": load_campaign,
+    "plan": load_plan,
+}
+REFUSALS = (RigError, CredibilityError, VehicleFileError)
+
+
+@functools.cache
+def _x500():
+    return load_vehicle("x500_v2")
+
+
+def test_the_undamaged_seed_is_read_and_planned(tmp_path):
+    """The damage starts from a log every reader accepts, so the fuzz reaches past the header."""
+    path = tmp_path / "flight.ulg"
+    path.write_bytes(seed_log())
+    assert {name for name, _ in open_log(path).topics} == set(SEED_TOPICS)
+    assert plan_replay(path).drive == "velocity"
+
+
+@given(damaged_logs())
+def test_a_damaged_flight_log_is_read_or_refused_in_one_line(data: bytes) -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "flight.ulg"
+        path.write_bytes(data)
+        for read in (open_log, plan_replay, lambda p: identify_vehicle(p, _x500())):
+            try:
+                read(path)
+            except REFUSALS as error:
+                one_line(error)
+
+
+@given(st.sampled_from(sorted(LOADERS)), toml_documents())
+def test_any_configuration_file_is_loaded_or_refused_in_one_line(kind: str, text: str) -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / f"{kind}.toml"
+        path.write_text(text, encoding="utf-8")
+        try:
+            LOADERS[kind](path)
+        except REFUSALS as error:
+            one_line(error)
