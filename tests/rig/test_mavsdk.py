@@ -6,13 +6,18 @@ The clients below make the calls, in the order and with the arguments, of MAVSDK
 for ``is_global_position_ok`` and ``is_home_position_ok``, arm, fly, land. Those examples
 used to wait forever: the home position only existed after arming, and SYS_STATUS had no
 pre-arm bit. The examples themselves also run unchanged (README, "MAVSDK").
+
+The take-off/land client also flies PX4 SITL (skips without ``$PX4_DIR``). PX4 v1.14 sends
+its API link to 14540+i only for instances 0..9 (``px4-rc.mavlink``: 14549 above), so that
+test takes a free instance in 1..9; an earlier try on instance 60+ listened on 14600+ and
+never heard PX4.
 """
 
 from __future__ import annotations
 
 import asyncio
 import socket
-import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,10 +25,9 @@ import pyulog
 from mavsdk import System
 from mavsdk.mission import MissionItem, MissionPlan
 
-from rig.lockstep.loop import RunOptions, run_scenario
-from rig.mavlink.px4_api import Ports
-from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import scenario_from_dict
+from rig.autopilots.px4 import PX4_DIR_ENV, find_px4
+from rig.mavlink.px4_api import Ports, free_instance
+from tests.rig.background_rig import RigInBackground
 
 pytestmark = pytest.mark.closed_loop
 #: Sim time runs this much faster than the wall clock the clients sleep on.
@@ -38,43 +42,18 @@ def _free_tcp_port() -> int:
         return probe.getsockname()[1]
 
 
-class RigInBackground:
-    """A scenario without commands flown by the rig in a thread: the client commands it."""
-
-    def __init__(self, tmp_path, instance: int, duration_s: float) -> None:
-        scenario = scenario_from_dict({"name": "mavsdk", "vehicle": "f450_high_precision",
-                                       "duration_s": duration_s, "seed": 5,
-                                       "rates": {"imu_hz": 250}})  # fmt: skip
-        options = RunOptions(instance=instance, out_dir=tmp_path / "run", speed=SPEED,
-                             timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
-        self.result = None
-        self.error: BaseException | None = None
-        self._thread = threading.Thread(target=self._fly, args=(scenario, options), daemon=True)
-        self._thread.start()
-
-    def _fly(self, scenario, options) -> None:
-        try:
-            self.result = run_scenario(scenario, options)
-        except BaseException as error:  # reported by the test, not lost in the thread
-            self.error = error
-
-    def finish(self, timeout_s: float):
-        self._thread.join(timeout_s)
-        assert not self._thread.is_alive(), "the rig run did not end"
-        assert self.error is None, self.error
-        return self.result
-
-
-async def _connected_and_healthy(instance: int):
-    """``System().connect`` on the API port and the examples' two waits; returns the drone
-    and the health that ended the wait."""
+async def _connected_and_healthy(instance: int, armable: bool = False):
+    """``System().connect`` on the API port and the examples' two waits (and, with
+    ``armable``, PX4's pre-arm checks too); returns the drone and the health that ended the
+    wait."""
     drone = System(port=_free_tcp_port())
     await drone.connect(system_address=f"udpin://0.0.0.0:{Ports(instance).api_remote_udp}")
     async for state in drone.core.connection_state():
         if state.is_connected:
             break
     async for health in drone.telemetry.health():
-        if health.is_global_position_ok and health.is_home_position_ok:
+        ready = health.is_armable or not armable
+        if health.is_global_position_ok and health.is_home_position_ok and ready:
             return drone, health
     raise AssertionError("the health stream ended")
 
@@ -92,23 +71,24 @@ def _altitude(rig_log) -> tuple[np.ndarray, np.ndarray]:
     return truth["timestamp"] / 1e6, -truth["z"]
 
 
+async def _takeoff_and_land(instance: int, armable: bool = False):
+    """The example's calls: healthy, arm, take off, 10 s, land; then wait until landed."""
+    drone, health = await _connected_and_healthy(instance, armable)
+    await drone.action.arm()
+    await drone.action.takeoff()
+    await asyncio.sleep(10)
+    await drone.action.land()
+    async for in_air in drone.telemetry.in_air():  # the example stops here; we watch
+        if not in_air:
+            break
+    return health
+
+
 def test_takeoff_and_land_as_the_example(tmp_path, free_instance):
     instance = free_instance()
-    rig = RigInBackground(tmp_path, instance, duration_s=70.0)
-
-    async def takeoff_and_land():
-        drone, health = await _connected_and_healthy(instance)
-        _all_ok(health)
-        await drone.action.arm()
-        await drone.action.takeoff()
-        await asyncio.sleep(10)
-        await drone.action.land()
-        async for in_air in drone.telemetry.in_air():  # the example stops here; we watch
-            if not in_air:
-                break
-        return health
-
-    asyncio.run(asyncio.wait_for(takeoff_and_land(), CLIENT_TIMEOUT_S))
+    rig = RigInBackground(tmp_path, instance, duration_s=70.0, speed=SPEED)
+    health = asyncio.run(asyncio.wait_for(_takeoff_and_land(instance), CLIENT_TIMEOUT_S))
+    _all_ok(health)
     result = rig.finish(timeout_s=60)
     _, altitude_m = _altitude(pyulog.ULog(str(result.rig_log)))
     # MIS_TAKEOFF_ALT 2.5 m, reached; the climb overshoots by up to 0.4 m (no take-off ramp)
@@ -119,7 +99,7 @@ def test_takeoff_and_land_as_the_example(tmp_path, free_instance):
 def test_mission_as_the_example(tmp_path, free_instance):
     """Three waypoints at 25 m and 10 m/s, RTL after the mission, wait until landed."""
     instance = free_instance()
-    rig = RigInBackground(tmp_path, instance, duration_s=150.0)
+    rig = RigInBackground(tmp_path, instance, duration_s=150.0, speed=SPEED)
     waypoints = ((47.398039859999997, 8.5455725400000002), (47.398036222362471, 8.5450146439425509),
                  (47.397825620791885, 8.5450092830163271))  # fmt: skip
     reached: list[int] = []
@@ -154,3 +134,31 @@ def test_mission_as_the_example(tmp_path, free_instance):
     truth = rig_log.get_dataset("vehicle_local_position_groundtruth").data
     assert np.hypot(truth["x"][-1], truth["y"][-1]) < 2.0  # back home (RTL), on the ground
     assert altitude_m[-1] < 0.1
+
+
+@pytest.fixture(scope="module")
+def px4_dir() -> Path:
+    build = find_px4()
+    if build is None:
+        pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl)")
+    return build.root
+
+
+def test_takeoff_and_land_as_the_example_with_px4(tmp_path, px4_dir):
+    """The same calls against PX4 SITL through the rig (thread, 2x real time): PX4 reports
+    every health flag true (its EKF runs on the rig's clock), takes off to MIS_TAKEOFF_ALT
+    and lands. A client or rig that hangs fails within its time bound. PX4 reports its global
+    position and home about a second before its pre-arm checks pass, when it would refuse the
+    example's arm, so this client also waits for ``is_armable``."""
+    instance = free_instance(1, 9)  # PX4 talks to MAVSDK on 14540+i only for i < 10
+    rig = RigInBackground(tmp_path, instance, duration_s=80.0, speed=2.0, autopilot="px4",
+                          px4_dir=px4_dir)  # fmt: skip
+    flight = _takeoff_and_land(instance, armable=True)
+    health = asyncio.run(asyncio.wait_for(flight, CLIENT_TIMEOUT_S))
+    _all_ok(health)
+    result = rig.finish(timeout_s=60)
+    _, altitude_m = _altitude(pyulog.ULog(str(result.rig_log)))
+    # MIS_TAKEOFF_ALT 2.5 m above the home PX4 set at boot; its altitude estimate has moved
+    # by a few decimetres by the time it arms (seen: 1.9 m flown)
+    assert 1.5 < altitude_m.max() < 3.2
+    assert altitude_m[-1] < 0.1  # landed

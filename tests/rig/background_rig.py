@@ -1,0 +1,52 @@
+"""The rig flying a scenario without commands in a thread, while a test drives the autopilot
+from outside as a user's ground station or script would (MAVSDK, MAVProxy, pymavlink).
+
+Shared by the ground-station tests (``test_mavsdk.py``, ``test_mavproxy.py``,
+``test_qgc_connect.py``, ``test_gcs_garbage.py``). ``speed`` paces simulated time against
+the wall clock those clients live on.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+from rig.lockstep.loop import RunOptions, RunResult, run_scenario
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
+
+
+class RigInBackground:
+    """``run_scenario`` in a daemon thread; :meth:`finish` joins it and reports its error."""
+
+    def __init__(self, tmp_path: Path, instance: int, duration_s: float, speed: float,
+                 **options: object) -> None:  # fmt: skip
+        scenario = scenario_from_dict({"name": "idle", "vehicle": "f450_high_precision",
+                                       "duration_s": duration_s, "seed": 5,
+                                       "rates": {"imu_hz": 250}})  # fmt: skip
+        run_options = RunOptions(instance=instance, out_dir=tmp_path / "run", speed=speed,
+                                 timeouts=LinkTimeouts(connect_s=60, answer_s=30),
+                                 **options)  # fmt: skip
+        self.result: RunResult | None = None
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._fly, args=(scenario, run_options),
+                                        daemon=True)  # fmt: skip
+        self._thread.start()
+
+    def _fly(self, scenario, options: RunOptions) -> None:
+        try:
+            self.result = run_scenario(scenario, options)
+        except BaseException as error:  # reported by the test, not lost in the thread
+            self.error = error
+
+    @property
+    def running(self) -> bool:
+        return self._thread.is_alive()
+
+    def finish(self, timeout_s: float) -> RunResult:
+        """The run's result, once it ended within ``timeout_s`` wall seconds without error."""
+        self._thread.join(timeout_s)
+        assert not self._thread.is_alive(), "the rig run did not end"
+        assert self.error is None, self.error
+        assert self.result is not None
+        return self.result
