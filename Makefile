@@ -39,7 +39,7 @@ fuzz: $(STAMP)
 # through each loop of the autopilot, the 1-DOF pitch bench sweep, then the two reports.
 # Finished runs are kept (make reruns only what is missing; `make clean` starts over); a run
 # counts as finished by its .complete stamp, so an interrupted run's readable logs are kept
-# but flown again.
+# until it is flown again (--force).
 # A report whose verdict is "fail" (exit 1) is a result, not a build error; bad input (2) is.
 X500_LOG    := data/flight_logs/px4_x500v2_v6xrt_flight_2026-03-20.ulg
 STUDY       := runs/credibility/x500
@@ -59,12 +59,12 @@ credibility: $(STUDY_RUNS)
 		--out $(REPORTS)/x500_validation || [ $$? -eq 1 ]
 
 $(STUDY)/bench_%/.complete: | $(STAMP)
-	$(BIN)/rig run pitch_sweep_bench --vehicle $(MODEL_$*) --out $(@D)
+	$(BIN)/rig run pitch_sweep_bench --vehicle $(MODEL_$*) --out $(@D) --force
 	touch $@
 
 $(STUDY)/%/.complete: $(X500_LOG) | $(STAMP)
 	$(BIN)/rig replay $(X500_LOG) $(DRIVE_$(firstword $(subst _, ,$*))) \
-		--vehicle $(MODEL_$(lastword $(subst _, ,$*))) --out $(@D)
+		--vehicle $(MODEL_$(lastword $(subst _, ,$*))) --out $(@D) --force
 	touch $@
 
 lint: $(STAMP)

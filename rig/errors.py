@@ -31,5 +31,9 @@ class GroundLinkError(RigError):
     """A scenario command was refused or not acknowledged in time."""
 
 
+class LogWriteFailed(RigError):
+    """A log could not be written (a full disk): the file stays whole up to its last message."""
+
+
 class CosimError(RigError):
     """The RTL co-simulation process failed, stalled or answered out of protocol."""

@@ -45,6 +45,7 @@ def main(argv: list[str] | None = None) -> int:
             sensor_layer=case["sensor_layer"],
             timeouts=LinkTimeouts(connect_s=60.0, answer_s=case["answer_timeout_s"]),
             autopilot_params=tuple(case["autopilot_params"]),
+            force=True,  # the campaign reruns a case that did not finish in its own folder
         )
         result = run_scenario(load_scenario(run_dir / "scenario.toml"), options)
         metrics = case_metrics(

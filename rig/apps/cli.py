@@ -222,6 +222,7 @@ def _run_options(args: argparse.Namespace) -> RunOptions:
         autopilot_params=tuple(args.param),
         px4_dir=getattr(args, "px4", None),
         speed=args.speed if args.speed is not None else DEFAULT_SPEED.get(args.command, math.inf),
+        force=args.force,
     )
 
 
@@ -258,6 +259,8 @@ def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) 
     parser.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max",
                         help="at most FACTOR × real time, kept by sleeping (default: 1 for "
                              "hil-sim, which you watch; max otherwise)")  # fmt: skip
+    parser.add_argument("--force", action="store_true",
+                        help="overwrite the logs of a run already in --out")  # fmt: skip
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to wait for the autopilot to connect")  # fmt: skip
 

@@ -46,7 +46,15 @@ from quad_model.vehicle import VEHICLES_DIR, BatteryParams, VehicleFileError, ve
 from rig.autopilots.reference.params import PARAMETERS, ParameterError, Parameters
 from rig.chips.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PwmOutput
 from rig.errors import RigError
-from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
+from rig.lockstep.loop import (
+    AUTOPILOTS,
+    RUNS_DIR,
+    Progress,
+    RunOptions,
+    RunResult,
+    claim_run_dir,
+    run_scenario,
+)
 from rig.scenarios.scenario import (
     Arm,
     Disarm,
@@ -357,8 +365,8 @@ def run_replay(
             "acknowledged so a replay is deterministic)"
         )
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
-    run_dir = run_options.out_dir or RUNS_DIR / f"replay-{replay.log_path.stem}-{stamp}"
-    run_dir.mkdir(parents=True, exist_ok=True)
+    default_dir = RUNS_DIR / f"replay-{replay.log_path.stem}-{stamp}"
+    run_dir = claim_run_dir(run_options.out_dir or default_dir, run_options.force)
     vehicle_path = (run_dir / "vehicle.toml").resolve()
     vehicle_path.write_text(tomli_w.dumps(replay.vehicle_document))
     (run_dir / "replay.json").write_text(json.dumps(replay.summary(), indent=2) + "\n")

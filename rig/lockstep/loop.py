@@ -106,6 +106,8 @@ class RunOptions:
     notes: tuple[tuple[str, str], ...] = ()
     #: At most this many simulated seconds per wall second (inf: as fast as possible).
     speed: float = math.inf
+    #: Overwrite the logs of a run already in ``out_dir`` (``--force``); else refused.
+    force: bool = False
 
     def __post_init__(self) -> None:
         if self.autopilot not in AUTOPILOTS:
@@ -172,6 +174,23 @@ def default_run_dir(scenario: Scenario) -> Path:
     return RUNS_DIR / f"{scenario.name}-{stamp}"
 
 
+#: Files whose presence means a folder already holds a run.
+RUN_LOGS = ("rig.ulg", "autopilot.ulg", "px4.ulg")
+
+
+def claim_run_dir(run_dir: Path, force: bool) -> Path:
+    """Create the run folder; one that holds a run's logs is refused unless ``force``
+    (then they are overwritten), so a finished run is never lost to a reused ``--out``."""
+    held = [name for name in RUN_LOGS if (run_dir / name).exists()]
+    if held and not force:
+        raise RigError(
+            f"{run_dir}: already holds a run ({', '.join(held)}); choose another --out, "
+            "or pass --force to overwrite it"
+        )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return run_dir
+
+
 def run_scenario(
     scenario: Scenario,
     options: RunOptions = RunOptions(),
@@ -181,8 +200,7 @@ def run_scenario(
     if options.autopilot == "px4":
         check_imu_rate(scenario.rates.imu_hz)  # before anything starts
         find_px4(options.px4_dir)  # a --px4 or $PX4_DIR that holds no PX4 fails here
-    run_dir = options.out_dir or default_run_dir(scenario)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = claim_run_dir(options.out_dir or default_run_dir(scenario), options.force)
     loop = _Loop(scenario, options, run_dir, progress)
     try:
         loop.run()

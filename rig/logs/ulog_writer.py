@@ -4,7 +4,8 @@ pyulog (the reader the whole project uses) can only write back a log it holds en
 memory, so a run that crashes or is interrupted would lose everything. This writer
 streams instead: the definitions section first, then each data message as it comes, flushed
 at least every ``flush_interval_s`` of wall time, so a killed process leaves a file pyulog
-reads up to the last flush. Format: https://docs.px4.io/main/en/dev_log/ulog_file_format
+reads up to the last flush. The writer buffers whole messages itself and a failed write (a
+full disk) is cut back to the last whole message, so the file always ends on one. Format: https://docs.px4.io/main/en/dev_log/ulog_file_format
 (little endian; header, definitions, data).
 
 Topics use PX4's uORB names and fields (``vehicle_attitude.q[4]`` ...), so a rig log, a PX4
@@ -23,6 +24,8 @@ from types import TracebackType
 
 import numpy as np
 
+from rig.errors import LogWriteFailed
+
 _MAGIC = b"ULog\x01\x12\x35"
 _FILE_VERSION = 1
 _TYPES = {  # ULog type → struct code
@@ -30,6 +33,8 @@ _TYPES = {  # ULog type → struct code
     "int32_t": "i", "uint32_t": "I", "int64_t": "q", "uint64_t": "Q",
     "float": "f", "double": "d", "bool": "?", "char": "c",
 }  # fmt: skip
+#: Buffered bytes that trigger a write before the flush interval is up.
+_FLUSH_BYTES = 1 << 20
 _FIELD = re.compile(r"^(?P<type>[a-z0-9_]+)(\[(?P<n>\d+)\])?$")
 #: PX4's log levels (syslog): the level byte of a logged string.
 LOG_LEVELS = {"emerg": 0, "alert": 1, "crit": 2, "err": 3, "warn": 4, "notice": 5, "info": 6,
@@ -129,11 +134,14 @@ class ULogWriter:
             definitions += _parameter(name, value)
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb")  # noqa: SIM115 - kept open for streaming, closed in close()
-        self._file.write(_MAGIC + bytes([_FILE_VERSION]) + struct.pack("<Q", start_time_us))
-        self._file.write(definitions)
-        self._file.flush()
-        self._last_flush = time.monotonic()
+        # Unbuffered: the writer buffers whole messages in ``_pending`` (see flush).
+        self._file = open(self.path, "wb", buffering=0)  # noqa: SIM115 - closed in close()
+        self._pending = bytearray()
+        self._written = 0  # bytes on disk, all of them whole messages
+        self._failure: str | None = None  # why writing stopped (then writes are dropped)
+        self._pending += _MAGIC + bytes([_FILE_VERSION]) + struct.pack("<Q", start_time_us)
+        self._pending += definitions
+        self.flush()
 
     def write(self, topic: str, timestamp_us: int, multi_id: int = 0, **values: object) -> None:
         """Append one sample of ``topic``; every declared field must be given.
@@ -168,13 +176,14 @@ class ULogWriter:
             raise _field_error(spec, values) from None
         except struct.error as error:
             raise ULogWriteError(f"topic {topic!r}: {error}") from None
-        self._file.write(prefix + payload)
+        self._pending += prefix
+        self._pending += payload
         self._maybe_flush()
 
     def _subscribe(self, spec: _Topic, multi_id: int) -> bytes:
         """Add the subscription of an instance; returns its data-message prefix."""
         msg_id = len(self._data_prefixes)
-        self._file.write(_message(b"A", struct.pack("<BH", multi_id, msg_id) + spec.name.encode()))
+        self._pending += _message(b"A", struct.pack("<BH", multi_id, msg_id) + spec.name.encode())
         prefix = struct.pack("<HBH", 2 + spec.packer.size, ord("D"), msg_id)
         self._data_prefixes[(spec.name, multi_id)] = prefix
         return prefix
@@ -182,22 +191,45 @@ class ULogWriter:
     def log(self, level: str, timestamp_us: int, text: str) -> None:
         """Append a logged string (shown by Flight Review and pyulog as a log message)."""
         body = struct.pack("<BQ", LOG_LEVELS[level] + ord("0"), timestamp_us) + text.encode()
-        self._file.write(_message(b"L", body))
+        self._pending += _message(b"L", body)
         self._maybe_flush()
 
     def set_parameter(self, name: str, value: int | float) -> None:
         """Record a parameter change during the run (as PX4 logs ``param set``)."""
-        self._file.write(_parameter(name, value))
+        self._pending += _parameter(name, value)
         self._maybe_flush()
 
     def flush(self) -> None:
-        self._file.flush()
+        """Write the buffered messages. If the disk refuses them (full, or a file size
+        limit), cut the file back to its last whole message and raise
+        :class:`LogWriteFailed` once; the writer then drops what it is given."""
         self._last_flush = time.monotonic()
+        if self._failure is not None:
+            self._pending.clear()
+            return
+        pending = memoryview(self._pending)
+        try:
+            while pending:
+                pending = pending[self._file.write(pending) :]
+        except OSError as error:
+            pending.release()
+            self._failure = error.strerror or str(error)
+            self._pending.clear()
+            self._file.truncate(self._written)
+            raise LogWriteFailed(
+                f"{self.path}: cannot write ({self._failure}); the log is whole up to its "
+                f"last complete message ({self._written} bytes)"
+            ) from None
+        pending.release()
+        self._written += len(self._pending)
+        self._pending.clear()
 
     def close(self) -> None:
         if not self._file.closed:
-            self._file.flush()
-            self._file.close()
+            try:
+                self.flush()
+            finally:
+                self._file.close()
 
     def __enter__(self) -> ULogWriter:
         return self
@@ -211,7 +243,8 @@ class ULogWriter:
         self.close()
 
     def _maybe_flush(self) -> None:
-        if time.monotonic() - self._last_flush >= self._flush_interval_s:
+        if (len(self._pending) >= _FLUSH_BYTES
+                or time.monotonic() - self._last_flush >= self._flush_interval_s):  # fmt: skip
             self.flush()
 
 

@@ -104,3 +104,47 @@ def test_two_rigs_fly_side_by_side_with_mavsdks_port_free(tmp_path, free_instanc
         log = pyulog.ULog(str(tmp_path / f"i{instance}" / "rig.ulg"))
         truth = log.get_dataset("vehicle_local_position_groundtruth").data
         assert truth["z"].min() < -1.0  # each took off
+
+
+def test_a_folder_holding_a_run_is_refused_without_force(capsys, tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "rig.ulg").write_bytes(b"a finished run")
+    assert main(["run", "level_step", "--out", str(out), "--connect-timeout", "1"]) == 1
+    last = capsys.readouterr().err.splitlines()[-1]
+    assert last == (f"rig: error: {out}: already holds a run (rig.ulg); choose another --out, "
+                    "or pass --force to overwrite it")  # fmt: skip
+    assert (out / "rig.ulg").read_bytes() == b"a finished run"  # untouched
+
+
+def _limit_file_size(limit_bytes: int):
+    """For the child: files cannot grow past ``limit_bytes`` (EFBIG, as a full disk's ENOSPC)."""
+
+    def limit() -> None:
+        import resource
+
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write fails instead of killing
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return limit
+
+
+@pytest.mark.closed_loop
+def test_a_full_disk_ends_the_run_in_one_line_with_whole_logs(tmp_path, free_instance):
+    """The disk fills mid-flight (a 3 MB file-size limit on the rig and its autopilot): the
+    run stops with one line, and each log ends on its last whole message."""
+    out = tmp_path / "run"
+    process = subprocess.run(
+        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--instance",
+         str(free_instance()), "--out", str(out)],
+        capture_output=True, text=True, timeout=600, preexec_fn=_limit_file_size(3 << 20),
+    )  # fmt: skip
+    assert process.returncode == 1, process.stderr
+    assert "Traceback" not in process.stderr
+    last = process.stderr.splitlines()[-1]
+    assert last.startswith("rig: error: "), process.stderr
+    assert "File too large" in process.stderr  # the rig's or the autopilot's own line
+    for name in ("rig.ulg", "autopilot.ulg"):
+        log = pyulog.ULog(str(out / name))
+        assert not log.file_corruption, name
+        assert log.data_list, name

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from rig.autopilots.reference.params import ParameterError, Parameters, parse_assignment
 from rig.autopilots.reference.process import Autopilot
+from rig.errors import LogWriteFailed
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,6 +34,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rig.autopilots.reference: {reason}; stopping", file=sys.stderr)
     except KeyboardInterrupt:
         pass  # the rig stops us with SIGINT: close the log cleanly
+    except LogWriteFailed as error:  # a full disk: the log is whole up to its last message
+        print(f"rig.autopilots.reference: {error}; stopping", file=sys.stderr)
+        return 1
     finally:
         autopilot.close()
     return 0
