@@ -48,6 +48,7 @@ from scipy.ndimage import uniform_filter1d
 
 from credibility.errors import CredibilityError
 from credibility.indices import coherence_weight
+from credibility.layouts import derive_missing, sources_of_missing
 from credibility.logs import read_ulog
 from credibility.spectral import default_windows, estimate_response, log_grid
 from quad_model.frames import STANDARD_GRAVITY_MPS2, pwm_to_throttle
@@ -195,6 +196,8 @@ class _Log:
     path: Path
     topics: Mapping[str, Mapping[str, NDArray[np.float64]]]
     params: Mapping[str, float]
+    #: Topics of a newer PX4 derived from an older log's (:mod:`credibility.layouts`).
+    derived: tuple[str, ...] = ()
 
     def topic(self, name: str, why: str) -> Mapping[str, NDArray[np.float64]]:
         data = self.topics.get(name)
@@ -217,19 +220,25 @@ def _read_log(path: Path) -> _Log:
         raise IdentificationError(f"{path}: log file not found")
     try:
         ulog, _ = read_ulog(path, _TOPICS)  # its warnings (a skipped damaged message) don't matter
+        topics = {d.name: dict(d.data) for d in ulog.data_list if d.multi_id == 0}
+        # An older PX4's log: read what the missing topics derive from (a second pass, so a
+        # current log never holds sensor_combined in memory).
+        sources = sources_of_missing(topics, _TOPICS)
+        if sources:
+            older, _ = read_ulog(path, sources)
+            topics.update((d.name, dict(d.data)) for d in older.data_list if d.multi_id == 0)
     except CredibilityError as error:
         raise IdentificationError(str(error)) from None
-    topics = {}
-    for dataset in ulog.data_list:
-        if dataset.multi_id == 0:
-            data = dict(dataset.data)
-            # the rates at their measurement time, so the fitted delay is physical
-            measured = dataset.name == "vehicle_angular_velocity" and "timestamp_sample" in data
-            stamp = data["timestamp_sample" if measured else "timestamp"]
-            order = np.argsort(stamp, kind="stable")
-            topics[dataset.name] = {k: np.asarray(v)[order] for k, v in data.items()}
-            topics[dataset.name]["t"] = stamp[order] * 1e-6
-    return _Log(path, topics, dict(ulog.initial_parameters))
+    params = dict(ulog.initial_parameters)
+    derived = derive_missing(topics, params, _TOPICS)
+    for name, data in topics.items():
+        # the rates at their measurement time, so the fitted delay is physical
+        measured = name == "vehicle_angular_velocity" and "timestamp_sample" in data
+        stamp = data["timestamp_sample" if measured else "timestamp"]
+        order = np.argsort(stamp, kind="stable")
+        topics[name] = {k: np.asarray(v)[order] for k, v in data.items()}
+        topics[name]["t"] = stamp[order] * 1e-6
+    return _Log(path, topics, params, derived)
 
 
 # ------------------------------------------------------------------ public entry point
@@ -293,7 +302,7 @@ def identify_vehicle(
         pwm_range_us=pwm_range,
         hover=hover,
         axes=tuple(axes),
-        notes=_notes(sample_rate_hz, log.params),
+        notes=(*log.derived, *_notes(sample_rate_hz, log.params)),
     )
 
 

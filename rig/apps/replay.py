@@ -38,6 +38,7 @@ import tomli_w
 from numpy.typing import NDArray
 
 from credibility.errors import CredibilityError
+from credibility.layouts import legacy_pwm_range
 from credibility.logs import read_ulog
 from hil_config import FieldError, read_toml
 from quad_model.environment import Environment, GeoPoint, MagneticField
@@ -577,8 +578,8 @@ def _vehicle_document(
 
 def motor_pwm_range(params: Mapping[str, float], source: str | Path) -> tuple[float, float]:
     """PWM (µs) at motor command 0 and 1: the log's ``PWM_*_MINn/MAXn`` of the outputs
-    assigned to Motor 1..4, PX4's defaults 1000/2000 when the log has none (PX4 SITL, the
-    rig's autopilot)."""
+    assigned to Motor 1..4 (an older PX4's ``PWM_MAIN_MIN/MAX``), PX4's defaults 1000/2000
+    when the log has none (PX4 SITL, the rig's autopilot)."""
     ranges = set()
     for key, function in params.items():
         if key.startswith(("PWM_MAIN_FUNC", "PWM_AUX_FUNC")) and function in MOTOR_OUTPUT_FUNCTIONS:
@@ -591,8 +592,8 @@ def motor_pwm_range(params: Mapping[str, float], source: str | Path) -> tuple[fl
                         f"({key} = {int(function)} is a motor output)"
                     )
             ranges.add((float(params[limits[0]]), float(params[limits[1]])))
-    if not ranges:
-        return DEFAULT_MOTOR_PWM_RANGE_US
+    if not ranges:  # a PX4 before 1.13 has one range for all, or none (SITL, our autopilot)
+        return legacy_pwm_range(params) or DEFAULT_MOTOR_PWM_RANGE_US
     if len(ranges) > 1:
         raise ReplayError(f"{source}: the motor outputs have different PWM ranges {sorted(ranges)}")
     return ranges.pop()

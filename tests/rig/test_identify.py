@@ -303,3 +303,72 @@ def test_cli_prints_the_table_and_fails_in_one_line(capsys, tmp_path, real_ident
     assert err.startswith("rig: error: ")
     assert err.count("\n") == 1
     assert "log file not found" in err
+
+
+def _write_older_layout(source: Path, path: Path) -> None:
+    """The real X500 flight as a PX4 before 1.10 logged it: body rates only in
+    sensor_combined, torque and thrust in actuator_controls_0, the motors only as PWM in
+    actuator_outputs (range PWM_MAIN_MIN/MAX), no vehicle_angular_velocity,
+    vehicle_torque_setpoint, vehicle_thrust_setpoint or actuator_motors."""
+    names = ["vehicle_local_position", "vehicle_land_detected", "battery_status",
+             "vehicle_air_data", "hover_thrust_estimate", "vehicle_rates_setpoint",
+             "sensor_combined", "vehicle_torque_setpoint", "vehicle_thrust_setpoint",
+             "actuator_motors"]  # fmt: skip
+    real = ULog(str(source), names)
+    data = {d.name: d.data for d in real.data_list if d.multi_id == 0}
+    fields = {
+        "vehicle_local_position": ["vx", "vy", "vz"],
+        "vehicle_land_detected": ["landed"],
+        "battery_status": ["voltage_v"],
+        "vehicle_air_data": ["rho"],
+        "hover_thrust_estimate": ["hover_thrust"],
+        "vehicle_rates_setpoint": ["roll", "pitch", "yaw"],
+    }
+    topics = {name: [("float", f) for f in columns] for name, columns in fields.items()}
+    topics |= {"sensor_combined": [("float[3]", "gyro_rad")],
+               "actuator_controls_0": [("float[8]", "control")],
+               "actuator_outputs": [("uint32_t", "noutputs"), ("float[16]", "output")]}  # fmt: skip
+    low, high = 1100.0, 1900.0  # the real log's motor range (PWM_AUX_MIN/MAX)
+    rows = []
+    for name, columns in fields.items():
+        for i, stamp in enumerate(data[name]["timestamp"]):
+            rows.append((int(stamp), name, {f: float(data[name][f][i]) for f in columns}))
+    gyro = data["sensor_combined"]
+    rows += [(int(t), "sensor_combined",
+              {"gyro_rad": [gyro[f"gyro_rad[{k}]"][i] for k in range(3)]})
+             for i, t in enumerate(gyro["timestamp"])]  # fmt: skip
+    torque, thrust = data["vehicle_torque_setpoint"], data["vehicle_thrust_setpoint"]
+    lift = np.interp(torque["timestamp"], thrust["timestamp"], -thrust["xyz[2]"])
+    rows += [(int(t), "actuator_controls_0",
+              {"control": [*(torque[f"xyz[{k}]"][i] for k in range(3)), lift[i], 0, 0, 0, 0]})
+             for i, t in enumerate(torque["timestamp"])]  # fmt: skip
+    motors = data["actuator_motors"]
+    rows += [(int(t), "actuator_outputs",
+              {"noutputs": 4, "output": [*(low + (high - low) * motors[f"control[{k}]"][i]
+                                           for k in range(4)), *[0.0] * 12]})
+             for i, t in enumerate(motors["timestamp"])]  # fmt: skip
+    parameters = {"SYS_AUTOSTART": 4019, "PWM_MAIN_MIN": low, "PWM_MAIN_MAX": high,
+                  "IMU_GYRO_CUTOFF": float(real.initial_parameters["IMU_GYRO_CUTOFF"])}  # fmt: skip
+    with ULogWriter(path, topics, parameters=parameters) as log:
+        for stamp, name, values in sorted(rows, key=lambda row: row[0]):
+            log.write(name, stamp, **values)
+
+
+def test_an_older_px4_layout_is_identified_from_what_it_logged(tmp_path, real_identification):
+    """A log without vehicle_angular_velocity, the torque/thrust set-points and
+    actuator_motors (PX4 < 1.10) is identified from sensor_combined, actuator_controls_0 and
+    actuator_outputs; each derived topic is a note, and the hover agrees with the log's own
+    newer topics within 1.5 % (its windows are found on the body rates, here the raw gyro
+    logged at 38 Hz instead of the filtered rates)."""
+    current, vehicle = real_identification
+    older = tmp_path / "older.ulg"
+    _write_older_layout(FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg", older)
+    result = identify_vehicle(older, vehicle)
+    derived = [note for note in result.notes if "derived from" in note]
+    assert [note.split()[0] for note in derived] == [
+        "vehicle_angular_velocity", "vehicle_torque_setpoint", "vehicle_thrust_setpoint",
+        "actuator_motors",
+    ]  # fmt: skip
+    assert result.pwm_range_us == (1100.0, 1900.0)
+    assert result.hover.throttle.value == pytest.approx(current.hover.throttle.value, rel=0.015)
+    assert result.hover.thrust_setpoint == pytest.approx(current.hover.thrust_setpoint, rel=0.015)
