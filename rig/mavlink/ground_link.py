@@ -43,6 +43,8 @@ from rig.mavlink.px4_api import Ports, mavlink
 GCS_SYSTEM_ID, GCS_COMPONENT_ID = 245, mavlink.MAV_COMP_ID_MISSIONPLANNER
 #: PX4 custom main mode OFFBOARD (px4_custom_mode.h).
 PX4_MAIN_MODE_OFFBOARD = 6
+#: PX4's Hold: main mode AUTO, sub mode LOITER (px4_custom_mode.h).
+PX4_MAIN_MODE_AUTO, PX4_AUTO_SUB_MODE_LOITER = 4, 3
 #: How many times an arm is asked again, a HEARTBEAT (1 s) apart, while PX4 is not ready.
 ARM_READY_RETRIES = 30
 #: Period of the offboard setpoint keep-alive: PX4 leaves offboard after COM_OF_LOSS_T (1 s).
@@ -256,6 +258,13 @@ class GroundLink:
     def land(self) -> Conversation:
         return self.command(mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan, math.nan, math.nan,
                             math.nan, what="land")  # fmt: skip
+
+    def hold(self) -> Conversation:
+        """DO_SET_MODE(Hold), as QGroundControl's mode menu and MAVSDK's ``hold()``."""
+        return self.command(
+            mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            PX4_MAIN_MODE_AUTO, PX4_AUTO_SUB_MODE_LOITER, what="hold",
+        )  # fmt: skip
 
     def offboard(self, setpoints: Sequence[mavlink.MAVLink_message], what: str) -> Conversation:
         """Setpoints, then DO_SET_MODE(OFFBOARD): the ACK also proves they were handled."""

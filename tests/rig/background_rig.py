@@ -8,7 +8,9 @@ the wall clock those clients live on.
 
 from __future__ import annotations
 
+import socket
 import threading
+import time
 from pathlib import Path
 
 from rig.lockstep.loop import RunOptions, RunResult, run_scenario
@@ -50,3 +52,17 @@ class RigInBackground:
         assert self.error is None, self.error
         assert self.result is not None
         return self.result
+
+
+def wait_until_bound(port: int, timeout_s: float) -> None:
+    """Until the autopilot holds its UDP ``port`` (the reference one binds after compiling
+    its kernels, PX4 once its startup script reaches ``mavlink start``)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(("127.0.0.1", port))
+            except OSError:
+                return
+        time.sleep(0.2)
+    raise AssertionError(f"nothing bound UDP {port} within {timeout_s} s")

@@ -19,7 +19,6 @@ import contextlib
 import queue
 import re
 import shutil
-import socket
 import subprocess
 import threading
 import time
@@ -30,7 +29,7 @@ import pyulog
 
 from rig.autopilots.reference.params import Parameters
 from rig.mavlink.px4_api import Ports
-from tests.rig.background_rig import RigInBackground
+from tests.rig.background_rig import RigInBackground, wait_until_bound
 
 pytestmark = pytest.mark.closed_loop
 MAVPROXY = shutil.which("mavproxy.py")
@@ -105,19 +104,6 @@ class Mavproxy:
         return "\n".join(self.output)
 
 
-def _wait_until_bound(port: int, timeout_s: float) -> None:
-    """Until the autopilot holds its UDP port (it binds after compiling its kernels)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            try:
-                probe.bind(("127.0.0.1", port))
-            except OSError:
-                return
-        time.sleep(0.2)
-    raise AssertionError(f"nothing bound UDP {port} within {timeout_s} s")
-
-
 @pytest.mark.skipif(MAVPROXY is None, reason="MAVProxy is not installed (pip install -e .[dev])")
 def test_mavproxy_connects_downloads_parameters_and_flies(tmp_path, free_instance):
     """Connect, parameter download without MAVLink-FTP time-outs, mode changes, arm,
@@ -126,7 +112,7 @@ def test_mavproxy_connects_downloads_parameters_and_flies(tmp_path, free_instanc
     instance = free_instance()
     ports = Ports(instance)
     rig = RigInBackground(tmp_path, instance, duration_s=45.0, speed=1.0)
-    _wait_until_bound(ports.gcs_local_udp, 60.0)
+    wait_until_bound(ports.gcs_local_udp, 60.0)
     mavproxy = Mavproxy(f"udpout:127.0.0.1:{ports.gcs_local_udp}", ports.system_id,
                         tmp_path / "mavproxy")  # fmt: skip
     try:
