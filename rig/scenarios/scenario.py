@@ -200,6 +200,13 @@ class Land(_Timed):
 
 
 @table(kw_only=True)
+class Hold(_Timed):
+    """PX4's Hold mode (loiter where it is); the mode to arm in again after a landing."""
+
+    action: Literal["hold"] = "hold"
+
+
+@table(kw_only=True)
 class Goto(_Timed):
     """Offboard position setpoint, re-sent every 0.1 s until the next mode command."""
 
@@ -246,7 +253,9 @@ class SetParam(_Timed):
     value: Number
 
 
-_FileCommand = Arm | Disarm | Takeoff | Land | Goto | Mission | PitchSweep | MotorTest | SetParam
+_FileCommand = (
+    Arm | Disarm | Takeoff | Land | Hold | Goto | Mission | PitchSweep | MotorTest | SetParam
+)
 #: A command of a scenario file: its ``action`` picks the table.
 Command = Annotated[_FileCommand, Field(discriminator="action")]
 

@@ -118,6 +118,7 @@ class CommandScript:
             "disarm": lambda: g.attempt(g.arm(False)) if c.may_refuse else g.arm(False),
             "takeoff": lambda: g.takeoff(c.altitude_m),
             "land": g.land,
+            "hold": g.hold,
             "mission": lambda: g.mission(c.waypoints_ned_m),
             "motor_test": lambda: g.motor_test(c.motor, c.throttle, c.duration_s),
             "set_param": lambda: g.set_param(c.name, c.value),

@@ -112,3 +112,17 @@ def test_same_seed_same_flight(tmp_path, free_instance):
     assert first.rig_log.read_bytes() == second.rig_log.read_bytes()
     assert first.autopilot_log.read_bytes() == second.autopilot_log.read_bytes()
     assert first.link.freewheel_frames == 0  # every frame answered, from the first
+
+
+def test_after_a_landing_hold_lets_it_arm_and_fly_again(tmp_path, free_instance):
+    """After an auto-landing the autopilot stays in Land, where PX4 refuses to arm; a pilot
+    switches to Hold first. Two hops in one run: the second climbs as the first did."""
+    commands = [*takeoff(2.0), {"at_s": 8.0, "action": "land"},
+                {"at_s": 17.0, "action": "hold"}, {"at_s": 17.5, "action": "arm"},
+                {"at_s": 17.6, "action": "takeoff", "altitude_m": 2.0}]  # fmt: skip
+    _, rig_log, _ = fly(tmp_path, free_instance, "two_hops", commands, 25.0, rates={"imu_hz": 250})
+    messages = [m.message for m in rig_log.logged_messages]
+    assert messages.count("arm: accepted") == 2
+    assert "hold: accepted" in messages
+    heights = -truth_at(rig_log, [6.0, 16.5, 24.0])["z"]
+    assert heights == pytest.approx([2.0, 0.0, 2.0], abs=HOVER_BOUND_M)
