@@ -63,7 +63,7 @@ from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
 from rig.processes import exit_description, stop_process_group
-from rig.scenarios.faults import FaultInjector
+from rig.scenarios.faults import FaultInjector, describe
 from rig.scenarios.scenario import Rates, Scenario
 from rig.scenarios.script import Action, CommandScript
 
@@ -118,7 +118,8 @@ class RunOptions:
 
 @dataclass(frozen=True)
 class Progress:
-    """What a progress display shows, once per simulated tenth of a second."""
+    """What a progress display (the status line, the live view) shows, once per simulated
+    tenth of a second: the truth, the motors and what the autopilot reported."""
 
     time_s: float
     duration_s: float
@@ -126,6 +127,19 @@ class Progress:
     altitude_m: float
     armed: bool
     last_event: str
+    #: Ground truth: attitude body→NED (w, x, y, z), position and velocity NED.
+    attitude_quat: tuple[float, ...]
+    position_ned_m: tuple[float, ...]
+    velocity_ned_mps: tuple[float, ...]
+    #: What an ideal IMU reads (the truth, before sensor models and faults).
+    specific_force_frd_mps2: tuple[float, ...]
+    angular_rate_frd_radps: tuple[float, ...]
+    #: Motor throttles 0..1 from the captured PWM: what the motors run at.
+    motor_throttles: tuple[float, ...]
+    #: The autopilot's latest HEARTBEAT ``custom_mode`` (PX4's encoding); None before one.
+    custom_mode: int | None
+    #: The scenario's faults acting now, as the log names them.
+    active_faults: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -537,14 +551,23 @@ class _Loop:
 
     def _report(self, truth: VehicleTruth) -> None:
         wall = time.monotonic() - self._wall_start
+        time_s = self.run_us / 1e6
         self.progress(
             Progress(
-                time_s=self.run_us / 1e6,
+                time_s=time_s,
                 duration_s=self.duration_s,
-                real_time_factor=self.run_us / 1e6 / wall if wall > 0 else math.inf,
+                real_time_factor=time_s / wall if wall > 0 else math.inf,
                 altitude_m=-float(truth.position_ned_m[2]),
                 armed=self.armed,
                 last_event=self.last_event,
+                attitude_quat=tuple(truth.attitude_quat.tolist()),
+                position_ned_m=tuple(truth.position_ned_m.tolist()),
+                velocity_ned_mps=tuple(truth.velocity_ned_mps.tolist()),
+                specific_force_frd_mps2=tuple(truth.specific_force_frd_mps2.tolist()),
+                angular_rate_frd_radps=tuple(truth.angular_rate_frd_radps.tolist()),
+                motor_throttles=tuple(self.throttle.tolist()),
+                custom_mode=self.ground.custom_mode,
+                active_faults=tuple(describe(f) for f in self.faults.faults if f.active(time_s)),
             )
         )
 

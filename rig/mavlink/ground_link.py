@@ -101,6 +101,8 @@ class GroundLink:
     ack_timeout_sim_s: float = 10.0
     #: Latest STATUSTEXT from the autopilot: quoted when a command is refused.
     last_statustext: str = ""
+    #: The autopilot's latest HEARTBEAT ``custom_mode`` (its flight mode, PX4's encoding).
+    custom_mode: int | None = None
     received: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -408,6 +410,8 @@ class GroundLink:
             for message in self.mav.parse_buffer(data) or ():
                 kind = message.get_type()
                 self.received[kind] = self.received.get(kind, 0) + 1
+                if kind == "HEARTBEAT" and message.autopilot != mavlink.MAV_AUTOPILOT_INVALID:
+                    self.custom_mode = message.custom_mode  # not a GCS's or companion's
                 if kind == "STATUSTEXT":
                     self.last_statustext = message.text
                 elif step.accept(message):
