@@ -1,7 +1,8 @@
 """``rig``: run scenarios closed-loop (``rig run``), the demo flight (``rig hil-sim``),
 replays of real flights (``rig replay``), campaigns of many runs (``rig campaign``), a run's
-plots (``rig plot``), identification from a log (``rig identify``) and the configuration
-files' JSON Schema (``rig schema``).
+plots (``rig plot``), a run in the browser (``--view`` while it flies, ``rig view`` after),
+identification from a log (``rig identify``) and the configuration files' JSON Schema
+(``rig schema``).
 
 Errors are one line on stderr (exit 1); Ctrl-C stops the run cleanly with the logs
 readable (exit 130).
@@ -10,11 +11,13 @@ readable (exit 130).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from rich.console import Console
@@ -24,6 +27,7 @@ from rich.text import Text
 from rig.apps.plots import plot_run
 from rig.apps.replay import DRIVES, ReplayOptions, plan_replay, run_replay
 from rig.apps.schemas import write_schemas
+from rig.apps.view import VIEW_PORT, ViewError, ViewServer, load_recording
 from rig.errors import RigError
 from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunResult, run_scenario
 from rig.lockstep.pacing import parse_speed
@@ -101,6 +105,10 @@ def main(argv: list[str] | None = None) -> int:
                           help="run on this Dask cluster instead of local processes")  # fmt: skip
     plot = commands.add_parser("plot", help="(re)make a finished run's PNG plots in its folder")
     plot.add_argument("run", type=Path, help="the run folder (holds rig.ulg)")
+    view = commands.add_parser("view", help="play a finished run back in the browser")
+    view.add_argument("run", type=Path, help="the run folder (holds rig.ulg)")
+    view.add_argument("--port", type=int, default=VIEW_PORT,
+                      help=f"port on 127.0.0.1 (default {VIEW_PORT})")  # fmt: skip
     identify = commands.add_parser(
         "identify", help="identify hover, roll/pitch plant and inertia from a flight log"
     )
@@ -135,6 +143,8 @@ def main(argv: list[str] | None = None) -> int:
         return _identify(args)
     if args.command == "plot":
         return _plot(args, console)
+    if args.command == "view":
+        return _view(args, console)
     signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         result = _replay(args, console) if args.command == "replay" else _run(args, console)
@@ -172,6 +182,19 @@ def _plot(args: argparse.Namespace, console: Console) -> int:
     return 0
 
 
+def _view(args: argparse.Namespace, console: Console) -> int:
+    """``rig view RUN``: serve the run's playback until Ctrl-C (the only way it ends: 0)."""
+    try:
+        server = ViewServer(args.port, recording=load_recording(args.run))
+    except RigError as error:
+        print(f"rig: error: {error}", file=sys.stderr)
+        return 1
+    console.print(f"playback of {args.run}: {server.url} (Ctrl-C stops)", highlight=False)
+    with server, contextlib.suppress(KeyboardInterrupt):
+        threading.Event().wait()
+    return 0
+
+
 def _plot_names(paths: list[Path]) -> str:
     return f"{paths[0].parent}/{{{','.join(p.name for p in paths)}}}"
 
@@ -189,7 +212,8 @@ def _run(args: argparse.Namespace, console: Console) -> RunResult:
     )
     _announce(console, scenario.name, scenario.description,
               options.sensor_layer or scenario.sensor_layer, options)  # fmt: skip
-    return _run_with_progress(console, lambda p: run_scenario(scenario, options, p))
+    with _live_view(args, console, scenario.name) as view:
+        return _run_with_progress(console, lambda p: run_scenario(scenario, options, p), view)
 
 
 def _replay(args: argparse.Namespace, console: Console) -> RunResult:
@@ -208,7 +232,8 @@ def _replay(args: argparse.Namespace, console: Console) -> RunResult:
               f"from the log", replay_options.sensor_layer, options)  # fmt: skip
     for level, text in plan.notes:
         console.print(f"{level}: {text}", highlight=False)
-    return _run_with_progress(console, lambda p: run_replay(plan, options, p))
+    with _live_view(args, console, f"replay of {plan.log_path.name}") as view:
+        return _run_with_progress(console, lambda p: run_replay(plan, options, p), view)
 
 
 def _run_options(args: argparse.Namespace) -> RunOptions:
@@ -263,6 +288,32 @@ def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) 
                         help="overwrite the logs of a run already in --out")  # fmt: skip
     parser.add_argument("--connect-timeout", type=float, default=60.0,
                         help="seconds to wait for the autopilot to connect")  # fmt: skip
+    parser.add_argument("--view", action="store_true",
+                        help="watch the flight live in a browser (the URL is printed)")  # fmt: skip
+    parser.add_argument("--view-port", type=int, default=None, metavar="PORT",
+                        help=f"--view's port on 127.0.0.1 (default {VIEW_PORT} + instance; "
+                             "0: any free one)")  # fmt: skip
+
+
+@contextlib.contextmanager
+def _live_view(
+    args: argparse.Namespace, console: Console, name: str
+) -> Iterator[Callable[[Progress], None] | None]:
+    """``--view``: the page's server for one run, or None. A port already taken is a
+    one-line warning and the run goes on without a view: the flight matters more."""
+    if not args.view:
+        yield None
+        return
+    port = args.view_port if args.view_port is not None else VIEW_PORT + args.instance
+    try:
+        server = ViewServer(port, name=name)
+    except ViewError as error:
+        print(f"rig: warning: no live view: {error}", file=sys.stderr)
+        yield None
+        return
+    console.print(f"live view: {server.url}", highlight=False)
+    with server:
+        yield server.publish
 
 
 def _campaign(args: argparse.Namespace, console: Console) -> int:
@@ -325,10 +376,13 @@ def _status(progress: Progress) -> str:
 
 
 def _run_with_progress(
-    console: Console, run: Callable[[Callable[[Progress], None]], RunResult]
+    console: Console,
+    run: Callable[[Callable[[Progress], None]], RunResult],
+    view: Callable[[Progress], None] | None = None,
 ) -> RunResult:
     """Run with a live status line (simulated time, RTF, altitude, mode) on a terminal,
-    and one plain line every LOG_PROGRESS_EVERY_S of simulated time otherwise."""
+    and one plain line every LOG_PROGRESS_EVERY_S of simulated time otherwise; every
+    report also goes to ``view`` (the live view's slot) when there is one."""
     if not console.is_terminal:
         next_line_s = 0.0
 
@@ -338,9 +392,22 @@ def _run_with_progress(
                 console.print(_status(progress), highlight=False)
                 next_line_s += LOG_PROGRESS_EVERY_S
 
-        return run(log_line)
+        return run(_and_view(log_line, view))
     with Live(console=console, refresh_per_second=4, transient=False) as live:
-        return run(lambda p: live.update(Text(_status(p))))
+        return run(_and_view(lambda p: live.update(Text(_status(p))), view))
+
+
+def _and_view(
+    show: Callable[[Progress], None], view: Callable[[Progress], None] | None
+) -> Callable[[Progress], None]:
+    if view is None:
+        return show
+
+    def both(progress: Progress) -> None:
+        show(progress)
+        view(progress)
+
+    return both
 
 
 if __name__ == "__main__":
