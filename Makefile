@@ -14,8 +14,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
 	touch $(STAMP)
 
+# The demo flight, watched live in a browser: it prints the view's URL (127.0.0.1:8765).
 hil-sim: $(STAMP)
-	$(BIN)/rig hil-sim $(if $(PX4_DIR),--autopilot px4 --px4 $(PX4_DIR))
+	$(BIN)/rig hil-sim --view $(if $(PX4_DIR),--autopilot px4 --px4 $(PX4_DIR))
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
