@@ -65,6 +65,7 @@ from rig.scenarios.scenario import (
     SensorLayer,
     SetpointTrack,
     StartPose,
+    Takeoff,
     Track,
 )
 
@@ -75,6 +76,11 @@ AIRFRAMES = {4019: "x500_v2"}
 #: GPS fix, attitude and position estimates need this long before it can arm (the bundled
 #: scenarios arm after 1 s too), so an earlier real arming is flown this late.
 AUTOPILOT_READY_S = 1.0
+#: A log that starts in the air is flown after a lead-in, since no autopilot (PX4 SITL
+#: included) boots flying: take off to the log's height at --start, climbing at PX4's
+#: MPC_TKO_SPEED default, and settle this long; the track then starts on the log's clock.
+TAKEOFF_CLIMB_MPS = 1.5
+LEAD_IN_SETTLE_S = 5.0
 #: Parameters the rig sets itself: MAV_SYS_ID follows the SITL instance.
 RIG_OWNED_PARAMETERS = frozenset({"MAV_SYS_ID"})
 #: The autopilot looks declination up in the WMM at this epoch (flight_controller), so the
@@ -149,25 +155,33 @@ class Replay:
     tracks: dict[str, SetpointTrack]
     options: ReplayOptions
     log_warnings: tuple[str, ...] = ()  # what pyulog reported (a damaged message skipped)
+    #: Airborne at --start: the height (m) taken off to first, and how long that takes (s).
+    start_height_m: float = 0.0
+    lead_in_s: float = 0.0
 
     @property
     def commands(self) -> tuple[ScriptCommand, ...]:
-        """Arm, stream the velocity track (the drive's inside the window), disarm; run seconds."""
-        start = self.start_s
+        """Arm, stream the velocity track (the drive's inside the window), disarm; run seconds.
+
+        A log that starts airborne is preceded by the lead-in: arm, take off to its height,
+        then the track from ``lead_in_s`` on."""
         if self.arm_s is None:
             return ()
-        commands: list[ScriptCommand] = [
-            Arm(at_s=self.arm_s - start),
-            Track(at_s=self.arm_s - start, track=self.tracks["velocity"]),
-        ]
+        origin = self.start_s - self.lead_in_s  # log second of run second 0
+        tracks = {kind: _delayed(track, self.lead_in_s) for kind, track in self.tracks.items()}
+        commands: list[ScriptCommand] = [Arm(at_s=self.arm_s - origin)]
+        if self.lead_in_s:
+            commands.append(Takeoff(at_s=AUTOPILOT_READY_S + 0.1, altitude_m=self.start_height_m))
+        commands.append(Track(at_s=max(self.arm_s - origin, self.lead_in_s),
+                              track=tracks["velocity"]))  # fmt: skip
         if self.window_s is not None and self.drive != "velocity":
             a, b = self.window_s
             commands += [
-                Track(at_s=a - start, track=self.tracks[self.drive]),
-                Track(at_s=b - start, track=self.tracks["velocity"]),
+                Track(at_s=a - origin, track=tracks[self.drive]),
+                Track(at_s=b - origin, track=tracks["velocity"]),
             ]
         if self.disarm_s is not None:
-            commands.append(Disarm(at_s=self.disarm_s - start, may_refuse=True))
+            commands.append(Disarm(at_s=self.disarm_s - origin, may_refuse=True))
         return tuple(sorted(commands, key=lambda c: c.at_s))
 
     @property
@@ -183,7 +197,14 @@ class Replay:
             ("warn", f"replay: parameter {s.name} = {s.value:g} skipped ({s.reason})")
             for s in self.skipped
         ]
-        if self.arm_s is not None and self.arm_s != self.real_arm_s:
+        if self.lead_in_s:
+            notes.append((
+                "warn",
+                f"replay: the log starts airborne at {self.start_s:.3f} s; the rig takes off to "
+                f"its height ({self.start_height_m:.1f} m) in a {self.lead_in_s:.1f} s lead-in "
+                f"and flies the log's setpoints from {self.start_s:.3f} s on its clock",
+            ))  # fmt: skip
+        elif self.arm_s is not None and self.arm_s != self.real_arm_s:
             notes.append(
                 (
                     "warn",
@@ -213,14 +234,14 @@ class Replay:
             description=f"replay of {self.log_path.name} ({self.drive} drive), "
             f"{self.start_s:.3f}-{self.end_s:.3f} s",
             vehicle=str(vehicle_path),
-            duration_s=self.end_s - self.start_s,
+            duration_s=self.end_s - self.start_s + self.lead_in_s,
             seed=self.options.seed,
             sensor_layer=self.options.sensor_layer,
             rates=rates,
             environment=environment,
             start=StartPose(
                 yaw_deg=math.degrees(self.yaw_rad),
-                clock_s=self.start_s,
+                clock_s=self.start_s - self.lead_in_s,
                 battery_voltage_v=self.initial_battery_voltage_v,
             ),
             motor_pwm_range_us=self.motor_pwm_range_us,
@@ -290,11 +311,10 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             f"{AUTOPILOT_READY_S:g} s after --start {start_s:g} s"
         )
     window = _window(path, options, start_s, end_s)
+    start_height_m = lead_in_s = 0.0
     if not log.landed_at(start_s):
-        raise ReplayError(
-            f"{path}: the vehicle is airborne at --start {start_s:g} s "
-            "(vehicle_land_detected.landed = 0); start while it is landed"
-        )
+        start_height_m = log.height_at(start_s)
+        lead_in_s = AUTOPILOT_READY_S + start_height_m / TAKEOFF_CLIMB_MPS + LEAD_IN_SETTLE_S
     vehicle, reason = _vehicle_choice(path, log, options.vehicle)
     vehicle_document, cell_count, battery = _vehicle_document(vehicle, log)
     pwm_range_us = motor_pwm_range(log.parameters, path)
@@ -312,7 +332,10 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             ) from None
     parameters, skipped, unknown = _parameters(log.parameters)
     real_arm_s, disarm_s = log.arming(start_s, end_s)
-    arm_s = None if real_arm_s is None else max(real_arm_s, start_s + AUTOPILOT_READY_S)
+    if lead_in_s:  # armed in the air: the lead-in arms as soon as the autopilot is ready
+        real_arm_s = arm_s = start_s - lead_in_s + AUTOPILOT_READY_S
+    else:
+        arm_s = None if real_arm_s is None else max(real_arm_s, start_s + AUTOPILOT_READY_S)
     if window is not None and (arm_s is None or window[0] <= arm_s):
         raise ReplayError(
             f"{path}: --window starts at {window[0]:g} s, before the vehicle is "
@@ -344,6 +367,8 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         tracks=tracks,
         options=options,
         log_warnings=log.warnings,
+        start_height_m=start_height_m,
+        lead_in_s=lead_in_s,
     )
     replay.scenario(Path(vehicle))  # a bad rate fails here, before a run folder exists
     return replay
@@ -419,6 +444,16 @@ class _FlightLog:
     def landed_at(self, time_s: float) -> bool:
         return bool(self._at("vehicle_land_detected", "landed", time_s, "landed at --start"))
 
+    def height_at(self, time_s: float) -> float:
+        """Height above the estimator's origin (where it booted, on the ground) at ``time_s``."""
+        height = -self._at("vehicle_local_position", "z", time_s, "the height at an airborne start")
+        if not math.isfinite(height) or height <= 0:
+            raise ReplayError(
+                f"{self.path}: vehicle_local_position.z = {-height:g} m at {time_s:g} s: no "
+                "height to take off to for an airborne start"
+            )
+        return height
+
     def battery_voltage_v(self, time_s: float) -> float | None:
         """The pack's voltage at ``time_s`` (None: no battery_status). The replay starts
         landed and disarmed, where only the avionics load the pack: ≈ its open-circuit
@@ -493,6 +528,13 @@ class _FlightLog:
         track_times = (0.0, *(float(t) - start_s for t in times_s[inside]))
         rows = (first, *values[inside])
         return SetpointTrack(drive, track_times, tuple(tuple(float(v) for v in r) for r in rows))
+
+
+def _delayed(track: SetpointTrack, delay_s: float) -> SetpointTrack:
+    """The track ``delay_s`` later (after an airborne start's lead-in)."""
+    if not delay_s:
+        return track
+    return SetpointTrack(track.kind, tuple(t + delay_s for t in track.times_s), track.values)
 
 
 def _initial(drive: str, first: NDArray[np.float64]) -> NDArray[np.float64]:
