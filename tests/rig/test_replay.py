@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 import pyulog
 
+from quad_model.vehicle import load_vehicle
 from rig.apps.cli import main
+from rig.apps.identify import IdentificationError, identify_vehicle
 from rig.apps.replay import ReplayError, ReplayOptions, plan_replay, run_replay
 from rig.chips.pwm import PwmOutput
 from rig.lockstep.loop import RunOptions
@@ -447,3 +449,19 @@ def test_an_airborne_start_is_in_the_air_at_the_logs_start(x500_path, real_log, 
     messages = [m.message for m in rig.logged_messages]
     assert any("starts airborne at 430.000 s" in text for text in messages)
     assert any(text.startswith("takeoff to 4.98") for text in messages)
+
+
+def test_the_three_real_logs_are_planned_or_refused_naming_what_is_missing(
+    x500_path, quad4001_log, auriol_log
+):
+    """The X500 flight and the 8S quad's hover (an airframe we have no file for, flown as the
+    X500 with --vehicle) plan and identify; the X8's ground run never flew, so both say
+    which topic a flight would have."""
+    x500 = load_vehicle("x500_v2")
+    for log in (x500_path, quad4001_log):
+        assert plan_replay(log, ReplayOptions(vehicle="x500_v2")).arm_s is not None
+        assert 0.2 < identify_vehicle(log, x500).hover.throttle.value < 0.7
+    with pytest.raises(ReplayError, match=r"topic vehicle_land_detected .* is not in the log$"):
+        plan_replay(auriol_log, ReplayOptions(vehicle="x500_v2"))
+    with pytest.raises(IdentificationError, match=r"no topic 'vehicle_land_detected'"):
+        identify_vehicle(auriol_log, x500)
