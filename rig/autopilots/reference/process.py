@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import select
 import socket
+import sys
 import time
 from pathlib import Path
 
@@ -40,6 +41,10 @@ GROUND_TRUTH_INTERVAL_US = 5000
 CONNECT_RETRY_S = 0.01
 #: With the simulator quiet this long (wall time), heartbeats keep ground stations informed.
 IDLE_HEARTBEAT_S = 1.0
+#: In lockstep the autopilot's clock stands still while the simulator sends nothing, as
+#: PX4's does; after this long (wall time) it says so once, naming the simulator as the
+#: side that stopped, and goes on waiting (a rig paused in a debugger resumes).
+SIM_SILENCE_NOTE_S = 5.0
 
 
 def sensor_frame(message, gps: GpsFix | None) -> SensorFrame:
@@ -133,6 +138,8 @@ class Autopilot:
         self.sim: socket.socket | None = None
         self.sim_malformed = 0
         self._gps: GpsFix | None = None
+        self._last_frame_wall_s = time.monotonic()
+        self._silence_noted = False
 
     def connect(self) -> None:
         """Connect to the rig, retrying until it accepts; heartbeats meanwhile."""
@@ -162,11 +169,14 @@ class Autopilot:
         """Serve until the simulator closes the link; returns why it stopped."""
         warm_up()
         self.connect()
+        self._last_frame_wall_s = time.monotonic()
         while True:
             readable, _, _ = select.select([self.sim, *(link.sock for link in self.links)],
                                            [], [], IDLE_HEARTBEAT_S)  # fmt: skip
             if not readable:
                 self.ground.heartbeat()
+            if self.sim not in readable:
+                self._note_silence()
             for link in self.links:
                 if link.sock in readable:
                     for message, sender in link.receive():
@@ -187,11 +197,22 @@ class Autopilot:
         if self.log is not None:
             self.log.close()
 
+    def _note_silence(self) -> None:
+        silent_s = time.monotonic() - self._last_frame_wall_s
+        if silent_s >= SIM_SILENCE_NOTE_S and not self._silence_noted:
+            self._silence_noted = True
+            print(f"rig.autopilots.reference: the simulator sent no sensor frame for "
+                  f"{SIM_SILENCE_NOTE_S:g} s of wall time; the clock stands at "
+                  f"t={self.fc.time_us / 1e6:.3f} s (lockstep), waiting",
+                  file=sys.stderr, flush=True)  # fmt: skip
+
     def _handle_sim(self, message) -> None:
         kind = message.get_type()
         if kind == "HIL_SENSOR":
             if message.id != 0:
                 return  # only IMU 0 drives the lockstep clock, as in PX4
+            self._last_frame_wall_s = time.monotonic()
+            self._silence_noted = False
             frame = sensor_frame(message, self._gps)
             self._gps = None
             controls = self.fc.update(frame, message.time_usec)

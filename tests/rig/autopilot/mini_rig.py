@@ -28,7 +28,8 @@ WAIT_S = 10.0
 class MiniRig:
     """Runs ``python -m rig.autopilots.reference --instance I`` against the F450 model."""
 
-    def __init__(self, instance: int, seed: int, log_path: Path, imu_rate_hz: int = 250) -> None:
+    def __init__(self, instance: int, seed: int, log_path: Path, imu_rate_hz: int = 250,
+                 stderr_path: Path | None = None) -> None:  # fmt: skip
         vehicle = load_vehicle("f450_high_precision")
         model_rng, sensor_rng = np.random.default_rng(seed).spawn(2)
         self.model = QuadModel(vehicle, model_rng)
@@ -42,9 +43,10 @@ class MiniRig:
         self.listener.bind(("127.0.0.1", Ports(instance).simulator_tcp))
         self.listener.listen(1)
         self.listener.settimeout(30.0)
+        self._stderr = None if stderr_path is None else stderr_path.open("w")
         self.process = subprocess.Popen(
             [sys.executable, "-m", "rig.autopilots.reference", "--instance", str(instance), "--log",
-             str(log_path)],
+             str(log_path)], stderr=self._stderr,
         )  # fmt: skip
         self.sim, _ = self.listener.accept()
         self.sim.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -106,3 +108,5 @@ class MiniRig:
         finally:
             if self.process.poll() is None:
                 self.process.kill()
+            if self._stderr is not None:
+                self._stderr.close()

@@ -3,11 +3,12 @@ garbage between frames (what the real rig never does; everything else is flown t
 rig in ``test_end_to_end.py``)."""
 
 import math
+import time
 
 import numpy as np
 import pytest
 
-from rig.autopilots.reference.process import gps_fix, sensor_frame
+from rig.autopilots.reference.process import SIM_SILENCE_NOTE_S, gps_fix, sensor_frame
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.sim_messages import hil_gps, hil_sensor
 from tests.rig.autopilot.gcs_client import GcsClient
@@ -69,3 +70,24 @@ def test_noise_on_the_simulator_link_leaves_it_flying(tmp_path, free_instance):
     finally:
         api.close()
         assert mini.close() == 0
+
+
+def test_a_silent_simulator_is_named_once_and_waited_for(tmp_path, free_instance):
+    """The rig stops sending frames (paused, or hung): the autopilot's clock stands still
+    (lockstep), it says once which side went quiet and since when, and flies on when the
+    frames come back."""
+    stderr = tmp_path / "autopilot.err"
+    mini = MiniRig(free_instance(), seed=6, log_path=tmp_path / "autopilot.ulg",
+                   stderr_path=stderr)  # fmt: skip
+    try:
+        mini.step(1.0)
+        time.sleep(SIM_SILENCE_NOTE_S + 1.5)
+        mini.step(0.2)  # it answers the next frames as before
+    finally:
+        mini.close()
+    notes = [line for line in stderr.read_text().splitlines() if "no sensor frame" in line]
+    assert notes == [
+        f"rig.autopilots.reference: the simulator sent no sensor frame for "
+        f"{SIM_SILENCE_NOTE_S:g} s of wall time; the clock stands at t=1.000 s (lockstep), "
+        "waiting"
+    ]
