@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-import pandas as pd
 from pydantic import Field
 from pyulog import ULog
 from pyulog.core import ULogException
@@ -186,6 +185,8 @@ def _read_ulog(path: Path) -> tuple[dict, tuple[str, ...]]:
 
 
 def _read_table(path: Path) -> dict:
+    import pandas as pd  # on demand: pandas and pyarrow cost ~100 MiB a ULog reader never needs
+
     try:
         frame = pd.read_csv(path) if path.suffix.lower() == ".csv" else pd.read_parquet(path)
     except (ValueError, OSError, pd.errors.ParserError) as exc:
