@@ -131,9 +131,9 @@ class Progress:
     attitude_quat: tuple[float, ...]
     position_ned_m: tuple[float, ...]
     velocity_ned_mps: tuple[float, ...]
-    #: What an ideal IMU reads (the truth, before sensor models and faults).
-    specific_force_frd_mps2: tuple[float, ...]
-    angular_rate_frd_radps: tuple[float, ...]
+    #: The IMU as the autopilot gets it (sensor models, faults, chips), FRD.
+    accel_mps2: tuple[float, ...]
+    gyro_radps: tuple[float, ...]
     #: Motor throttles 0..1 from the captured PWM: what the motors run at.
     motor_throttles: tuple[float, ...]
     #: The autopilot's latest HEARTBEAT ``custom_mode`` (PX4's encoding); None before one.
@@ -313,6 +313,7 @@ class _Loop:
         self.pwm = PwmOutput(4, self.rates.pwm_hz, scenario.motor_pwm_range_us)
         self.throttle = np.zeros(4)
         self._capture: tuple[tuple[float, ...], tuple[bool, ...]] | None = None
+        self._delivered: ChipReadout  # the latest chip readout, for the progress report
         self.ports = Ports(options.instance)
         if options.autopilot == "px4":
             params = px4_parameters(vehicle, self.model.hover_throttle(), self.rates.imu_hz,
@@ -429,6 +430,7 @@ class _Loop:
             si=readings,
         )
         out = self.layer.frame(chip_frame)
+        self._delivered = out
         for chip, error in out.bus_errors:
             self.log.bus_error(chip)
             self._event(f"bus error: {chip}: {error}", "warn")
@@ -563,8 +565,8 @@ class _Loop:
                 attitude_quat=tuple(truth.attitude_quat.tolist()),
                 position_ned_m=tuple(truth.position_ned_m.tolist()),
                 velocity_ned_mps=tuple(truth.velocity_ned_mps.tolist()),
-                specific_force_frd_mps2=tuple(truth.specific_force_frd_mps2.tolist()),
-                angular_rate_frd_radps=tuple(truth.angular_rate_frd_radps.tolist()),
+                accel_mps2=self._delivered.accel_mps2,
+                gyro_radps=self._delivered.gyro_radps,
                 motor_throttles=tuple(self.throttle.tolist()),
                 custom_mode=self.ground.custom_mode,
                 active_faults=tuple(describe(f) for f in self.faults.faults if f.active(time_s)),

@@ -209,8 +209,8 @@ def _report(time_s: float) -> Progress:
     return Progress(
         time_s=time_s, duration_s=10.0, real_time_factor=math.inf, altitude_m=1.0, armed=True,
         last_event="", attitude_quat=(1.0, 0.0, 0.0, 0.0), position_ned_m=(0.0, 0.0, -1.0),
-        velocity_ned_mps=(0.0, 0.0, 0.0), specific_force_frd_mps2=(0.0, 0.0, -9.8),
-        angular_rate_frd_radps=(0.0, 0.0, 0.0), motor_throttles=(0.5,) * 4,
+        velocity_ned_mps=(0.0, 0.0, 0.0), accel_mps2=(0.0, 0.0, -9.8),
+        gyro_radps=(0.0, 0.0, 0.0), motor_throttles=(0.5,) * 4,
         custom_mode=None, active_faults=(),
     )  # fmt: skip
 

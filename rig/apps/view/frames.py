@@ -5,7 +5,8 @@ run's are sampled from its logs (``rig.ulg``, and the autopilot's log for the ar
 and the flight mode), so the page draws both the same way. Keys of a frame:
 
 ``t`` run seconds, ``q`` attitude body→NED (w, x, y, z), ``pos``/``vel`` NED (m, m/s),
-``motors`` throttles 0..1, ``accel``/``gyro`` what an ideal IMU reads (m/s², rad/s, FRD),
+``motors`` throttles 0..1, ``accel``/``gyro`` the IMU as the autopilot got it, faults and
+all (m/s², rad/s, FRD),
 ``armed``, ``mode`` (PX4's name, None if unknown), ``faults`` (acting now), ``event``
 (latest rig event), ``rtf`` (live only).
 """
@@ -23,7 +24,7 @@ import pyulog
 
 from credibility.errors import CredibilityError
 from credibility.logs import read_ulog
-from quad_model.frames import STANDARD_GRAVITY_MPS2, ned_to_body, pwm_to_throttle
+from quad_model.frames import pwm_to_throttle
 from rig.apps.plots import AUTOPILOT_LOGS
 from rig.errors import RigError
 from rig.lockstep.loop import Progress
@@ -48,7 +49,7 @@ _NAV_STATES = {0: "Manual", 1: "Altitude", 2: "Position", 3: "Mission", 4: "Hold
 #: How ``rig.scenarios.faults`` logs a fault's start and end.
 _FAULT_EVENT = re.compile(r"fault (?P<fault>.+) (?P<change>started|ended)")
 _RIG_TOPICS = ("vehicle_attitude_groundtruth", "vehicle_local_position_groundtruth",
-               "vehicle_angular_velocity_groundtruth", "actuator_outputs")  # fmt: skip
+               "sensor_combined", "actuator_outputs")  # fmt: skip
 
 
 class ViewError(RigError):
@@ -73,8 +74,8 @@ def live_frame(progress: Progress) -> Frame:
         "pos": _rounded(progress.position_ned_m, 4),
         "vel": _rounded(progress.velocity_ned_mps, 3),
         "motors": _rounded(progress.motor_throttles, 4),
-        "accel": _rounded(progress.specific_force_frd_mps2, 3),
-        "gyro": _rounded(progress.angular_rate_frd_radps, 4),
+        "accel": _rounded(progress.accel_mps2, 3),
+        "gyro": _rounded(progress.gyro_radps, 4),
         "armed": progress.armed,
         "mode": mode_name(progress.custom_mode),
         "faults": list(progress.active_faults),
@@ -115,7 +116,7 @@ def load_recording(run_dir: Path) -> Recording:
     # every N frames from frame N), and the page counts run seconds as the live view does.
     start_us = truth_us[0] - (truth_us[1] - truth_us[0])
     times_us = range(start_us + step_us, truth_us[-1] + 1, step_us)
-    rates = _topic(rig, "vehicle_angular_velocity_groundtruth")
+    imu = _topic(rig, "sensor_combined")
     outputs = _topic(rig, "actuator_outputs")
     status = _autopilot_status(run_dir)
     events = [(round((m.timestamp - start_us) / 1e6, 3), m.log_level_str(), m.message)
@@ -124,8 +125,6 @@ def load_recording(run_dir: Path) -> Recording:
     for time_us in times_us:
         i = _at(position["timestamp"], time_us)
         q = np.array([attitude[f"q[{k}]"][i] for k in range(4)])  # logged with the position
-        acceleration = np.array([position[a][i] for a in ("ax", "ay", "az")])
-        specific_force = ned_to_body(q, acceleration - (0.0, 0.0, STANDARD_GRAVITY_MPS2))
         t = (time_us - start_us) / 1e6
         frame: Frame = {
             "t": round(t, 3),
@@ -133,8 +132,8 @@ def load_recording(run_dir: Path) -> Recording:
             "pos": _rounded((position[a][i] for a in "xyz"), 4),
             "vel": _rounded((position[a][i] for a in ("vx", "vy", "vz")), 3),
             "motors": _motors(outputs, time_us),
-            "accel": _rounded(specific_force, 3),
-            "gyro": _rounded(_sample(rates, "xyz", 3, time_us), 4),
+            "accel": _rounded(_sample(imu, "accelerometer_m_s2", 3, time_us), 3),
+            "gyro": _rounded(_sample(imu, "gyro_rad", 3, time_us), 4),
             "armed": None,
             "mode": None,
             "faults": _faults_at(events, t),
