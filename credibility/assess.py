@@ -2,7 +2,9 @@
 
 This is the compute half; ``credibility.report`` renders what it returns. Every number the
 method used (thresholds and their rule, n_t, grids, windows, excluded frequencies, lags,
-smoothing) is kept in the result objects so the report can show it.
+smoothing) is kept in the result objects so the report can show it. A test the logs cannot
+score is kept too, as ``NotScored`` with its reason, and every bias the method knows of
+(sample rates, few samples) is a ``Caveat``: nothing the plan asks for is dropped silently.
 """
 
 import datetime as dt
@@ -10,13 +12,33 @@ import importlib.metadata
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal, TypeVar
 
 import numpy as np
 
 from credibility import indices, signals, spectral
-from credibility.errors import CredibilityError
+from credibility.caveats import (
+    FEW_SAMPLE_PARAMETERS,
+    RATE_CONSEQUENCES,
+    Caveat,
+    Logged,
+    epsilon_below_noise,
+    few_samples,
+    interpolated,
+    rate_mismatch,
+    require_epsilon,
+)
+from credibility.errors import CredibilityError, NotScorable, Reason
 from credibility.logs import LogFile, SignalSpec, open_log
 from credibility.plan import FrequencyTest, PerformanceTest, Plan, Test, TimeTest
+
+Outcome = Literal["pass", "fail", "could not be scored"]
+Row = TypeVar("Row")
+
+#: Bendat & Piersol (Random Data, table 9.6): the gain estimate |Ĥ| has a normalized random
+#: error ε_r (the estimate's ``random_error``), 20/ln 10 · ε_r in dB, and the phase estimate
+#: a standard deviation of ε_r radians.
+_DB_PER_RELATIVE_ERROR = 20.0 / np.log(10.0)
 
 
 @dataclass(frozen=True)
@@ -63,6 +85,8 @@ class TimeResult:
     real_values: np.ndarray
     threshold: float
     threshold_rule: str
+    #: σ of the real curve's noise (``signals.noise_sigma``): the e_t of an exact model.
+    noise_floor: float
     rows: tuple[TimeRow, ...]
     zero_output_error: float
     zero_output_eta: float
@@ -91,6 +115,9 @@ class FrequencyRow:
     eps_mag_db: float
     eps_pha_deg: float
     threshold_rule: str
+    #: e_mag and e_pha an exact model would still have: the real response's random error.
+    floor_mag_db: float
+    floor_pha_deg: float
     eta_mag: float
     eta_pha: float
     eta: float
@@ -127,28 +154,62 @@ class LogInfo:
     warnings: tuple[str, ...]
 
 
+@dataclass(frozen=True)
+class NotScored:
+    """A test the logs could not score; ``reason`` is also among the report's caveats and
+    ``detail`` is the bare message, for a caller that wants the error as before."""
+
+    test: Test
+    reason: Caveat
+    detail: str
+
+
 @dataclass(frozen=True, eq=False)
 class Assessment:
-    """The whole answer: per-test results, eq. (aveP) means, η_all, η_min and the verdicts."""
+    """The whole answer: per-test results, eq. (aveP) means, η_all, η_min and the verdicts.
+
+    ``results`` holds the scored tests and ``not_scored`` the others (each in plan order);
+    the indices are over the scored tests. ``eta_all`` and ``eta_min`` are None when the
+    report could not be scored, and ``unscorable_reason`` says why.
+    """
 
     plan: Plan
     logs: tuple[LogInfo, ...]
     results: tuple[Result, ...]
+    not_scored: tuple[NotScored, ...]
+    caveats: tuple[Caveat, ...]
     means: dict[str, float]
-    eta_all: float
-    eta_min: float
+    eta_all: float | None
+    eta_min: float | None
+    unscorable_reason: str | None
     package_version: str
     created_utc: str
 
     @property
+    def scorable(self) -> bool:
+        """Enough tests were scored for a verdict (see ``unscorable_reason``)."""
+        return self.unscorable_reason is None
+
+    @property
     def meets_eps_min(self) -> bool:
         """η_min ≥ ε_min: the paper's condition for η_all to be meaningful (eq. (worse))."""
-        return self.eta_min >= self.plan.eps_min
+        return self.eta_min is not None and self.eta_min >= self.plan.eps_min
 
     @property
     def passes(self) -> bool:
         """η_all at or above the pass mark."""
-        return self.eta_all >= self.plan.pass_mark
+        return self.eta_all is not None and self.eta_all >= self.plan.pass_mark
+
+    @property
+    def outcome(self) -> Outcome:
+        """The verdict the exit code reports: η_min against ε_min over the scored tests."""
+        if not self.scorable:
+            return "could not be scored"
+        return "pass" if self.meets_eps_min else "fail"
+
+    def caveats_of(self, test: str) -> tuple[Caveat, ...]:
+        """One test's warnings, for the marker on its section of the report."""
+        return tuple(c for c in self.caveats if c.test == test)
 
 
 def package_version() -> str:
@@ -160,22 +221,42 @@ def steps(plan: Plan) -> int:
     return len(set(plan.logs.values())) + len(plan.tests)
 
 
-def assess(plan: Plan, progress: Callable[[str], None] = lambda _: None) -> Assessment:
-    """Score every test of ``plan``; ``progress`` is called once per step with its label."""
+def assess(
+    plan: Plan, progress: Callable[[str], None] = lambda _: None, *, strict: bool = True
+) -> Assessment:
+    """Score every test of ``plan``; ``progress`` is called once per step with its label.
+
+    A log that cannot be read is a ``CredibilityError``. A test the readable logs cannot
+    score raises one too when ``strict`` (for a caller that needs every number); otherwise
+    it is listed in ``not_scored`` and the indices are over the others, which is what the
+    CLI does so the report can say what it could not compare.
+    """
     opened: dict[Path, LogFile] = {}
     for path in dict.fromkeys(plan.logs.values()):
         progress(f"reading {path.name}")
         opened[path] = open_log(path)
     logs = {role: opened[path] for role, path in plan.logs.items()}
-    results = []
+    caveats = [Caveat(None, "log_reader", w) for log in opened.values() for w in log.warnings]
+    results: list[Result] = []
+    not_scored: list[NotScored] = []
     for test in plan.tests:
         progress(f"{test.kind} test {test.name}")
-        results.append(_run(test, logs, plan))
+        try:
+            results.append(_run(test, logs, plan, caveats))
+        except CredibilityError as exc:
+            reason = Caveat(test.name, _reason(exc), f"{exc}; not scored")
+            not_scored.append(NotScored(test, reason, str(exc)))
+            caveats.append(reason)
+    if strict and not_scored:
+        first = not_scored[0]
+        more = f" (and {len(not_scored) - 1} more tests not scored)" if len(not_scored) > 1 else ""
+        raise CredibilityError(f"test {first.test.name!r}: {first.detail}{more}")
     means = {
         kind: indices.rms_aggregate([r.eta for r in results if r.test.kind == kind])
         for kind in indices.KINDS
         if any(r.test.kind == kind for r in results)
     }
+    reason = unscorable_reason(plan, results)
     return Assessment(
         plan=plan,
         logs=tuple(
@@ -183,23 +264,68 @@ def assess(plan: Plan, progress: Callable[[str], None] = lambda _: None) -> Asse
             for role, log in logs.items()
         ),
         results=tuple(results),
+        not_scored=tuple(not_scored),
+        caveats=tuple(caveats),
         means=means,
-        eta_all=indices.overall_index(means, plan.weights),
-        eta_min=indices.minimum_index([r.eta for r in results]),
+        eta_all=None if reason else indices.overall_index(means, plan.weights),
+        eta_min=None if reason else indices.minimum_index([r.eta for r in results]),
+        unscorable_reason=reason,
         package_version=package_version(),
         created_utc=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     )
 
 
-def _run(test: Test, logs: dict[str, LogFile], plan: Plan) -> Result:
-    try:
-        if isinstance(test, PerformanceTest):
-            return _performance(test, logs, plan)
-        if isinstance(test, TimeTest):
-            return _time(test, logs, plan)
-        return _frequency(test, logs, plan)
-    except CredibilityError as exc:
-        raise CredibilityError(f"test {test.name!r}: {exc}") from None
+def unscorable_reason(plan: Plan, results: list[Result]) -> str | None:
+    """Why the scored tests cannot stand for the plan, or None when they can.
+
+    Each kind of test the plan has must keep at least half of its tests: η̄ of a kind
+    resting on a minority of the tests the plan chose for it no longer summarizes them,
+    and a kind with none left leaves η_all undefined (its weight has nothing to weigh).
+    """
+    if not results:
+        return f"none of the {len(plan.tests)} tests could be scored"
+    for kind in indices.KINDS:
+        total = sum(test.kind == kind for test in plan.tests)
+        scored = sum(result.test.kind == kind for result in results)
+        if scored == 0 and total:
+            return f"no {kind} test (of {total}) could be scored: η̄_{kind[0]} is undefined"
+        if 2 * scored < total:
+            return (
+                f"only {scored} of {total} {kind} tests could be scored: η̄_{kind[0]} would "
+                "rest on fewer than half of them"
+            )
+    return None
+
+
+def _reason(exc: CredibilityError) -> Reason:
+    return exc.reason if isinstance(exc, NotScorable) else "unusable_signal"
+
+
+def _run(test: Test, logs: dict[str, LogFile], plan: Plan, notes: list[Caveat]) -> Result:
+    if isinstance(test, PerformanceTest):
+        return _performance(test, logs, plan, notes)
+    if isinstance(test, TimeTest):
+        return _time(test, logs, plan, notes)
+    return _frequency(test, logs, plan, notes)
+
+
+def _rows(test: Test, row: Callable[[str], Row], notes: list[Caveat]) -> tuple[Row, ...]:
+    """One row per sim, the assessed one first. A compared sim (outside the aggregates)
+    that cannot be scored is left out with a caveat; the assessed one fails the test."""
+    rows = []
+    for role in test.roles.sims:
+        try:
+            rows.append(row(role))
+        except CredibilityError as exc:
+            if role == test.roles.sim:
+                raise
+            notes.append(Caveat(test.name, _reason(exc), f"{exc}; compared sim {role!r} left out"))
+    return tuple(rows)
+
+
+def _note(notes: list[Caveat], caveat: Caveat | None) -> None:
+    if caveat is not None:
+        notes.append(caveat)
 
 
 def _windowed(log: LogFile, spec: SignalSpec, segment_s, plan: Plan) -> signals.Signal:
@@ -209,10 +335,14 @@ def _windowed(log: LogFile, spec: SignalSpec, segment_s, plan: Plan) -> signals.
 # --- performance ---------------------------------------------------------------------------
 
 
-def _parameter(test: PerformanceTest, sig: signals.Signal) -> float:
-    values = sig.values
-    if test.highpass_hz is not None:
-        values = signals.highpass(values, sig.median_interval_s(), test.highpass_hz)
+def _statistic_values(test: PerformanceTest, sig: signals.Signal) -> np.ndarray:
+    """The samples the parameter is computed from (high-passed when the test asks)."""
+    if test.highpass_hz is None:
+        return sig.values
+    return signals.highpass(sig.values, sig.median_interval_s(), test.highpass_hz)
+
+
+def _parameter(test: PerformanceTest, sig: signals.Signal, values: np.ndarray) -> float:
     if test.parameter == "mean":
         return float(values.mean())
     if test.parameter == "std":
@@ -226,28 +356,57 @@ def _parameter(test: PerformanceTest, sig: signals.Signal) -> float:
     }[test.parameter]
 
 
-def _performance(test: PerformanceTest, logs: dict[str, LogFile], plan: Plan) -> PerformanceResult:
+def _performance_row(
+    test: PerformanceTest, plan: Plan, role: str, p_e: float, p_s: float
+) -> PerformanceRow:
+    if test.threshold is not None:
+        threshold, rule = test.threshold, "plan"
+    elif p_e == 0.0 and p_s == 0.0:
+        raise NotScorable(
+            "unscorable_epsilon",
+            f"p_e = p_s = 0 ({role!r}), so ε_p = K_p·|p_e| and its fallback K_p·|p_s| are 0 and "
+            "η_p is undefined; give the test a 'threshold'",
+        )
+    else:
+        threshold = indices.performance_threshold(p_e, p_s, test.k_p)
+        rule = "K_p·|p_e|" if p_e != 0.0 else "K_p·|p_s| (p_e = 0)"
+    error = indices.performance_error(p_e, p_s)
+    eta = indices.normalized_index(error, threshold, plan.pass_mark)
+    return PerformanceRow(role, p_e, p_s, error, threshold, rule, eta)
+
+
+def _performance(
+    test: PerformanceTest, logs: dict[str, LogFile], plan: Plan, notes: list[Caveat]
+) -> PerformanceResult:
     if test.parameter == "value":
         p_e = test.values[test.roles.real]
-        sims = {role: test.values[role] for role in test.roles.sims}
-    else:
-        real = _windowed(logs[test.roles.real], test.signal, test.segment_s, plan)
-        p_e = _parameter(test, real)
-        sims = {
-            role: _parameter(test, _windowed(logs[role], test.signal_sim, test.segment_sim_s, plan))
-            for role in test.roles.sims
-        }
-    rows = []
-    for role, p_s in sims.items():
-        if test.threshold is not None:
-            threshold, rule = test.threshold, "plan"
-        else:
-            threshold = indices.performance_threshold(p_e, p_s, test.k_p)
-            rule = "K_p·|p_e|" if p_e != 0.0 else "K_p·|p_s| (p_e = 0)"
-        error = indices.performance_error(p_e, p_s)
-        eta = indices.normalized_index(error, threshold, plan.pass_mark)
-        rows.append(PerformanceRow(role, p_e, p_s, error, threshold, rule, eta))
-    return PerformanceResult(test, tuple(rows))
+        rows = _rows(
+            test, lambda role: _performance_row(test, plan, role, p_e, test.values[role]), notes
+        )
+        return PerformanceResult(test, rows)
+    real_role = test.roles.real
+    real = _windowed(logs[real_role], test.signal, test.segment_s, plan)
+    real_values = _statistic_values(test, real)
+    p_e = _parameter(test, real, real_values)
+    consequence = RATE_CONSEQUENCES.get(test.parameter)
+    sims: dict[str, signals.Signal] = {}
+
+    def row(role: str) -> PerformanceRow:
+        sim = sims[role] = _windowed(logs[role], test.signal_sim, test.segment_sim_s, plan)
+        if consequence:
+            real_logged, sim_logged = Logged.of(real_role, real), Logged.of(role, sim)
+            _note(notes, rate_mismatch(test.name, real_logged, sim_logged, consequence))
+        p_s = _parameter(test, sim, _statistic_values(test, sim))
+        return _performance_row(test, plan, role, p_e, p_s)
+
+    rows = _rows(test, row, notes)
+    if test.parameter in FEW_SAMPLE_PARAMETERS:
+        real_logged = Logged.of(real_role, real)
+        assessed, eps = Logged.of(test.roles.sim, sims[test.roles.sim]), rows[0].threshold
+        _note(
+            notes, few_samples(test.name, test.parameter, real_logged, real_values, assessed, eps)
+        )
+    return PerformanceResult(test, rows)
 
 
 # --- time ----------------------------------------------------------------------------------
@@ -270,8 +429,9 @@ def _alignment_shift(test: TimeTest, real_log: LogFile, sim_log: LogFile) -> flo
     return signals.correlation_lag(real, sim, test.segment_s, s_a, lag, real.median_interval_s())
 
 
-def _time(test: TimeTest, logs: dict[str, LogFile], plan: Plan) -> TimeResult:
-    real_log = logs[test.roles.real]
+def _time(test: TimeTest, logs: dict[str, LogFile], plan: Plan, notes: list[Caveat]) -> TimeResult:
+    real_role = test.roles.real
+    real_log = logs[real_role]
     real = _windowed(real_log, test.signal, test.segment_s, plan)
     duration = test.segment_s[1] - test.segment_s[0]
     n_t = test.n_t or round(duration / real.median_interval_s()) + 1
@@ -289,23 +449,32 @@ def _time(test: TimeTest, logs: dict[str, LogFile], plan: Plan) -> TimeResult:
         threshold, rule = test.threshold, "plan"
     else:
         threshold, rule = indices.range_threshold(y_e, test.k_p), "K_p·(max y_e − min y_e)"
-    rows = []
-    for role in test.roles.sims:
+    require_epsilon("ε_t", threshold, rule, test.unit)
+    noise_floor = signals.noise_sigma(y_e)
+    source = "σ of its noise from the curve's 4th differences"
+    caveat = epsilon_below_noise(test.name, "ε_t", threshold, rule, noise_floor, source, test.unit)
+    _note(notes, caveat)
+    on_grid = Logged("the comparison grid t_1 … t_n", 1.0 / interval, n_t, duration)
+    consequence = RATE_CONSEQUENCES["time"]
+    _note(notes, interpolated(test.name, Logged.of(real_role, real), on_grid, consequence))
+
+    def row(role: str) -> TimeRow:
         shift = _alignment_shift(test, real_log, logs[role])
         segment = (test.segment_sim_s[0] + shift, test.segment_sim_s[1] + shift)
-        y_s = curve(_windowed(logs[role], test.signal_sim, segment, plan), segment[0])
+        sim = _windowed(logs[role], test.signal_sim, segment, plan)
+        _note(notes, interpolated(test.name, Logged.of(role, sim), on_grid, consequence))
+        y_s = curve(sim, segment[0])
         error = indices.rms_error(y_e, y_s)
-        rows.append(
-            TimeRow(
-                role=role,
-                values=y_s,
-                segment_s=segment,
-                alignment_shift_s=shift,
-                error=error,
-                eta=indices.normalized_index(error, threshold, plan.pass_mark),
-                theil_u=indices.theil_inequality(y_e, y_s),
-            )
+        return TimeRow(
+            role=role,
+            values=y_s,
+            segment_s=segment,
+            alignment_shift_s=shift,
+            error=error,
+            eta=indices.normalized_index(error, threshold, plan.pass_mark),
+            theil_u=indices.theil_inequality(y_e, y_s),
         )
+
     zero_error = indices.rms_error(y_e, np.zeros_like(y_e))
     return TimeResult(
         test=test,
@@ -313,7 +482,8 @@ def _time(test: TimeTest, logs: dict[str, LogFile], plan: Plan) -> TimeResult:
         real_values=y_e,
         threshold=threshold,
         threshold_rule=rule,
-        rows=tuple(rows),
+        noise_floor=noise_floor,
+        rows=_rows(test, row, notes),
         zero_output_error=zero_error,
         zero_output_eta=indices.normalized_index(zero_error, threshold, plan.pass_mark),
     )
@@ -322,21 +492,13 @@ def _time(test: TimeTest, logs: dict[str, LogFile], plan: Plan) -> TimeResult:
 # --- frequency -----------------------------------------------------------------------------
 
 
-def _uniform_pair(
-    log: LogFile, input_spec: SignalSpec, output_spec: SignalSpec, segment_s, rate_hz, plan
-) -> tuple[np.ndarray, np.ndarray]:
-    """Input and output on one uniform grid (spectra need uniform samples)."""
-    x = _windowed(log, input_spec, segment_s, plan)
-    y = _windowed(log, output_spec, segment_s, plan)
-    grid = np.arange(segment_s[0], segment_s[1], 1.0 / rate_hz)
-    return signals.resample(x, grid), signals.resample(y, grid)
-
-
-def _frequency(test: FrequencyTest, logs: dict[str, LogFile], plan: Plan) -> FrequencyResult:
-    real_log = logs[test.roles.real]
+def _frequency(
+    test: FrequencyTest, logs: dict[str, LogFile], plan: Plan, notes: list[Caveat]
+) -> FrequencyResult:
+    real_role = test.roles.real
     rate_hz = (
         test.sample_rate_hz
-        or 1.0 / _windowed(real_log, test.output, test.segment_s, plan).median_interval_s()
+        or _windowed(logs[real_role], test.output, test.segment_s, plan).rate_hz()
     )
     freqs = spectral.log_grid(test.band_hz, test.n_points)
     shortest_s = min(
@@ -344,16 +506,46 @@ def _frequency(test: FrequencyTest, logs: dict[str, LogFile], plan: Plan) -> Fre
     )
     windows = test.windows_s or spectral.default_windows(shortest_s, test.band_hz)
 
-    def estimate(log: LogFile, input_spec, output_spec, segment_s):
-        x, y = _uniform_pair(log, input_spec, output_spec, segment_s, rate_hz, plan)
-        return spectral.estimate_response(x, y, rate_hz, freqs, windows, test.overlap)
+    def estimate(
+        role: str, input_spec: SignalSpec, output_spec: SignalSpec, segment_s: tuple[float, float]
+    ) -> spectral.FrequencyResponseEstimate:
+        """Input and output on one uniform grid (spectra need uniform samples)."""
+        grid = np.arange(segment_s[0], segment_s[1], 1.0 / rate_hz)
+        spectra = Logged("the spectra's uniform grid", rate_hz, grid.size, grid[-1] - grid[0])
+        x, y = (_windowed(logs[role], spec, segment_s, plan) for spec in (input_spec, output_spec))
+        consequence = RATE_CONSEQUENCES["frequency"]
+        for sig in (x, y):
+            _note(notes, interpolated(test.name, Logged.of(role, sig), spectra, consequence))
+        return spectral.estimate_response(
+            signals.resample(x, grid),
+            signals.resample(y, grid),
+            rate_hz,
+            freqs,
+            windows,
+            test.overlap,
+        )
 
-    real = estimate(real_log, test.input, test.output, test.segment_s)
-    rows = []
-    for role in test.roles.sims:
-        sim = estimate(logs[role], test.input_sim, test.output_sim, test.segment_sim_s)
-        rows.append(_compare_responses(test, real, sim, role, plan.pass_mark))
-    return FrequencyResult(test, real, rate_hz, tuple(rows))
+    real = estimate(real_role, test.input, test.output, test.segment_s)
+
+    def row(role: str) -> FrequencyRow:
+        sim = estimate(role, test.input_sim, test.output_sim, test.segment_sim_s)
+        return _compare_responses(test, real, sim, role, plan.pass_mark)
+
+    rows = _rows(test, row, notes)
+    assessed = rows[0]
+    source = "W_γ-weighted random error of the real response"
+    for symbol, eps, floor, given, unit in (
+        ("ε_mag", assessed.eps_mag_db, assessed.floor_mag_db, test.threshold_mag_db, "dB"),
+        ("ε_pha", assessed.eps_pha_deg, assessed.floor_pha_deg, test.threshold_phase_deg, "deg"),
+    ):
+        rule = _frequency_rule(given)
+        _note(notes, epsilon_below_noise(test.name, symbol, eps, rule, floor, source, unit))
+    return FrequencyResult(test, real, rate_hz, rows)
+
+
+def _frequency_rule(given: float | None) -> str:
+    """Where an ε of a frequency test came from."""
+    return "plan" if given else "K_p·range of the real curve over the coherent grid"
 
 
 def _compare_responses(
@@ -384,10 +576,15 @@ def _compare_responses(
     e_pha = indices.weighted_rms_error(p_e, p_s, w)
     eps_mag = test.threshold_mag_db or indices.range_threshold(m_e, test.k_p)
     eps_pha = test.threshold_phase_deg or indices.range_threshold(p_e, test.k_p)
-    rule = ", ".join(
-        f"{name}: {'plan' if given else 'K_p·range of the real curve over the coherent grid'}"
+    rules = {
+        name: _frequency_rule(given)
         for name, given in (("ε_mag", test.threshold_mag_db), ("ε_pha", test.threshold_phase_deg))
-    )
+    }
+    require_epsilon("ε_mag", eps_mag, rules["ε_mag"], "dB")
+    require_epsilon("ε_pha", eps_pha, rules["ε_pha"], "deg")
+    # The error an exact model would still have: the real estimate's random error, weighted.
+    random_error = real.random_error[included]
+    rule = ", ".join(f"{name}: {how}" for name, how in rules.items())
     eta_mag = indices.normalized_index(e_mag, eps_mag, pass_mark)
     eta_pha = indices.normalized_index(e_pha, eps_pha, pass_mark)
     return FrequencyRow(
@@ -402,6 +599,8 @@ def _compare_responses(
         eps_mag_db=eps_mag,
         eps_pha_deg=eps_pha,
         threshold_rule=rule,
+        floor_mag_db=indices.weighted_rms_error(_DB_PER_RELATIVE_ERROR * random_error, 0.0, w),
+        floor_pha_deg=indices.weighted_rms_error(np.degrees(random_error), 0.0, w),
         eta_mag=eta_mag,
         eta_pha=eta_pha,
         eta=indices.frequency_index(eta_mag, eta_pha),

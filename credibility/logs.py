@@ -24,7 +24,7 @@ from pyulog import ULog
 from pyulog.core import ULogException
 from scipy.spatial.transform import Rotation
 
-from credibility.errors import CredibilityError
+from credibility.errors import CredibilityError, NotScorable
 from credibility.signals import Signal
 from hil_config import Number, table
 
@@ -94,9 +94,10 @@ class LogFile:
         if fields is None:
             known = sorted({f"{t}.{i}" if i else t for t, i in self.topics})
             hint = ", ".join(k for k in known if k.split(".")[0] == topic) or ", ".join(known[:12])
-            raise CredibilityError(
+            raise NotScorable(
+                "missing_topic",
                 f"{self.path}: no topic {topic!r} instance {instance} (signal {spec.path!r}); "
-                f"available: {hint}"
+                f"available: {hint}",
             )
         values = _field_values(fields, field, spec.path, self.path)
         time_s = fields["timestamp_s"]
@@ -117,7 +118,9 @@ def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Pa
     if angle in _EULER and all(q in fields for q in quaternion):
         return _euler(*(fields[q].astype(float) for q in quaternion))[_EULER.index(angle)]
     listed = ", ".join(sorted(f for f in fields if f != "timestamp_s")[:20])
-    raise CredibilityError(f"{path}: no field {field!r} (signal {name!r}); fields: {listed}")
+    raise NotScorable(
+        "missing_topic", f"{path}: no field {field!r} (signal {name!r}); fields: {listed}"
+    )
 
 
 def _euler(w, x, y, z) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

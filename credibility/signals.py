@@ -10,8 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal as sps
+from scipy import stats
 
-from credibility.errors import CredibilityError
+from credibility.errors import CredibilityError, NotScorable
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,8 +35,12 @@ class Signal:
     def median_interval_s(self) -> float:
         """The nominal sample interval: robust to the dropouts and jitter of real logs."""
         if self.time_s.size < 2:
-            raise CredibilityError(f"{self.where}: fewer than 2 samples")
+            raise NotScorable("short_signal", f"{self.where}: fewer than 2 samples")
         return float(np.median(np.diff(self.time_s)))
+
+    def rate_hz(self) -> float:
+        """The nominal sample rate, so a report can say at what rate each log was logged."""
+        return 1.0 / self.median_interval_s()
 
 
 def window(
@@ -52,9 +57,10 @@ def window(
         raise CredibilityError(f"{sig.where}: segment [{t_a:g}, {t_b:g}] s is empty")
     first, last = sig.span_s()
     if t_a < first or t_b > last:
-        raise CredibilityError(
+        raise NotScorable(
+            "short_signal",
             f"{sig.where}: segment [{t_a:g}, {t_b:g}] s is outside the logged span "
-            f"[{first:.3f}, {last:.3f}] s"
+            f"[{first:.3f}, {last:.3f}] s",
         )
     inside = (sig.time_s >= t_a) & (sig.time_s <= t_b)
     time_s, values = sig.time_s[inside], sig.values[inside]
@@ -86,6 +92,24 @@ def max_gap(sig: Signal) -> float:
 def resample(sig: Signal, grid_s: np.ndarray) -> np.ndarray:
     """Values on ``grid_s`` by linear interpolation (the paper's t_1 … t_{n_t} of eq. (RQ))."""
     return np.interp(grid_s, sig.time_s, sig.values)
+
+
+#: Δ⁴ of white noise of σ = 1 has σ = sqrt(1 + 16 + 36 + 16 + 1) (binomial coefficients).
+_DIFF4_NOISE_GAIN = float(np.sqrt(70.0))
+
+
+def noise_sigma(values: np.ndarray) -> float:
+    """The σ of the white noise on a uniformly sampled curve, robust to the curve itself.
+
+    The 4th difference cancels any cubic, so a curve resolved by its samples barely
+    contributes; its median absolute deviation (scipy's, scaled to σ) ignores the few
+    large values a step or a spike leaves. Used to tell a threshold ε that lies below the
+    noise from one a model can be scored against. 0 for fewer than 5 samples.
+    """
+    if values.size < 5:
+        return 0.0
+    diff4 = np.diff(values, n=4)
+    return float(stats.median_abs_deviation(diff4, scale="normal")) / _DIFF4_NOISE_GAIN
 
 
 def smooth(values: np.ndarray, interval_s: float, window_s: float, polyorder: int) -> np.ndarray:
@@ -157,8 +181,9 @@ def correlation_lag(
     lo = max(-max_lag_s, first - other_start_s)
     hi = min(max_lag_s, last - other_start_s - duration)
     if hi < lo:
-        raise CredibilityError(
-            f"{other.where}: no room to align [{segment_s[0]:g}, {segment_s[1]:g}] s"
+        raise NotScorable(
+            "short_signal",
+            f"{other.where}: no room to align [{segment_s[0]:g}, {segment_s[1]:g}] s",
         )
     lags = np.arange(np.ceil(lo / interval_s), np.floor(hi / interval_s) + 1) * interval_s
     other_grid = other_start_s + lags[0] + np.arange(ref_grid.size + lags.size - 1) * interval_s
