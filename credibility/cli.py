@@ -1,6 +1,7 @@
 """``credibility`` command line: ``report PLAN.toml`` and ``paper``.
 
-Exit codes: 0 when η_min ≥ ε_min, 1 when not, 2 for bad input or usage (one line on stderr).
+Exit codes: 0 when η_min ≥ ε_min, 1 when not, 2 for bad input or usage (one line on
+stderr), 3 when the inputs were read but too few tests could be scored for a verdict.
 """
 
 import argparse
@@ -10,6 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -18,16 +20,26 @@ from credibility.errors import CredibilityError
 from credibility.indices import KINDS
 from credibility.paper import paper_comparison
 from credibility.plan import load_plan, with_weights
-from credibility.report import exit_code, write_report
+from credibility.report import ExitCode, exit_code, write_report
 
-BAD_INPUT = 2
+#: ``credibility report --help`` ends with what each exit code means.
+EXIT_CODES = """exit codes:
+  0  pass: η_min ≥ ε_min over the scored tests
+  1  fail: η_min < ε_min (a result, not an error)
+  2  bad input: the plan or a log cannot be read, or a wrong option; nothing is written
+  3  could not be scored: the logs were read, but a kind of test kept fewer than half of
+     its tests (a topic missing, a log too short, ε undefined); the report says which
+
+Every test is scored or listed as not scored with its reason; the report's warnings
+(HTML and JSON) also name sample rates and sample counts that bias a statistic, and
+thresholds below the real log's noise."""
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse that exits with the package's bad-input code and a one-line message."""
 
     def error(self, message: str) -> None:
-        self.exit(BAD_INPUT, f"credibility: error: {message}\n")
+        self.exit(ExitCode.BAD_INPUT, f"credibility: error: {message}\n")
 
 
 def _log_override(text: str) -> tuple[str, Path]:
@@ -69,7 +81,13 @@ def _weights_source(args: argparse.Namespace) -> str:
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="credibility", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
-    report = commands.add_parser("report", help="score logs with a test plan")
+    report = commands.add_parser(
+        "report",
+        help="score logs with a test plan",
+        description="Score logs with a test plan; write <plan>.html and <plan>.json.",
+        epilog=EXIT_CODES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     report.add_argument("plan", type=Path, help="test plan (TOML)")
     report.add_argument(
         "--log",
@@ -118,15 +136,25 @@ def _report(args: argparse.Namespace, console: Console) -> int:
             progress.update(task, description=label)
             progress.advance(task)
 
-        assessment = assess(plan, advance)
-    for warning in dict.fromkeys(w for log in assessment.logs for w in log.warnings):
-        console.print(f"[yellow]warning:[/] {warning}")
+        assessment = assess(plan, advance, strict=False)
+    for caveat in assessment.caveats:
+        test = f"{caveat.test}: " if caveat.test else ""
+        console.print(f"[yellow]warning:[/] {escape(f'{test}{caveat.kind}: {caveat.message}')}")
     html_path, json_path = write_report(assessment, args.out)
     code = exit_code(assessment)
-    console.print(
-        f"η_all {assessment.eta_all:.2%}, η_min {assessment.eta_min:.2%} "
-        f"{'≥' if code == 0 else '<'} ε_min {plan.eps_min:.0%} → {html_path}, {json_path}"
-    )
+    if assessment.not_scored:
+        console.print(
+            f"{len(assessment.not_scored)} of {len(plan.tests)} tests not scored: "
+            + ", ".join(item.test.name for item in assessment.not_scored)
+        )
+    if code == ExitCode.NOT_SCORED:
+        verdict = f"could not be scored: {assessment.unscorable_reason}"
+    else:
+        verdict = (
+            f"η_all {assessment.eta_all:.2%}, η_min {assessment.eta_min:.2%} "
+            f"{'≥' if code == ExitCode.PASS else '<'} ε_min {plan.eps_min:.0%}"
+        )
+    console.print(f"{verdict} → {html_path}, {json_path}")
     return code
 
 
@@ -166,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _report(args, err)
     except CredibilityError as exc:
         print(f"credibility: error: {exc}", file=sys.stderr)
-        return BAD_INPUT
+        return ExitCode.BAD_INPUT
 
 
 if __name__ == "__main__":

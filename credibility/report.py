@@ -6,6 +6,7 @@ base64 PNG, so the report opens offline and can be mailed as one file.
 
 import base64
 import dataclasses
+import enum
 import hashlib
 import io
 import json
@@ -22,19 +23,44 @@ from credibility import indices, weakest
 from credibility.assess import (
     Assessment,
     FrequencyResult,
+    NotScored,
     PerformanceResult,
     Result,
     TimeResult,
 )
+from credibility.caveats import Caveat
 from credibility.logs import SignalSpec
+from credibility.plan import Test
 
 PAPER_W_GAMMA = "paper: W_γ = (1 − e^{−γ²}) / (1 − e^{−1}) on min(γ²_real, γ²_sim)"
 CIFER_W_GAMMA = "Tischler & Remple: W_γ = [1.58 (1 − e^{−γ²})]², W_g = 1, W_p = 0.01745"
 
 
-def exit_code(assessment: Assessment) -> int:
-    """0 when η_min ≥ ε_min, 1 when not (the CLI uses 2 for bad input)."""
-    return 0 if assessment.meets_eps_min else 1
+class ExitCode(enum.IntEnum):
+    """What ``credibility report`` exits with, so a pipeline can tell the cases apart."""
+
+    #: η_min ≥ ε_min over the scored tests.
+    PASS = 0
+    #: η_min < ε_min: a result, not an error.
+    FAIL = 1
+    #: The plan or a log cannot be read, or the command line is wrong; nothing is written.
+    BAD_INPUT = 2
+    #: Everything was read, but too few tests could be scored to give a verdict
+    #: (``Assessment.unscorable_reason``); the report says which and why.
+    NOT_SCORED = 3
+
+
+def exit_code(assessment: Assessment) -> ExitCode:
+    """The verdict as an exit code: pass, fail, or could not be scored."""
+    return {
+        "pass": ExitCode.PASS,
+        "fail": ExitCode.FAIL,
+        "could not be scored": ExitCode.NOT_SCORED,
+    }[assessment.outcome]
+
+
+def _caveat_dicts(caveats: tuple[Caveat, ...]) -> list[dict[str, Any]]:
+    return [dataclasses.asdict(caveat) for caveat in caveats]
 
 
 def _spec(spec: SignalSpec | None) -> dict[str, Any] | None:
@@ -52,15 +78,30 @@ def _floats(values: np.ndarray) -> list[float]:
     return [float(v) for v in values]
 
 
-def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
-    test = result.test
-    common = {
+def _identity(test: Test) -> dict[str, Any]:
+    return {
         "name": test.name,
         "kind": test.kind,
         "real": test.roles.real,
         "sim": test.roles.sim,
         "compare": list(test.roles.compare),
         "k_p": test.k_p,
+    }
+
+
+def _not_scored_dict(item: NotScored) -> dict[str, Any]:
+    return _identity(item.test) | {
+        "scored": False,
+        "eta": None,
+        "passes_pass_mark": None,
+        "not_scored": {"kind": item.reason.kind, "message": item.reason.message},
+    }
+
+
+def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
+    test = result.test
+    common = _identity(test) | {
+        "scored": True,
         "eta": result.eta,
         "passes_pass_mark": result.eta >= pass_mark,
     }
@@ -99,6 +140,7 @@ def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
             },
             "threshold": result.threshold,
             "threshold_rule": result.threshold_rule,
+            "noise_floor": result.noise_floor,
             "zero_output": {"e_t": result.zero_output_error, "eta_t": result.zero_output_eta},
             "rows": [
                 {
@@ -142,6 +184,8 @@ def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
                 "eps_mag_db": row.eps_mag_db,
                 "eps_pha_deg": row.eps_pha_deg,
                 "threshold_rule": row.threshold_rule,
+                "floor_mag_db": row.floor_mag_db,
+                "floor_pha_deg": row.floor_pha_deg,
                 "eta_mag": row.eta_mag,
                 "eta_pha": row.eta_pha,
                 "eta_f": row.eta,
@@ -157,9 +201,25 @@ def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
     }
 
 
+def _tests_in_plan_order(assessment: Assessment) -> list[tuple[Test, Result | NotScored]]:
+    """Every test of the plan with its result or the reason it has none."""
+    outcomes: dict[str, Result | NotScored] = {r.test.name: r for r in assessment.results}
+    outcomes |= {item.test.name: item for item in assessment.not_scored}
+    return [(test, outcomes[test.name]) for test in assessment.plan.tests]
+
+
 def to_dict(assessment: Assessment) -> dict[str, Any]:
     """Everything the method used and found, as plain JSON types."""
     plan = assessment.plan
+    tests = []
+    for test, outcome in _tests_in_plan_order(assessment):
+        entry = (
+            _not_scored_dict(outcome)
+            if isinstance(outcome, NotScored)
+            else _test_dict(outcome, plan.pass_mark)
+        )
+        entry["warnings"] = _caveat_dicts(assessment.caveats_of(test.name))
+        tests.append(entry)
     return {
         "package": "hil-rig credibility",
         "package_version": assessment.package_version,
@@ -188,15 +248,22 @@ def to_dict(assessment: Assessment) -> dict[str, Any]:
             for log in assessment.logs
         ],
         "summary": {
+            "outcome": assessment.outcome,
+            "unscorable_reason": assessment.unscorable_reason,
+            "tests": len(plan.tests),
+            "scored": len(assessment.results),
+            "not_scored": [item.test.name for item in assessment.not_scored],
+            "warnings": len(assessment.caveats),
             "means": assessment.means,
             "eta_all": assessment.eta_all,
             "eta_min": assessment.eta_min,
             "eps_min": plan.eps_min,
             "meets_eps_min": assessment.meets_eps_min,
             "passes_pass_mark": assessment.passes,
-            "exit_code": exit_code(assessment),
+            "exit_code": int(exit_code(assessment)),
         },
-        "tests": [_test_dict(r, plan.pass_mark) for r in assessment.results],
+        "warnings": _caveat_dicts(assessment.caveats),
+        "tests": tests,
         "weakest": [_weakness_dict(w) for w in weakest.rank(assessment)],
     }
 
@@ -308,6 +375,7 @@ th{background:#eee} td:first-child,th:first-child{text-align:left}
 .pass{color:#070;font-weight:bold} .fail{color:#b00;font-weight:bold}
 pre{background:#f6f6f6;padding:0.6em;overflow-x:auto;font-size:0.85em}
 .warn{color:#a60}
+table.text td,table.text th{text-align:left}
 ul.why{text-align:left;margin:0;padding-left:1.2em}
 """
 #: The page template (``templates/report.html.j2``); every value is escaped there.
@@ -336,6 +404,15 @@ class Code:
 
 
 @dataclass(frozen=True)
+class Link:
+    """A table cell linking to a test's section (``#test-<name>``)."""
+
+    text: str
+    target: str
+    kind: str = "link"
+
+
+@dataclass(frozen=True)
 class Reasons:
     """A table cell listing ``(role, η, why)`` findings."""
 
@@ -343,8 +420,8 @@ class Reasons:
     kind: str = "reasons"
 
 
-def _pct(value: float) -> str:
-    return f"{100.0 * value:.2f} %"
+def _pct(value: float | None) -> str:
+    return "—" if value is None else f"{100.0 * value:.2f} %"
 
 
 def _performance_section(result: PerformanceResult, pass_mark: float) -> dict[str, Any]:
@@ -430,6 +507,21 @@ def _weakest_rows(assessment: Assessment) -> list[list[Any]]:
     ]  # fmt: skip
 
 
+def _not_scored_section(item: NotScored) -> dict[str, Any]:
+    return {"kind": "not_scored", "name": item.test.name, "test_kind": item.test.kind,
+            "reason": item.reason.kind, "message": item.reason.message}  # fmt: skip
+
+
+def _section(result: Result | NotScored, pass_mark: float) -> dict[str, Any]:
+    if isinstance(result, NotScored):
+        return _not_scored_section(result)
+    if isinstance(result, PerformanceResult):
+        return _performance_section(result, pass_mark)
+    if isinstance(result, TimeResult):
+        return _time_section(result, pass_mark)
+    return _frequency_section(result, pass_mark)
+
+
 def render_html(assessment: Assessment) -> str:
     """The whole report as one HTML string."""
     plan = assessment.plan
@@ -440,16 +532,21 @@ def render_html(assessment: Assessment) -> str:
     summary_rows.append(["η_all (eq. (overall))", _pct(assessment.eta_all), "—"])
     summary_rows.append(["η_min (eq. (worse))", _pct(assessment.eta_min), "—"])
     sections = []
-    for result in assessment.results:
-        if isinstance(result, PerformanceResult):
-            sections.append(_performance_section(result, plan.pass_mark))
-        elif isinstance(result, TimeResult):
-            sections.append(_time_section(result, plan.pass_mark))
-        else:
-            sections.append(_frequency_section(result, plan.pass_mark))
+    for test, result in _tests_in_plan_order(assessment):
+        section = _section(result, plan.pass_mark)
+        section["caveats"] = [
+            (caveat.kind, caveat.message)
+            for caveat in assessment.caveats_of(test.name)
+            if not isinstance(result, NotScored) or caveat != result.reason
+        ]
+        sections.append(section)
     return _TEMPLATES.get_template("report.html.j2").render(
         css=_CSS,
         plan=plan,
+        outcome=assessment.outcome,
+        unscorable_reason=assessment.unscorable_reason,
+        scored=len(assessment.results),
+        not_scored=len(assessment.not_scored),
         eta_all=_pct(assessment.eta_all),
         eta_min=_pct(assessment.eta_min),
         passes=Verdict(assessment.passes, "at or above", "below"),
@@ -458,6 +555,10 @@ def render_html(assessment: Assessment) -> str:
         eps_min=_pct(plan.eps_min),
         k_e=f"{indices.pass_mark_gain(plan.pass_mark):.4g}",
         summary_rows=summary_rows,
+        caveat_rows=[
+            [Link(c.test, f"test-{c.test}") if c.test else "(report)", c.kind, c.message]
+            for c in assessment.caveats
+        ],
         weakest_rows=_weakest_rows(assessment),
         sections=sections,
         package_version=assessment.package_version,
@@ -466,7 +567,6 @@ def render_html(assessment: Assessment) -> str:
         log_rows=[
             [log.role, str(log.path), log.format, Code(log.sha256)] for log in assessment.logs
         ],
-        warnings=[w for log in assessment.logs for w in log.warnings],
     )
 
 

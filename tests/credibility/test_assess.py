@@ -213,10 +213,6 @@ BAD_PLANS = [
         ("segment_s = [10.0, 20.0]", "segmnet_s = [10.0, 20.0]"),
         "key 'tests[0].segmnet_s' = [10.0, 20.0]: unknown key",
     ),
-    (
-        ("segment_s = [10.0, 30.0]", "segment_s = [50.0, 70.0]"),
-        "segment [50, 70] s is outside the logged span",
-    ),
     (('sim_low = "sim_low.csv"', 'sim_low = "missing.csv"'), "missing.csv: log file not found"),
     (
         ('compare = ["sim_low"]', 'compare = ["sim_x"]'),
@@ -238,6 +234,27 @@ def test_bad_plans_give_one_line_and_exit_2(logs, capsys, edit, message):
     assert message in err
     assert err.startswith("credibility: error: ")
     assert err.count("\n") == 1
+
+
+def test_a_segment_past_the_log_is_not_scored_and_exits_3(logs, capsys):
+    """The logs are readable, so this is no bad input (2): the only time test is listed as
+    not scored with the span it needed, and with no time test left there is no verdict."""
+    plan = _write_plan(logs, PLAN.replace("segment_s = [10.0, 30.0]", "segment_s = [50.0, 70.0]"))
+    out = logs / "out"
+    assert main(["report", str(plan), "--out", str(out)]) == 3
+    report = json.loads((out / "plan.json").read_text())
+    curve = report["tests"][1]
+    assert (curve["name"], curve["scored"], curve["eta"]) == ("curve", False, None)
+    assert curve["not_scored"]["kind"] == "short_signal"
+    assert (
+        "segment [50, 70] s is outside the logged span [0.000, 59.990] s"
+        in (curve["not_scored"]["message"])
+    )
+    assert report["summary"]["outcome"] == "could not be scored"
+    assert report["summary"]["unscorable_reason"] == (
+        "no time test (of 1) could be scored: η̄_t is undefined"
+    )
+    assert "segment [50, 70] s is outside the logged span" in capsys.readouterr().err
 
 
 def test_log_override_replaces_a_role(logs):
