@@ -17,18 +17,29 @@ PX4"): PX4 answers a HIL_SENSOR with HIL_ACTUATOR_CONTROLS only when its rate co
 ran for that sample and its lockstep components (the simulator and the logger, which
 waits for EKF2) have all progressed. So ``IMU_GYRO_RATEMAX`` and ``IMU_INTEG_RATE`` must
 both equal the simulator's IMU rate; ``IMU_INTEG_RATE`` stops at 1000 Hz.
+
+A real vehicle's parameters (a replay flies PX4 with the log's own, :func:`sitl_parameters`)
+are taken where they describe how the vehicle flies, and never where they describe its
+hardware (calibrations, drivers, ports, outputs) or what SITL and the rig need (airframe
+10016, lockstep, the sticks as MAVLink MANUAL_CONTROL): :data:`NOT_FROM_THE_VEHICLE`.
 """
 
 from __future__ import annotations
 
+import json
+import lzma
 import math
 import os
+import re
 import shlex
 import shutil
 import subprocess
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from quad_model.vehicle import Vehicle
 from rig.errors import RigError
@@ -156,6 +167,120 @@ def parse_assignments(texts: tuple[str, ...]) -> dict[str, float]:
             raise RigError(f"--param {text!r}: expected NAME=VALUE with a finite number")
         params[name.strip()] = number
     return params
+
+
+#: Where a PX4 build keeps its generated parameter metadata (names, types, ranges).
+PARAMETER_METADATA = Path("etc/extras/parameters.json.xz")
+
+#: The sticks of a replayed flight reach PX4 as MAVLink MANUAL_CONTROL from the rig's
+#: onboard link (a joystick, in PX4's words), not from an RC receiver: "joystick only".
+STICK_PARAMETERS: dict[str, float] = {"COM_RC_IN_MODE": 1}
+
+_LINKS = "serial port or MAVLink link of the real board (SITL's links are the rig's ports)"
+#: A real vehicle's parameters that never go into SITL, each with why (first match wins).
+NOT_FROM_THE_VEHICLE: tuple[tuple[re.Pattern[str], str], ...] = tuple(
+    (re.compile(pattern), reason)
+    for pattern, reason in (
+        (r"CAL_.*|TC_.*", "calibration of the real sensor chips (other device ids; the rig's "
+                          "sensors are ideal, and PX4's calibration checks would fail)"),
+        (r"SYS_AUTOSTART|SYS_AUTOCONFIG|SYS_HITL",
+         f"PX4 SITL flies airframe {AIRFRAME} in lockstep (SYS_HITL 0)"),
+        (r"SENS_EN_.*|SENS_BOARD_.*", "a sensor driver or the board's mounting in the real "
+                                      "vehicle (the rig's chips are SITL's sensors)"),
+        (r"SER_.*|MAV_\d_.*|UXRCE_.*|GPS_\d_.*|TEL_.*|RC_PORT_CONFIG|RC_INPUT_PROTO"
+         r"|.*_PRT_CFG|.*_PORT_CFG", _LINKS),
+        (r"PWM_.*|DSHOT_.*|UAVCAN_.*|HIL_ACT_.*",
+         f"a hardware output (SITL's motors are simulator outputs, set by airframe {AIRFRAME})"),
+        (r"IMU_GYRO_RATEMAX|IMU_INTEG_RATE", "lockstep: the rig sets it to its IMU rate"),
+        (r"MAV_SYS_ID", "the SITL instance sets it (system id = instance + 1)"),
+        (r"SDLOG_MODE", "the rig logs from boot to shutdown"),
+        (r"COM_RC_IN_MODE", "the rig's sticks are MAVLink MANUAL_CONTROL: joystick only (1)"),
+        (r"COM_CPU_MAX", "PX4 on posix reports no CPU load (SITL's rcS turns the check off)"),
+        (r"CBRK_SUPPLY_CHK", "SITL has no power module (SITL's rcS sets this circuit breaker)"),
+    )
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One parameter of a PX4 build, as its metadata declares it."""
+
+    name: str
+    integer: bool
+    low: float | None = None
+    high: float | None = None
+    values: frozenset[int] | None = None  # an enumeration's values
+    bits: int | None = None  # a bitmask's defined bits
+
+    def refusal(self, value: float) -> str | None:
+        """Why ``value`` is not one this build knows (None: it is). Compared as PX4 stores
+        it (float32), so a logged 0.01 equals a minimum of 0.01."""
+        stored = float(np.float32(value))
+        if self.integer and not float(value).is_integer():
+            return f"not an integer (the build's {self.name} is INT32)"
+        if self.low is not None and stored < float(np.float32(self.low)):
+            return f"below this build's minimum {self.low:g}"
+        if self.high is not None and stored > float(np.float32(self.high)):
+            return f"above this build's maximum {self.high:g}"
+        if self.values is not None and int(value) not in self.values:
+            return f"not one of this build's values {sorted(self.values)}"
+        if self.bits is not None and int(value) & ~self.bits:
+            return f"sets bits this build does not define (mask {self.bits})"
+        return None
+
+
+def build_parameters(build: Px4Build) -> dict[str, ParameterSpec]:
+    """Every parameter the build knows, from its generated metadata (what ``param set``
+    accepts by name); a build without it fails in one line."""
+    path = build.root / PARAMETER_METADATA
+    try:
+        entries = json.loads(lzma.decompress(path.read_bytes()))["parameters"]
+        return {entry["name"]: _spec(entry) for entry in entries}
+    except (OSError, lzma.LZMAError, ValueError, KeyError, TypeError) as error:
+        raise Px4NotFound(
+            f"{path}: cannot read the build's parameter metadata ({error}); a PX4 replay "
+            "needs it to know which of the log's parameters this PX4 has"
+        ) from None
+
+
+def _spec(entry: dict[str, Any]) -> ParameterSpec:
+    values, bits = entry.get("values"), entry.get("bitmask")
+    return ParameterSpec(
+        name=entry["name"],
+        integer=entry["type"] == "Int32",
+        low=entry.get("min"),
+        high=entry.get("max"),
+        values=None if values is None else frozenset(v["value"] for v in values),
+        bits=None if bits is None else sum(1 << b["index"] for b in bits),
+    )
+
+
+def sitl_parameters(
+    logged: Mapping[str, float], known: Mapping[str, ParameterSpec]
+) -> tuple[dict[str, float], tuple[tuple[str, float, str], ...]]:
+    """Split a real vehicle's parameters into those SITL takes as they are and those it must
+    not, each ``(name, value, reason)``: not in this build, :data:`NOT_FROM_THE_VEHICLE`, or
+    a value outside what this build defines (skipped, never clamped: the log may come from
+    another PX4 version)."""
+    applied: dict[str, float] = {}
+    skipped = []
+    for name in sorted(logged):
+        value = logged[name]
+        reason = _not_for_sitl(name, value, known.get(name))
+        if reason is None:
+            applied[name] = value
+        else:
+            skipped.append((name, float(value), reason))
+    return applied, tuple(skipped)
+
+
+def _not_for_sitl(name: str, value: float, spec: ParameterSpec | None) -> str | None:
+    if spec is None:
+        return "not a parameter of this PX4 build"
+    for pattern, why in NOT_FROM_THE_VEHICLE:
+        if pattern.fullmatch(name):
+            return why
+    return spec.refusal(value)
 
 
 class Px4Sitl:

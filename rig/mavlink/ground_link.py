@@ -22,7 +22,9 @@ socket is read in order).
 PX4 facts used here (PX4-Autopilot ``src/modules/commander/px4_custom_mode.h``,
 ``src/modules/mavlink/mavlink_receiver.cpp``, MAVLink ``common.xml``): custom main mode
 OFFBOARD = 6; NAV_TAKEOFF with a NaN altitude climbs MIS_TAKEOFF_ALT above home;
-DO_MOTOR_TEST takes a 1-based motor instance and a percentage.
+DO_MOTOR_TEST takes a 1-based motor instance and a percentage; MANUAL_CONTROL carries
+pitch in x, roll in y and yaw in r (±1000) and the throttle in z (0..1000, PX4 reads
+z/500 − 1); a ground station is one that sends HEARTBEAT of type GCS.
 """
 
 from __future__ import annotations
@@ -45,6 +47,14 @@ GCS_SYSTEM_ID, GCS_COMPONENT_ID = 245, mavlink.MAV_COMP_ID_MISSIONPLANNER
 PX4_MAIN_MODE_OFFBOARD = 6
 #: PX4's Hold: main mode AUTO, sub mode LOITER (px4_custom_mode.h).
 PX4_MAIN_MODE_AUTO, PX4_AUTO_SUB_MODE_LOITER = 4, 3
+#: PX4 ``vehicle_status.nav_state`` → the custom (main, sub) mode DO_SET_MODE selects it with,
+#: and its name in QGroundControl (px4_custom_mode.h, ``get_px4_custom_mode``).
+PX4_MODES: dict[int, tuple[int, int, str]] = {
+    0: (1, 0, "Manual"), 1: (2, 0, "Altitude"), 2: (3, 0, "Position"), 3: (4, 4, "Mission"),
+    4: (4, 3, "Hold"), 5: (4, 5, "Return"), 10: (5, 0, "Acro"), 14: (6, 0, "Offboard"),
+    15: (7, 0, "Stabilized"), 17: (4, 2, "Takeoff"), 18: (4, 6, "Land"),
+    19: (4, 8, "Follow Me"), 20: (4, 9, "Precision Land"),
+}  # fmt: skip
 #: How many times an arm is asked again, a HEARTBEAT (1 s) apart, while PX4 is not ready.
 ARM_READY_RETRIES = 30
 #: Period of the offboard setpoint keep-alive: PX4 leaves offboard after COM_OF_LOSS_T (1 s).
@@ -69,6 +79,22 @@ _ATTITUDE_ONLY = (
 )
 #: PX4 flies the body rates of a SET_ATTITUDE_TARGET whose attitude is ignored.
 _RATES_ONLY = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One MISSION_ITEM_INT: ``command`` (MAV_CMD) at a global position, its altitude in
+    ``frame`` (MAV_FRAME: above home for the RELATIVE_ALT frames, else AMSL)."""
+
+    frame: int
+    command: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    param1: float = 0.0  # NAV_WAYPOINT: hold time (s)
+    param2: float = 0.0  # acceptance radius (m); 0: the autopilot's default
+    param3: float = 0.0
+    param4: float = math.nan  # yaw (deg); NaN: the autopilot's choice
 
 
 @dataclass(frozen=True)
@@ -268,6 +294,15 @@ class GroundLink:
             PX4_MAIN_MODE_AUTO, PX4_AUTO_SUB_MODE_LOITER, what="hold",
         )  # fmt: skip
 
+    def set_mode(self, nav_state: int) -> Conversation:
+        """DO_SET_MODE to the PX4 flight mode ``nav_state`` (:data:`PX4_MODES`), as a ground
+        station's mode menu does."""
+        main, sub, name = PX4_MODES[nav_state]
+        return self.command(
+            mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub,
+            what=f"mode {name}",
+        )  # fmt: skip
+
     def offboard(self, setpoints: Sequence[mavlink.MAVLink_message], what: str) -> Conversation:
         """Setpoints, then DO_SET_MODE(OFFBOARD): the ACK also proves they were handled."""
         conversation = self.command(
@@ -333,6 +368,27 @@ class GroundLink:
             [1.0, 0.0, 0.0, 0.0], roll, pitch, yaw, float(thrust),
         )  # fmt: skip
 
+    def manual_control(
+        self, roll: float, pitch: float, yaw: float, throttle: float
+    ) -> mavlink.MAVLink_message:
+        """A pilot's sticks in PX4's convention (``manual_control_setpoint``: −1..1, throttle
+        −1 at idle) as MANUAL_CONTROL; beyond ±1 is held at the stop, as a stick is."""
+
+        def axis(value: float) -> int:
+            return round(1000 * min(max(value, -1.0), 1.0))
+
+        return self.mav.manual_control_encode(
+            self.ports.system_id, axis(pitch), axis(roll), (axis(throttle) + 1000) // 2,
+            axis(yaw), 0,
+        )  # fmt: skip
+
+    def heartbeat(self) -> mavlink.MAVLink_message:
+        """The ground station's HEARTBEAT (1 Hz, as QGroundControl sends it): PX4 counts a
+        ground station as connected while it hears one, which NAV_DLL_ACT needs to arm."""
+        return self.mav.heartbeat_encode(
+            mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE
+        )
+
     def motor_test(self, motor: int, throttle: float, duration_s: float) -> Conversation:
         return self.command(
             mavlink.MAV_CMD_DO_MOTOR_TEST, motor + 1, mavlink.MOTOR_TEST_THROTTLE_PERCENT,
@@ -342,20 +398,31 @@ class GroundLink:
 
     def mission(self, waypoints_ned_m: Sequence[Sequence[float]]) -> Conversation:
         """Upload waypoints (MISSION_COUNT/REQUEST/ITEM_INT/ACK), then MISSION_START."""
-        target = self.ports.system_id
         items = []
-        for seq, (north, east, down) in enumerate(waypoints_ned_m):
+        for north, east, down in waypoints_ned_m:
             lat, lon, _ = ned_to_geodetic(
                 (north, east, down), self.home.lat_deg, self.home.lon_deg, self.home.alt_amsl_m
             )
-            items.append(
-                self.mav.mission_item_int_encode(
-                    target, 1, seq, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-                    mavlink.MAV_CMD_NAV_WAYPOINT, 0, 1, 0.0, 1.0, 0.0, math.nan,
-                    round(lat * 1e7), round(lon * 1e7), float(-down),
-                )
-            )  # fmt: skip
-        message = self.mav.mission_count_encode(target, 1, len(items))
+            items.append(MissionItem(mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                     mavlink.MAV_CMD_NAV_WAYPOINT, lat, lon, float(-down),
+                                     param2=1.0))  # fmt: skip
+        yield from self.upload_mission(items)
+        return (yield from self.command(mavlink.MAV_CMD_MISSION_START, 0, 0,
+                                        what=f"mission of {len(items)} waypoints"))  # fmt: skip
+
+    def upload_mission(self, items: Sequence[MissionItem]) -> Conversation:
+        """The mission protocol's upload (MISSION_COUNT, then each MISSION_ITEM_INT PX4 asks
+        for, until MISSION_ACK); the mission starts when a mode or MISSION_START says so."""
+        target = self.ports.system_id
+        encoded = [
+            self.mav.mission_item_int_encode(
+                target, 1, seq, item.frame, item.command, 0, 1, item.param1, item.param2,
+                item.param3, item.param4, round(item.lat_deg * 1e7), round(item.lon_deg * 1e7),
+                float(item.alt_m),
+            )
+            for seq, item in enumerate(items)
+        ]  # fmt: skip
+        message = self.mav.mission_count_encode(target, 1, len(encoded))
         while True:
             answer = yield Expect(
                 (message,),
@@ -364,17 +431,16 @@ class GroundLink:
             )
             if answer.get_type() == "MISSION_ACK":
                 break
-            if not 0 <= answer.seq < len(items):
+            if not 0 <= answer.seq < len(encoded):
                 raise GroundLinkError(
-                    f"mission upload: the autopilot asked for item {answer.seq} of {len(items)}"
+                    f"mission upload: the autopilot asked for item {answer.seq} of {len(encoded)}"
                 )
-            message = items[answer.seq]
+            message = encoded[answer.seq]
         if answer.type != mavlink.MAV_MISSION_ACCEPTED:
             raise GroundLinkError(
                 f"the autopilot refused the mission: {_enum_name('MAV_MISSION', answer.type)}"
             )
-        return (yield from self.command(mavlink.MAV_CMD_MISSION_START, 0, 0,
-                                        what=f"mission of {len(items)} waypoints"))  # fmt: skip
+        return f"mission of {len(encoded)} items uploaded"
 
     def set_param(self, name: str, value: float) -> Conversation:
         """PARAM_SET → PARAM_VALUE echo; PX4 answers with the value it actually took."""

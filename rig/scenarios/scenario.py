@@ -44,6 +44,7 @@ from quad_model.environment import Environment
 from rig.chips.layer import Chip
 from rig.chips.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PWM_TICK_HZ
 from rig.errors import ScenarioError
+from rig.mavlink.ground_link import PX4_MODES, MissionItem
 
 SCENARIOS_DIR = Path(__file__).parent  # the bundled scenario files live beside this module
 #: Coarsest capture tick: 10 µs is 1 % of the 1000-2000 µs throttle range.
@@ -264,6 +265,8 @@ TRACK_KINDS = {
     "velocity": "vn, ve, vd (m/s, NED) and yaw (rad; NaN: not controlled)",
     "attitude": "q w, x, y, z (body to NED) and collective thrust 0..1",
     "rates": "roll, pitch, yaw rate (rad/s, FRD) and collective thrust 0..1",
+    "manual": "a pilot's sticks: roll, pitch, yaw, throttle, −1..1 (PX4's "
+    "manual_control_setpoint; throttle −1 at idle)",
 }
 
 
@@ -272,7 +275,8 @@ class SetpointTrack:
     """Offboard setpoints recorded at known times (e.g. a real flight's), in run seconds.
 
     A :class:`Track` streams it from its own time on: each sample goes out at the first
-    frame at or after its time, and the latest one is held (zero-order hold) in between.
+    frame at or after its time, and the latest one is held (zero-order hold) in between. A
+    ``manual`` track is a pilot's sticks instead, interpolated between its samples.
     """
 
     kind: str
@@ -294,8 +298,34 @@ class Track(_Timed):
     action: Literal["track"] = "track"
 
 
-#: What a command script walks: the file's commands and the code's tracks.
-ScriptCommand = _FileCommand | Track
+@table(kw_only=True)
+class SetMode(_Timed):
+    """Switch PX4 to the flight mode ``nav_state`` (``vehicle_status.nav_state``), as a ground
+    station's mode menu does: set by code (a PX4 replay flies the log's mode switches). A
+    refusal is logged and the run goes on, as the pilot's flight went on."""
+
+    nav_state: int
+    action: Literal["mode"] = "mode"
+
+    def __post_init__(self) -> None:
+        if self.nav_state not in PX4_MODES:
+            modes = sorted(PX4_MODES)
+            raise FieldError("nav_state", self.nav_state, f"not a PX4 mode to select ({modes})")
+
+
+@table(kw_only=True)
+class UploadMission(_Timed):
+    """Upload a mission as flown (a replay's, from the log), without starting it: set by
+    code; a mode switch to Mission starts it."""
+
+    items: tuple[InstanceOf[MissionItem], ...]
+    action: Literal["upload_mission"] = "upload_mission"
+
+
+#: A command that only code sets (a replay): recorded streams, mode switches, a flown mission.
+CodeCommand = Track | SetMode | UploadMission
+#: What a command script walks: the file's commands and the code's.
+ScriptCommand = _FileCommand | CodeCommand
 
 
 # -- faults: one table per kind, told apart by ``kind`` -----------------------------------
@@ -420,8 +450,11 @@ class Scenario:
     motor_pwm_range_us: tuple[Positive, Positive] = DEFAULT_MOTOR_PWM_RANGE_US
     commands: tuple[Command, ...] = ()
     faults: tuple[FaultSpec, ...] = ()
-    #: Recorded setpoint streams, set by code (a replay); a file cannot give them.
-    tracks: SkipJsonSchema[tuple[InstanceOf[Track], ...]] = ()
+    #: Commands set by code (a replay: recorded setpoint and stick streams, a PX4 replay's
+    #: mode switches and mission); a file cannot give them.
+    tracks: SkipJsonSchema[
+        tuple[InstanceOf[Track] | InstanceOf[SetMode] | InstanceOf[UploadMission], ...]
+    ] = ()
     #: Where the scenario came from (its file); set by the loader.
     source: SkipJsonSchema[str] = "<code>"
 

@@ -6,9 +6,15 @@ the way MAVSDK does (PX4 leaves offboard when setpoints stop): a ``goto`` re-sen
 position setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at ``rate_hz``,
 a ``track`` sends a :class:`~rig.scenarios.scenario.SetpointTrack`'s recorded setpoints at
 their times and holds the last one (re-sent every 0.1 s) between them. A mode command
-(takeoff, land, mission, motor test, another stream) ends the running stream; arm, disarm
-and set_param do not change the mode, so the stream goes on as MAVSDK's does (a replay arms
-and disarms mid-stream).
+(takeoff, land, mission, mode, motor test, another stream) ends the running stream; arm,
+disarm, set_param and a mission upload do not change the mode, so the stream goes on as
+MAVSDK's does (a replay arms and disarms mid-stream).
+
+A ``manual`` track is a pilot's sticks, played as QGroundControl plays a joystick: MANUAL_CONTROL
+every 20 ms (PX4 takes the sticks as lost after COM_RC_LOSS_T, 0.5 s), the track
+interpolated linearly between its samples (a real log holds them at 5 Hz), and the ground
+station's HEARTBEAT every second. It runs beside the setpoint streams, and no mode command
+ends it: the pilot holds the sticks in every mode.
 
 With ``barrier=True`` (the reference autopilot) every setpoint travels inside an
 acknowledged conversation, so it acts at a known frame; with PX4 the stream is sent
@@ -30,6 +36,11 @@ from rig.scenarios.scenario import (
     SetpointTrack,
     Track,
 )
+
+#: A pilot's sticks are sent this often (µs of simulated time): well inside PX4's 0.5 s.
+STICKS_PERIOD_US = 20_000
+#: The ground station's HEARTBEAT beside the sticks (µs).
+HEARTBEAT_PERIOD_US = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -53,6 +64,11 @@ class _Stream:
     sample: int = 0  # a track's latest sample due
 
 
+def _next_on_grid(due_us: int, period_us: int, time_us: int) -> int:
+    """The first time after ``time_us`` on the grid ``due_us`` + k·``period_us``."""
+    return due_us + ((time_us - due_us) // period_us + 1) * period_us
+
+
 def _us(time_s: float) -> int:
     """A file's time (s) on the frames' whole-µs grid."""
     return round(time_s * 1e6)
@@ -63,7 +79,30 @@ _KEEPALIVE_US = _us(OFFBOARD_KEEPALIVE_S)
 
 
 #: Commands that leave the flight mode, and so a running setpoint stream, as they are.
-_KEEP_STREAM = frozenset({"arm", "disarm", "set_param"})
+_KEEP_STREAM = frozenset({"arm", "disarm", "set_param", "upload_mission"})
+
+
+@dataclass
+class _Sticks:
+    """A pilot's sticks being played (a ``manual`` track): the next sends and the sample."""
+
+    track: SetpointTrack
+    next_us: int
+    heartbeat_us: int
+    sample: int = 0
+
+    def at(self, time_s: float) -> tuple[float, ...]:
+        """The sticks at ``time_s``: linear between the samples around it, the first one
+        before and the last one after them."""
+        times, values = self.track.times_s, self.track.values
+        while self.sample + 1 < len(times) and times[self.sample + 1] <= time_s:
+            self.sample += 1
+        here = values[self.sample]
+        if self.sample + 1 == len(times) or time_s <= times[self.sample]:
+            return here
+        t0, t1, there = times[self.sample], times[self.sample + 1], values[self.sample + 1]
+        share = (time_s - t0) / (t1 - t0)
+        return tuple(a + (b - a) * share for a, b in zip(here, there, strict=True))
 
 
 class CommandScript:
@@ -90,6 +129,7 @@ class CommandScript:
         self._due_us = [_us(command.at_s) for command in self._commands]
         self._next = 0
         self._stream: _Stream | None = None
+        self._sticks: _Sticks | None = None
 
     def due(self, time_us: int) -> Iterator[Action]:
         """The actions due at run time ``time_us``."""
@@ -102,9 +142,15 @@ class CommandScript:
             action = self._stream_action(stream, time_us)
             if action is not None:
                 yield action
+        sticks = self._sticks
+        if sticks is not None and time_us >= sticks.next_us:
+            yield self._sticks_action(sticks, time_us)
 
     def _start(self, command: ScriptCommand, time_us: int) -> Iterator[Action]:
         g, c, name = self.ground, command, f"{command.action} at t={command.at_s:g} s"
+        if isinstance(command, Track) and command.track.kind == "manual":
+            self._sticks = _Sticks(command.track, time_us, time_us)
+            return
         if command.action not in _KEEP_STREAM:
             self._stream = None  # a mode command takes over from a running setpoint stream
         if isinstance(command, Goto | PitchSweep | Track):
@@ -117,9 +163,11 @@ class CommandScript:
             # a replay's disarm follows the real flight's and may find this one still flying
             "disarm": lambda: g.attempt(g.arm(False)) if c.may_refuse else g.arm(False),
             "takeoff": lambda: g.takeoff(c.altitude_m),
-            "land": g.land,
-            "hold": g.hold,
+            "land": lambda: g.land(),
+            "hold": lambda: g.hold(),
+            "mode": lambda: g.attempt(g.set_mode(c.nav_state)),
             "mission": lambda: g.mission(c.waypoints_ned_m),
+            "upload_mission": lambda: g.upload_mission(c.items),
             "motor_test": lambda: g.motor_test(c.motor, c.throttle, c.duration_s),
             "set_param": lambda: g.set_param(c.name, c.value),
         }
@@ -151,6 +199,17 @@ class CommandScript:
         if self.barrier or first:
             return Action(name, self.ground.offboard([setpoint], name), logged=first)
         return Action(name, unacknowledged=(setpoint,), logged=False)
+
+    def _sticks_action(self, sticks: _Sticks, time_us: int) -> Action:
+        """The sticks now as MANUAL_CONTROL, with the ground station's HEARTBEAT when due;
+        never waited for (PX4's sticks are a stream, not a conversation)."""
+        sticks.next_us = _next_on_grid(sticks.next_us, STICKS_PERIOD_US, time_us)
+        roll, pitch, yaw, throttle = sticks.at(time_us / 1e6)
+        messages = [self.ground.manual_control(roll, pitch, yaw, throttle)]
+        if time_us >= sticks.heartbeat_us:
+            sticks.heartbeat_us = _next_on_grid(sticks.heartbeat_us, HEARTBEAT_PERIOD_US, time_us)
+            messages.append(self.ground.heartbeat())
+        return Action("sticks", unacknowledged=tuple(messages), logged=False)
 
     def _track_setpoint(
         self, stream: _Stream, track: SetpointTrack, time_us: int, stamp_s: float
