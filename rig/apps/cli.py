@@ -33,7 +33,7 @@ from rig.lockstep.loop import AUTOPILOTS, RUNS_DIR, Progress, RunOptions, RunRes
 from rig.lockstep.pacing import parse_speed
 from rig.mavlink.px4_api import Ports
 from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import SensorLayer, load_scenario
+from rig.scenarios.scenario import Rates, SensorLayer, load_scenario
 
 HIL_SIM_SCENARIO = "hil_sim"
 #: Pacing per command: the demo flight is watched in a ground station, so real time.
@@ -67,7 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     _add_run_options(demo)
     replay = commands.add_parser(
-        "replay", help="fly a real PX4 flight log's own setpoints through the rig"
+        "replay",
+        help="fly a real PX4 flight log through the rig: its setpoints (reference autopilot) "
+        "or, with PX4, its parameters, sticks, modes and mission",
     )
     replay.add_argument("log", type=Path, help="the real flight's ULog")
     replay.add_argument("--drive", choices=DRIVES, default="velocity",
@@ -85,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         "--imu-hz",
         type=int,
         default=None,
-        help=f"IMU rate = lockstep rate (default {ReplayOptions.imu_hz})",
+        help=f"IMU rate = lockstep rate (default {Rates().imu_hz}; with PX4 the log's "
+        "IMU_GYRO_RATEMAX)",
     )
     _add_run_options(replay, scenario=False)
     campaign = commands.add_parser(
@@ -222,12 +225,14 @@ def _replay(args: argparse.Namespace, console: Console) -> RunResult:
     replay_options = ReplayOptions(
         drive=args.drive, window_s=tuple(args.window) if args.window else None,
         start_s=args.start, end_s=args.end, vehicle=args.vehicle, seed=args.seed,
+        autopilot=args.autopilot, px4_dir=args.px4,
         **{name: value for name, value in given.items() if value is not None},
     )  # fmt: skip
     plan = plan_replay(args.log, replay_options)
     options = _run_options(args)
+    how = "as its pilot flew it" if plan.px4 else f"{plan.drive} drive"
     _announce(console, f"replay of {plan.log_path.name}",
-              f"{plan.drive} drive, {plan.start_s:.3f}-{plan.end_s:.3f} s, vehicle "
+              f"{how}, {plan.start_s:.3f}-{plan.end_s:.3f} s, vehicle "
               f"{plan.vehicle} ({plan.vehicle_reason}), {len(plan.parameters)} parameters "
               f"from the log", replay_options.sensor_layer, options)  # fmt: skip
     for level, text in plan.notes:
@@ -238,14 +243,14 @@ def _replay(args: argparse.Namespace, console: Console) -> RunResult:
 
 def _run_options(args: argparse.Namespace) -> RunOptions:
     return RunOptions(
-        autopilot=getattr(args, "autopilot", "reference"),
+        autopilot=args.autopilot,
         instance=args.instance,
         out_dir=args.out,
         sensor_layer=args.sensor_layer,
         duration_s=getattr(args, "duration", None),
         timeouts=LinkTimeouts(connect_s=args.connect_timeout),
         autopilot_params=tuple(args.param),
-        px4_dir=getattr(args, "px4", None),
+        px4_dir=args.px4,
         speed=args.speed if args.speed is not None else DEFAULT_SPEED.get(args.command, math.inf),
         force=args.force,
     )
@@ -269,12 +274,12 @@ def _add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) 
     parser.add_argument("--instance", type=int, default=0, help="SITL instance i: ports +i")
     parser.add_argument("--out", type=Path, default=None,
                         help="run folder (default runs/<name>-<UTC time>)")  # fmt: skip
+    parser.add_argument("--autopilot", choices=AUTOPILOTS, default="reference",
+                        help="reference (embedded) or px4 (PX4 SITL)")  # fmt: skip
+    parser.add_argument("--px4", type=Path, default=None, metavar="DIR",
+                        help="PX4 SITL build (bin/px4 + etc/) the rig starts; default "
+                             "$PX4_DIR, else the rig waits for a PX4 you start")  # fmt: skip
     if scenario:
-        parser.add_argument("--autopilot", choices=AUTOPILOTS, default="reference",
-                            help="reference (embedded) or px4 (PX4 SITL)")  # fmt: skip
-        parser.add_argument("--px4", type=Path, default=None, metavar="DIR",
-                            help="PX4 SITL build (bin/px4 + etc/) the rig starts; default "
-                                 "$PX4_DIR, else the rig waits for a PX4 you start")  # fmt: skip
         parser.add_argument("--duration", type=float, default=None,
                             help="simulated seconds (default: the scenario's)")  # fmt: skip
         parser.add_argument("--vehicle", default=None, metavar="NAME|PATH",

@@ -21,6 +21,13 @@ Drives (the reference autopilot's matching loop takes the log's own setpoints):
 
 Attitude and rates are open loop on position, so the velocity drive flies the vehicle to
 the window and takes over again after it.
+
+``--autopilot px4`` flies PX4 SITL instead, with the firmware's own parameters from the log
+(:func:`rig.autopilots.px4.sitl_parameters` decides which ones SITL takes) and as the pilot
+flew it: the log's sticks (``manual_control_setpoint``) as MANUAL_CONTROL, its arm, mode
+switches and disarm at their times (``vehicle_status``), its mission uploaded as it was
+flown (``navigator_mission_item``) and, in Offboard, its velocity setpoints. PX4 boots
+PX4_BOOT_S before the log's start, so it is ready when the log arms.
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -44,6 +51,16 @@ from hil_config import FieldError, read_toml
 from quad_model.environment import Environment, GeoPoint, MagneticField
 from quad_model.model import ModelInputError, charge_used_for_voltage_c
 from quad_model.vehicle import VEHICLES_DIR, BatteryParams, VehicleFileError, vehicle_from_dict
+from rig.autopilots.px4 import (
+    RIG_PARAMETERS,
+    STICK_PARAMETERS,
+    Px4NotFound,
+    build_parameters,
+    check_imu_rate,
+    find_px4,
+    lockstep_parameters,
+    sitl_parameters,
+)
 from rig.autopilots.reference.params import PARAMETERS, ParameterError, Parameters
 from rig.chips.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PwmOutput
 from rig.errors import RigError
@@ -56,17 +73,22 @@ from rig.lockstep.loop import (
     claim_run_dir,
     run_scenario,
 )
+from rig.mavlink.ground_link import PX4_MODES, MissionItem
+from rig.mavlink.px4_api import mavlink
 from rig.scenarios.scenario import (
     Arm,
+    CodeCommand,
     Disarm,
     Rates,
     Scenario,
     ScriptCommand,
     SensorLayer,
+    SetMode,
     SetpointTrack,
     StartPose,
     Takeoff,
     Track,
+    UploadMission,
 )
 
 DRIVES = ("velocity", "attitude", "rates")
@@ -91,6 +113,32 @@ WMM_EPOCH_YEAR = 2026.0
 MOTOR_OUTPUT_FUNCTIONS = (101, 102, 103, 104)
 #: PX4 vehicle_status.arming_state ARMED (msg/VehicleStatus.msg).
 ARMING_STATE_ARMED = 2
+#: PX4 SITL boots this long (simulated s) before the log's start, so that its pre-flight
+#: checks (EKF2 aligned, GPS healthy for EKF2_REQ_GPS_H) have passed when the log arms, and
+#: the arm, every mode switch and the landing happen at the log's own times.
+PX4_BOOT_S = 20.0
+#: Seconds after PX4's boot at which the log's mission is uploaded.
+PX4_SETUP_S = 1.0
+#: The mode the log armed in is selected this long before the arm (PX4 switches modes freely
+#: while disarmed; the arm is then checked in that mode).
+ARM_MODE_LEAD_S = 1.0
+#: A PX4 replay's IMU (= lockstep) rate unless --imu-hz says otherwise is the log's
+#: IMU_GYRO_RATEMAX, the rate its rate controller ran at (800 Hz on the X500), where PX4 can
+#: keep lockstep at it; else this. At 250 Hz the rig's IMU (vibration sampled without the
+#: real chips' 8 kHz filtering) left EKF2's vertical velocity 1-2 m/s off and the altitude
+#: hold swinging ±2.5 m where the real one held; at 800 and 1000 Hz it follows the real flight.
+PX4_IMU_HZ = Rates().imu_hz
+#: ``vehicle_status.latest_disarming_reason`` of a pilot's or ground station's disarm (stick
+#: gesture, RC switch, external command: the same numbers in every PX4 since 1.13). Any other
+#: disarm (landing, pre-flight timeout, failsafe) was PX4's own. Either way a PX4 replay sends
+#: a disarm at the log's time, so the disarmed stretch after landing is the log's; PX4 takes
+#: it only once it has landed, and otherwise disarms by itself later.
+PILOT_DISARM_REASONS = frozenset({1, 2, 4})
+#: nav_states flown on the pilot's sticks: PX4 needs manual control input in them.
+STICK_MODES = frozenset({0, 1, 2, 10, 15})
+NAV_STATE_MISSION, NAV_STATE_OFFBOARD = 3, 14
+#: navigator_mission_item frames with a global position (MAV_FRAME GLOBAL*, PX4 stores 0).
+GLOBAL_FRAMES = frozenset({0, 3, 5, 6})
 #: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
 _DRIVE_FIELDS = {
     "velocity": ("vehicle_local_position_setpoint", ("vx", "vy", "vz", "yaw")),
@@ -115,7 +163,9 @@ class ReplayOptions:
     vehicle: str | None = None  # None: from SYS_AUTOSTART
     seed: int = 0
     sensor_layer: SensorLayer = SensorLayer.TLM
-    imu_hz: int = Rates().imu_hz
+    imu_hz: int | None = None  # None: Rates' default (1000 Hz); with PX4 see PX4_IMU_HZ
+    autopilot: str = AUTOPILOTS[0]
+    px4_dir: Path | None = None  # PX4's build (--px4); None: $PX4_DIR
 
 
 @dataclass(frozen=True)
@@ -123,6 +173,28 @@ class SkippedParameter:
     name: str
     value: float
     reason: str
+
+
+@dataclass(frozen=True)
+class FlightEvent:
+    """Something the pilot, a ground station or PX4 did in the real flight (log seconds):
+    ``kind`` arm, disarm, mode (the pilot's mode, ``nav_state_user_intention``) or autopilot
+    (PX4 changed mode by itself: a failsafe). ``commanded``: a PX4 replay sends it."""
+
+    time_s: float
+    kind: str
+    nav_state: int | None
+    commanded: bool
+    detail: str
+
+    def describe(self) -> str:
+        what = {"arm": "armed", "disarm": "disarmed"}.get(self.kind) or (
+            f"mode {_mode_name(self.nav_state)}"
+            if self.kind == "mode"
+            else f"PX4 switched to {_mode_name(self.nav_state)} by itself"
+        )
+        action = "commanded" if self.commanded else "not commanded"
+        return f"{self.time_s:.3f} s {what} ({self.detail}): {action}"
 
 
 @dataclass(frozen=True)
@@ -155,23 +227,41 @@ class Replay:
     tracks: dict[str, SetpointTrack]
     options: ReplayOptions
     log_warnings: tuple[str, ...] = ()  # what pyulog reported (a damaged message skipped)
-    #: Airborne at --start: the height (m) taken off to first, and how long that takes (s).
+    #: Airborne at --start: the height (m) taken off to first.
     start_height_m: float = 0.0
+    #: Run seconds flown before the log's start: PX4's boot, an airborne start's take-off.
     lead_in_s: float = 0.0
+    #: A PX4 replay's: the log's events, its mission as flown, the pilot's sticks.
+    events: tuple[FlightEvent, ...] = ()
+    mission: tuple[MissionItem, ...] = ()
+    mission_notes: tuple[str, ...] = ()
+    sticks: SetpointTrack | None = None
+    firmware: str = ""  # the log's PX4, as its header says
+
+    @property
+    def px4(self) -> bool:
+        return self.options.autopilot == "px4"
+
+    @property
+    def ready_s(self) -> float:
+        """Run seconds after which the autopilot can arm (an airborne start's lead-in)."""
+        return PX4_BOOT_S if self.px4 else AUTOPILOT_READY_S
 
     @property
     def commands(self) -> tuple[ScriptCommand, ...]:
         """Arm, stream the velocity track (the drive's inside the window), disarm; run seconds.
 
         A log that starts airborne is preceded by the lead-in: arm, take off to its height,
-        then the track from ``lead_in_s`` on."""
+        then the track from ``lead_in_s`` on. PX4 flies :meth:`_pilots_commands` instead."""
         if self.arm_s is None:
             return ()
+        if self.px4:
+            return self._pilots_commands()
         origin = self.start_s - self.lead_in_s  # log second of run second 0
         tracks = {kind: _delayed(track, self.lead_in_s) for kind, track in self.tracks.items()}
         commands: list[ScriptCommand] = [Arm(at_s=self.arm_s - origin)]
-        if self.lead_in_s:
-            commands.append(Takeoff(at_s=AUTOPILOT_READY_S + 0.1, altitude_m=self.start_height_m))
+        if self.start_height_m:
+            commands.append(Takeoff(at_s=self.ready_s + 0.1, altitude_m=self.start_height_m))
         commands.append(Track(at_s=max(self.arm_s - origin, self.lead_in_s),
                               track=tracks["velocity"]))  # fmt: skip
         if self.window_s is not None and self.drive != "velocity":
@@ -184,20 +274,75 @@ class Replay:
             commands.append(Disarm(at_s=self.disarm_s - origin, may_refuse=True))
         return tuple(sorted(commands, key=lambda c: c.at_s))
 
+    def _pilots_commands(self) -> tuple[ScriptCommand, ...]:
+        """The flight as its pilot and ground station flew it (PX4): the sticks from PX4's
+        boot on, the mission uploaded while PX4 boots, the mode it armed in just before the
+        arm, then every commanded event at its log time (an airborne start: after the
+        lead-in's arm and take-off, the mode in force at --start)."""
+        origin = self.start_s - self.lead_in_s
+        commands: list[ScriptCommand] = []
+        if self.sticks is not None:
+            commands.append(Track(at_s=0.0, track=self._lead_in_sticks()))
+        if self.mission:
+            commands.append(UploadMission(at_s=PX4_SETUP_S, items=self.mission))
+        if self.start_height_m:
+            takeoff = Takeoff(at_s=self.ready_s + 0.1, altitude_m=self.start_height_m)
+            commands += [Arm(at_s=self.ready_s), takeoff]
+        arms = {event.time_s for event in self.events if event.kind == "arm"}
+        for event in self.events:
+            if not event.commanded:
+                continue
+            at_s = event.time_s - origin
+            if event.kind == "arm":
+                commands.append(Arm(at_s=at_s))
+            elif event.kind == "disarm":
+                commands.append(Disarm(at_s=at_s, may_refuse=True))
+            elif event.nav_state == NAV_STATE_OFFBOARD:
+                velocity = _delayed(self.tracks["velocity"], self.lead_in_s)
+                commands.append(Track(at_s=at_s, track=velocity))
+            else:  # the mode it armed in is selected before the arm
+                at_s -= ARM_MODE_LEAD_S if event.time_s in arms else 0.0
+                commands.append(SetMode(at_s=at_s, nav_state=event.nav_state))
+        return tuple(sorted(commands, key=lambda c: c.at_s))
+
+    def _lead_in_sticks(self) -> SetpointTrack:
+        """The sticks on the run's clock: before the log's start the first sample is held,
+        except in an airborne start's lead-in, where they rest centred until --start."""
+        assert self.sticks is not None
+        track = _delayed(self.sticks, self.lead_in_s)
+        if not self.start_height_m:
+            return track
+        centred = (0.0, 0.0, 0.0, 0.0)
+        return SetpointTrack("manual", (0.0, self.lead_in_s - 1e-3, *track.times_s),
+                             (centred, centred, *track.values))  # fmt: skip
+
     @property
     def autopilot_params(self) -> tuple[str, ...]:
-        """The applied parameters as ``--param NAME=VALUE`` (repr: the exact float)."""
-        return tuple(f"{name}={value!r}" for name, value in self.parameters.items())
+        """The applied parameters as ``--param NAME=VALUE`` (repr: the exact float); PX4 also
+        gets the rig's own stick input mode (:data:`STICK_PARAMETERS`)."""
+        applied = self.parameters | (STICK_PARAMETERS if self.px4 else {})
+        return tuple(f"{name}={value!r}" for name, value in applied.items())
+
+    @property
+    def rig_parameters(self) -> dict[str, float]:
+        """What the rig sets in PX4 whatever the log says (lockstep, SITL, the sticks)."""
+        if not self.px4:
+            return {}
+        assert self.options.imu_hz is not None
+        return RIG_PARAMETERS | lockstep_parameters(self.options.imu_hz) | STICK_PARAMETERS
 
     @property
     def notes(self) -> tuple[tuple[str, str], ...]:
         """Warnings for the run's log: what the replay could not take from the real flight."""
         notes = [("warn", f"replay: {warning}") for warning in self.log_warnings]
-        notes += [
-            ("warn", f"replay: parameter {s.name} = {s.value:g} skipped ({s.reason})")
-            for s in self.skipped
-        ]
-        if self.lead_in_s:
+        if self.px4:
+            notes += self._px4_notes()
+        else:
+            notes += [
+                ("warn", f"replay: parameter {s.name} = {s.value:g} skipped ({s.reason})")
+                for s in self.skipped
+            ]
+        if self.start_height_m:
             notes.append((
                 "warn",
                 f"replay: the log starts airborne at {self.start_s:.3f} s; the rig takes off to "
@@ -217,6 +362,36 @@ class Replay:
         notes.append(("info", "replay: wind is zero (the real wind is unknown)"))
         return tuple(notes)
 
+    def _px4_notes(self) -> list[tuple[str, str]]:
+        """The firmware and where its parameters came from, skipped ones grouped by reason,
+        PX4's boot before the log, and the log's events with what the replay does of each."""
+        total = len(self.parameters) + len(self.skipped)
+        notes = [("info", f"replay: the log was flown by {self.firmware}; PX4 SITL gets "
+                          f"{len(self.parameters)} of its {total} parameters (replay.json lists "
+                          "each one applied or skipped)")]  # fmt: skip
+        by_reason: dict[str, list[str]] = {}
+        for skipped in self.skipped:
+            by_reason.setdefault(skipped.reason, []).append(skipped.name)
+        notes += [
+            ("warn", f"replay: skipped ({reason}): {', '.join(names)}")
+            for reason, names in by_reason.items()
+        ]
+        logged = {s.name: f"{s.value:g}" for s in self.skipped}
+        notes.append((
+            "info",
+            f"replay: PX4 runs in lockstep at {self.options.imu_hz} Hz: IMU_GYRO_RATEMAX = "
+            f"IMU_INTEG_RATE = {self.options.imu_hz} (the log's: "
+            f"{logged.get('IMU_GYRO_RATEMAX', 'none')} and {logged.get('IMU_INTEG_RATE', 'none')})",
+        ))  # fmt: skip
+        notes.append((
+            "info",
+            f"replay: PX4 boots {PX4_BOOT_S:g} s before the log's start "
+            f"({self.start_s - self.lead_in_s:.3f} s on the log's clock) to be ready to arm",
+        ))  # fmt: skip
+        notes += [("info", f"replay: {note}") for note in self.mission_notes]
+        notes += [("info", f"replay: log event {event.describe()}") for event in self.events]
+        return notes
+
     def scenario(self, vehicle_path: Path) -> Scenario:
         """The scenario this replay flies, with its vehicle file at ``vehicle_path``."""
         environment = Environment()
@@ -225,13 +400,14 @@ class Replay:
                 home=self.home, magnetic_field=MagneticField.from_wmm(self.home, WMM_EPOCH_YEAR)
             )
         try:
-            rates = Rates(imu_hz=self.options.imu_hz)
+            rates = Rates(imu_hz=self.options.imu_hz or Rates().imu_hz)
         except FieldError as error:  # an IMU rate the model cannot step
             reason = f"--imu-hz = {error.value}: {error.reason}"
             raise ReplayError(f"{self.log_path}: {reason}") from None
         return Scenario(
             name=f"replay-{self.log_path.stem}",
-            description=f"replay of {self.log_path.name} ({self.drive} drive), "
+            description=f"replay of {self.log_path.name} "
+            f"({'as its pilot flew it' if self.px4 else f'{self.drive} drive'}), "
             f"{self.start_s:.3f}-{self.end_s:.3f} s",
             vehicle=str(vehicle_path),
             duration_s=self.end_s - self.start_s + self.lead_in_s,
@@ -245,8 +421,8 @@ class Replay:
                 battery_voltage_v=self.initial_battery_voltage_v,
             ),
             motor_pwm_range_us=self.motor_pwm_range_us,
-            commands=tuple(c for c in self.commands if not isinstance(c, Track)),
-            tracks=tuple(c for c in self.commands if isinstance(c, Track)),
+            commands=tuple(c for c in self.commands if not isinstance(c, CodeCommand)),
+            tracks=tuple(c for c in self.commands if isinstance(c, CodeCommand)),
             source=str(self.log_path),
         )
 
@@ -263,11 +439,14 @@ class Replay:
             "cell_count": self.cell_count,
             "motor_pwm_range_us": list(self.motor_pwm_range_us),
             "initial_battery_voltage_v": self.initial_battery_voltage_v,
+            "autopilot": self.options.autopilot,
+            "log_firmware": self.firmware,
             "parameters_applied": self.parameters,
-            "parameters_skipped_out_of_range": [
+            "parameters_skipped": [
                 {"name": s.name, "value": s.value, "reason": s.reason} for s in self.skipped
             ],
             "parameters_unknown_count": self.unknown_parameter_count,
+            "parameters_set_by_the_rig": self.rig_parameters,
             "log_warnings": list(self.log_warnings),
             "start_yaw_deg": math.degrees(self.yaw_rad),
             "home": None
@@ -281,6 +460,13 @@ class Replay:
             "real_arm_s": self.real_arm_s,
             "arm_s": self.arm_s,
             "disarm_s": self.disarm_s,
+            "lead_in_s": self.lead_in_s,
+            "events": [asdict(event) for event in self.events],
+            "mission": [  # yaw NaN (the autopilot's choice) as null: JSON has no NaN
+                asdict(item) | {"param4": None if math.isnan(item.param4) else item.param4}
+                for item in self.mission
+            ],
+            "mission_notes": list(self.mission_notes),
             "seed": self.options.seed,
             "sensor_layer": self.options.sensor_layer,
             "imu_hz": self.options.imu_hz,
@@ -290,12 +476,8 @@ class Replay:
 def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) -> Replay:
     """Configure a replay of ``log_path`` (no flying); raises :class:`ReplayError`."""
     path = Path(log_path)
-    if options.drive not in DRIVES:
-        raise ReplayError(f"--drive {options.drive!r}: expected one of {', '.join(DRIVES)}")
-    if options.sensor_layer not in list(SensorLayer):
-        raise ReplayError(
-            f"--sensor-layer {options.sensor_layer!r}: expected one of {', '.join(SensorLayer)}"
-        )
+    options = _checked(options)
+    px4 = options.autopilot == "px4"
     log = _FlightLog(path)
     start_s = log.first_s if options.start_s is None else options.start_s
     end_s = log.last_s if options.end_s is None else options.end_s
@@ -311,10 +493,13 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             f"{AUTOPILOT_READY_S:g} s after --start {start_s:g} s"
         )
     window = _window(path, options, start_s, end_s)
-    start_height_m = lead_in_s = 0.0
+    if px4:
+        options = _with_px4_imu_rate(options, log.parameters)
+    ready_s = PX4_BOOT_S if px4 else AUTOPILOT_READY_S
+    start_height_m, lead_in_s = 0.0, (PX4_BOOT_S if px4 else 0.0)
     if not log.landed_at(start_s):
         start_height_m = log.height_at(start_s)
-        lead_in_s = AUTOPILOT_READY_S + start_height_m / TAKEOFF_CLIMB_MPS + LEAD_IN_SETTLE_S
+        lead_in_s = ready_s + start_height_m / TAKEOFF_CLIMB_MPS + LEAD_IN_SETTLE_S
     vehicle, reason = _vehicle_choice(path, log, options.vehicle)
     vehicle_document, cell_count, battery = _vehicle_document(vehicle, log)
     pwm_range_us = motor_pwm_range(log.parameters, path)
@@ -330,10 +515,15 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             raise ReplayError(
                 f"{path}: battery_status.voltage_v at --start {start_s:g} s: {error}"
             ) from None
-    parameters, skipped, unknown = _parameters(log.parameters)
+    if px4:
+        parameters, skipped, unknown = _px4_parameters(log.parameters, options)
+    else:
+        parameters, skipped, unknown = _parameters(log.parameters)
     real_arm_s, disarm_s = log.arming(start_s, end_s)
-    if lead_in_s:  # armed in the air: the lead-in arms as soon as the autopilot is ready
-        real_arm_s = arm_s = start_s - lead_in_s + AUTOPILOT_READY_S
+    if start_height_m:  # armed in the air: the lead-in arms as soon as the autopilot is ready
+        real_arm_s = arm_s = start_s - lead_in_s + ready_s
+    elif px4:  # PX4 booted early enough to arm at the log's time
+        arm_s = real_arm_s
     else:
         arm_s = None if real_arm_s is None else max(real_arm_s, start_s + AUTOPILOT_READY_S)
     if window is not None and (arm_s is None or window[0] <= arm_s):
@@ -341,9 +531,25 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             f"{path}: --window starts at {window[0]:g} s, before the vehicle is "
             f"armed ({'never' if arm_s is None else f'{arm_s:.3f} s'})"
         )
-    tracks = {"velocity": log.track("velocity", start_s, end_s)}
+    events = log.timeline(start_s, end_s) if px4 else ()
+    offboard = any(e.commanded and e.nav_state == NAV_STATE_OFFBOARD for e in events)
+    tracks = {"velocity": log.track("velocity", start_s, end_s)} if not px4 or offboard else {}
     if options.drive != "velocity":
         tracks[options.drive] = log.track(options.drive, start_s, end_s)
+    home = log.home()
+    mission: tuple[MissionItem, ...] = ()
+    mission_notes: tuple[str, ...] = ()
+    if any(e.commanded and e.nav_state == NAV_STATE_MISSION for e in events):
+        mission, mission_notes = log.flown_mission(home)
+    sticks = None
+    if px4:
+        sticks = log.sticks(start_s, end_s)
+        manual = sorted({e.nav_state for e in events if e.commanded} & STICK_MODES)
+        if sticks is None and manual:
+            raise ReplayError(
+                f"{path}: topic manual_control_setpoint (the pilot's sticks, which PX4 needs "
+                f"in mode {_mode_name(manual[0])}) is not in the log"
+            )
     replay = Replay(
         log_path=path,
         drive=options.drive,
@@ -360,7 +566,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         skipped=skipped,
         unknown_parameter_count=unknown,
         yaw_rad=log.heading_at(start_s),
-        home=log.home(),
+        home=home,
         real_arm_s=real_arm_s,
         arm_s=arm_s,
         disarm_s=disarm_s,
@@ -369,9 +575,78 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         log_warnings=log.warnings,
         start_height_m=start_height_m,
         lead_in_s=lead_in_s,
+        events=events,
+        mission=mission,
+        mission_notes=mission_notes,
+        sticks=sticks,
+        firmware=log.firmware,
     )
     replay.scenario(Path(vehicle))  # a bad rate fails here, before a run folder exists
     return replay
+
+
+def _checked(options: ReplayOptions) -> ReplayOptions:
+    """The options with the IMU rate resolved; a bad one fails in one line naming its flag."""
+    if options.drive not in DRIVES:
+        raise ReplayError(f"--drive {options.drive!r}: expected one of {', '.join(DRIVES)}")
+    if options.sensor_layer not in list(SensorLayer):
+        raise ReplayError(
+            f"--sensor-layer {options.sensor_layer!r}: expected one of {', '.join(SensorLayer)}"
+        )
+    if options.autopilot not in AUTOPILOTS:
+        raise ReplayError(
+            f"--autopilot {options.autopilot!r}: expected one of {', '.join(AUTOPILOTS)}"
+        )
+    if options.autopilot != "px4":
+        return replace(options, imu_hz=options.imu_hz or Rates().imu_hz)
+    if options.drive != "velocity" or options.window_s is not None:
+        raise ReplayError(
+            "--drive and --window choose the reference autopilot's loop; PX4 flies the log "
+            "as its pilot flew it (sticks, modes, mission)"
+        )
+    if options.imu_hz is not None:
+        try:
+            check_imu_rate(options.imu_hz)
+        except RigError as error:
+            raise ReplayError(f"--imu-hz {options.imu_hz}: {error}") from None
+    return options
+
+
+def _with_px4_imu_rate(options: ReplayOptions, logged: Mapping[str, float]) -> ReplayOptions:
+    """Without --imu-hz, PX4 runs its rate loop at the log's IMU_GYRO_RATEMAX when it can
+    keep lockstep there (PX4_IMU_HZ otherwise)."""
+    if options.imu_hz is not None:
+        return options
+    rate = int(logged.get("IMU_GYRO_RATEMAX", 0))
+    try:
+        check_imu_rate(rate)
+        Rates(imu_hz=rate)
+    except (RigError, FieldError):
+        rate = PX4_IMU_HZ
+    return replace(options, imu_hz=rate)
+
+
+def _px4_parameters(
+    logged: dict[str, float | int], options: ReplayOptions
+) -> tuple[dict[str, float | int], tuple[SkippedParameter, ...], int]:
+    """The log's parameters PX4 SITL takes, the skipped ones with why, and how many this
+    build does not have; the build (--px4, $PX4_DIR) is needed for its parameter list."""
+    try:
+        build = find_px4(options.px4_dir)
+        known = None if build is None else build_parameters(build)
+    except Px4NotFound as error:
+        raise ReplayError(str(error)) from None
+    if known is None:
+        raise ReplayError(
+            "--autopilot px4 needs PX4's build (--px4 DIR or $PX4_DIR): its parameter list "
+            "decides which of the log's parameters PX4 takes"
+        )
+    applied, skipped = sitl_parameters(logged, known)
+    return (
+        {name: logged[name] for name in applied},
+        tuple(SkippedParameter(*entry) for entry in skipped),
+        sum(1 for name in logged if name not in known),
+    )
 
 
 def run_replay(
@@ -382,14 +657,9 @@ def run_replay(
     """Fly a planned replay; the run folder also gets ``vehicle.toml`` and ``replay.json``.
 
     ``run_options`` says where and how (instance, folder, timeouts); its ``--param`` values
-    are applied after the log's, so they win.
+    are applied after the log's, so they win. The autopilot and PX4's build are the plan's.
     """
     run_options = run_options or RunOptions()
-    if run_options.autopilot != AUTOPILOTS[0]:
-        raise ReplayError(
-            "replay flies the reference autopilot only (its setpoints are "
-            "acknowledged so a replay is deterministic)"
-        )
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     default_dir = RUNS_DIR / f"replay-{replay.log_path.stem}-{stamp}"
     run_dir = claim_run_dir(run_options.out_dir or default_dir, run_options.force)
@@ -399,6 +669,8 @@ def run_replay(
     scenario = replay.scenario(vehicle_path)
     flown = replace(
         run_options,
+        autopilot=replay.options.autopilot,
+        px4_dir=replay.options.px4_dir or run_options.px4_dir,
         out_dir=run_dir,
         sensor_layer=replay.options.sensor_layer,
         autopilot_params=(*replay.autopilot_params, *run_options.autopilot_params),
@@ -425,6 +697,7 @@ class _FlightLog:
         if not self.topics:
             raise ReplayError(f"{path}: the ULog holds no logged data")
         self.parameters: dict[str, float | int] = dict(ulog.initial_parameters)
+        self.firmware = _firmware(ulog.msg_info_dict)
         self.first_s = min(float(d.data["timestamp"][0]) for d in ulog.data_list) / 1e6
         self.last_s = max(float(d.data["timestamp"][-1]) for d in ulog.data_list) / 1e6
 
@@ -501,6 +774,149 @@ class _FlightLog:
             disarm_s = None
         return arm_s, disarm_s
 
+    def timeline(self, start_s: float, end_s: float) -> tuple[FlightEvent, ...]:
+        """The flight's arm, disarm and mode switches in ``[start_s, end_s)``, and what PX4
+        did by itself, from ``vehicle_status``; the mode in force at ``start_s`` comes first.
+
+        The pilot's mode is ``nav_state_user_intention`` (``nav_state`` in a PX4 before
+        1.14): a replay commands it while armed (and the mode armed in), never a mode PX4
+        chose itself in a failsafe, nor the mode it returns to after an automatic disarm.
+        """
+        status = self.topic("vehicle_status", "the flight's arm, disarm and mode switches")
+        for field in ("nav_state", "arming_state"):
+            if field not in status:
+                raise ReplayError(f"{self.path}: topic vehicle_status has no field {field}")
+        times_s = status["timestamp"] / 1e6
+        nav = status["nav_state"].astype(int)
+        intended = status.get("nav_state_user_intention", status["nav_state"]).astype(int)
+        armed = status["arming_state"] == ARMING_STATE_ARMED
+        reasons = status.get("latest_disarming_reason")
+        failsafe = status.get("failsafe", np.zeros(len(nav)))
+        events: list[FlightEvent] = []
+        flown = False
+        for k in range(len(times_s)):
+            time_s, mode = float(times_s[k]), int(intended[k])
+            if armed[k] != (armed[k - 1] if k else False):
+                events.append(self._arming_event(status, k, armed[k], reasons))
+                time_s = events[-1].time_s  # the mode it armed in, or left to after a disarm
+            flown = flown or bool(armed[k])
+            if not k or mode != intended[k - 1]:
+                if mode not in PX4_MODES:
+                    commanded, detail = False, "not a mode a ground station selects"
+                elif armed[k] or not flown:
+                    commanded, detail = True, "the pilot's"
+                else:
+                    commanded, detail = False, "after the disarm: PX4's own"
+                events.append(FlightEvent(time_s, "mode", mode, commanded, detail))
+            elif nav[k] != nav[k - 1]:
+                cause = "failsafe" if failsafe[k] else "back from a failsafe"
+                events.append(FlightEvent(float(times_s[k]), "autopilot", int(nav[k]), False,
+                                          f"{cause}: PX4 decides again"))  # fmt: skip
+        return _clipped(events, start_s, end_s)
+
+    def _arming_event(
+        self, status: dict[str, NDArray[Any]], k: int, armed: bool, reasons: NDArray[Any] | None
+    ) -> FlightEvent:
+        if armed:  # the logger starts on arming: the arm comes before the first sample
+            arm_s = float(status["armed_time"][k]) / 1e6 or float(status["timestamp"][k]) / 1e6
+            return FlightEvent(arm_s, "arm", None, True, "the pilot's")
+        reason = None if reasons is None else int(reasons[k])
+        whose = ("the pilot's" if reason is None or reason in PILOT_DISARM_REASONS else
+                 f"PX4's own, reason {reason}")  # fmt: skip
+        detail = f"{whose}; refused unless PX4 has landed"
+        return FlightEvent(float(status["timestamp"][k]) / 1e6, "disarm", None, True, detail)
+
+    def sticks(self, start_s: float, end_s: float) -> SetpointTrack | None:
+        """The pilot's sticks (``manual_control_setpoint`` roll, pitch, yaw, throttle, PX4's
+        −1..1) in run seconds from ``start_s``, first the ones in force then; None without."""
+        data = self.topics.get("manual_control_setpoint")
+        fields = ("roll", "pitch", "yaw", "throttle")
+        if data is None or any(f not in data for f in fields):
+            return None
+        valid = (
+            data["valid"].astype(bool) if "valid" in data else np.ones(len(data["timestamp"]), bool)
+        )
+        if not valid.any():
+            return None
+        times_s = data["timestamp"][valid] / 1e6
+        values = _hold_last_finite(np.column_stack([data[f][valid].astype(float) for f in fields]))
+        inside = (times_s > start_s) & (times_s < end_s)
+        before = np.nonzero(times_s <= start_s)[0]
+        first = values[before[-1]] if len(before) else values[0]
+        return SetpointTrack(
+            "manual",
+            (0.0, *(float(t) - start_s for t in times_s[inside])),
+            tuple(tuple(float(v) for v in row) for row in (first, *values[inside])),
+        )
+
+    def flown_mission(
+        self, home: GeoPoint | None
+    ) -> tuple[tuple[MissionItem, ...], tuple[str, ...]]:
+        """The mission as PX4 flew it (``navigator_mission_item``: for each sequence number
+        the last item logged with it; one the navigator inserted, such as a climb before the
+        first waypoint, is logged before it), uploadable as MISSION_ITEM_INT, and what the
+        log could not say about it."""
+        data = self.topics.get("navigator_mission_item")
+        if data is None or not len(data["timestamp"]):
+            return (), ("the log flew Mission mode but holds no navigator_mission_item: no "
+                        "mission to upload",)  # fmt: skip
+        last = {int(seq): k for k, seq in enumerate(data["sequence_current"])}
+        flown = 0
+        while flown in last:
+            flown += 1
+        notes = []
+        if flown < len(last):
+            notes.append(
+                f"mission items {sorted(set(last) - set(range(flown)))} follow a gap "
+                f"(item {flown} never became current): only items 0-{flown - 1} go up"
+            )
+        results = self.topics.get("mission_result")
+        total = (
+            int(results["seq_total"].max())
+            if results is not None and "seq_total" in results
+            else flown
+        )
+        if total > flown:
+            notes.append(
+                f"the log's mission had {total} items; {flown} became current and "
+                f"are uploaded (the log holds no more)"
+            )
+        rows = [last[seq] for seq in range(flown)]
+        frames = {int(data["frame"][k]) for k in rows}
+        if not frames <= GLOBAL_FRAMES:
+            return (), (
+                *notes,
+                f"mission frame(s) {sorted(frames - GLOBAL_FRAMES)} are not "
+                "global positions: no mission to upload",
+            )
+        lat = np.array([float(data["latitude"][k]) for k in rows])
+        lon = np.array([float(data["longitude"][k]) for k in rows])
+        shift = (0.0, 0.0)
+        if home is not None:
+            shift = tuple(
+                float(np.round(h - np.median(v)))
+                for h, v in ((home.lat_deg, lat), (home.lon_deg, lon))
+            )
+            if shift != (0.0, 0.0):
+                notes.append(
+                    f"the mission items lie {shift[0]:g}° N, {shift[1]:g}° E from the "
+                    "log's home: whole degrees, the uploader's offset of the log's "
+                    "positions, taken out"
+                )
+        items = tuple(
+            MissionItem(
+                frame=(mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT if data["altitude_is_relative"][k]
+                       else mavlink.MAV_FRAME_GLOBAL_INT),
+                command=int(data["nav_cmd"][k]),
+                lat_deg=float(la) + shift[0], lon_deg=float(lo) + shift[1],
+                alt_m=float(data["altitude"][k]),
+                param1=float(data["time_inside"][k]), param2=float(data["acceptance_radius"][k]),
+                param3=float(data["loiter_radius"][k]), param4=math.degrees(float(data["yaw"][k])),
+            )
+            for k, la, lo in zip(rows, lat, lon, strict=True)
+        )  # fmt: skip
+        return items, tuple(notes)
+
     def track(self, drive: str, start_s: float, end_s: float) -> SetpointTrack:
         """The drive's setpoints in run seconds from ``start_s``, first the one in force then.
 
@@ -528,6 +944,37 @@ class _FlightLog:
         track_times = (0.0, *(float(t) - start_s for t in times_s[inside]))
         rows = (first, *values[inside])
         return SetpointTrack(drive, track_times, tuple(tuple(float(v) for v in r) for r in rows))
+
+
+def _clipped(events: list[FlightEvent], start_s: float, end_s: float) -> tuple[FlightEvent, ...]:
+    """The events in ``[start_s, end_s)``; the pilot's mode in force at ``start_s`` (if the
+    flight was armed then) comes first, moved to ``start_s``."""
+    before = [e for e in events if e.time_s < start_s]
+    inside = [e for e in events if start_s <= e.time_s < end_s]
+    modes = [e for e in before if e.kind == "mode"]
+    armed = [e for e in before if e.kind in ("arm", "disarm")]
+    if modes and armed and armed[-1].kind == "arm":
+        inside.insert(0, replace(modes[-1], time_s=start_s, commanded=True,
+                                 detail="in force at --start"))  # fmt: skip
+    return tuple(inside)
+
+
+def _mode_name(nav_state: int | None) -> str:
+    mode = PX4_MODES.get(nav_state) if nav_state is not None else None
+    return mode[2] if mode is not None else f"nav_state {nav_state}"
+
+
+def _firmware(info: Mapping[str, Any]) -> str:
+    """The log's PX4 as its header names it: version, release type, git hash, board."""
+    release = int(info.get("ver_sw_release", 0) or 0)
+    kind = release & 0xFF
+    suffix = ("" if kind == 255 else "rc" if kind >= 192 else "beta" if kind >= 128
+              else "alpha" if kind >= 64 else "dev")  # fmt: skip
+    version = f"v{release >> 24 & 0xFF}.{release >> 16 & 0xFF}.{release >> 8 & 0xFF}{suffix}"
+    git = str(info.get("ver_sw", ""))[:8]
+    return (
+        f"{info.get('sys_name', 'PX4')} {version} (git {git or '?'}) on {info.get('ver_hw', '?')}"
+    )
 
 
 def _delayed(track: SetpointTrack, delay_s: float) -> SetpointTrack:

@@ -1,0 +1,382 @@
+"""``rig replay LOG --autopilot px4``: the real X500 flight flown by PX4 SITL with the log's
+own parameters, sticks, mode switches and mission.
+
+The plan is checked against the log's facts without PX4 (a stand-in build whose parameter
+list holds the log's names); the flight test needs PX4 (``$PX4_DIR``; CI points it at
+``../shared/px4_sitl``) and skips without it. Times are the log's boot seconds.
+"""
+
+import json
+import lzma
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import pyulog
+
+from quad_model.frames import geodetic_to_ned
+from rig.apps.cli import main
+from rig.apps.replay import (
+    ARM_MODE_LEAD_S,
+    PX4_BOOT_S,
+    PX4_SETUP_S,
+    ReplayError,
+    ReplayOptions,
+    plan_replay,
+    run_replay,
+)
+from rig.autopilots.px4 import PX4_DIR_ENV, build_parameters, find_px4, sitl_parameters
+from rig.lockstep.loop import RunOptions
+from rig.mavlink.ground_link import GroundLink
+from rig.mavlink.px4_api import Ports, mavlink
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import SetMode, SetpointTrack, Track, UploadMission
+from rig.scenarios.script import HEARTBEAT_PERIOD_US, STICKS_PERIOD_US, CommandScript
+
+LOGS = Path(__file__).resolve().parents[2] / "data/flight_logs"
+X500 = LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
+#: The X500 log's first timestamp and its arming (vehicle_status.armed_time, "Armed by RC
+#: switch"), mode switches (nav_state_user_intention) and disarm ("Disarmed by landing").
+FIRST_S, ARMED_S = 407.404345, 408.889359
+MISSION_S, TAKEOVER_S, LAND_S, DISARMED_S = 437.862, 455.431, 481.566, 503.072
+POSCTL, ALTCTL, MISSION, LAND = 2, 1, 3, 18
+#: What SITL must never get from a real vehicle, one example per rule (the log's names).
+NEVER_COPIED = {
+    "CAL_ACC0_ID": "calibration of the real sensor chips",
+    "TC_A_ENABLE": "calibration of the real sensor chips",
+    "SYS_AUTOSTART": "airframe 10016",
+    "SENS_BOARD_ROT": "board's mounting",
+    "MAV_2_UDP_PRT": "MAVLink link of the real board",
+    "GPS_1_PROTOCOL": "serial port",
+    "IMU_GYRO_RATEMAX": "lockstep",
+    "IMU_INTEG_RATE": "lockstep",
+    "MAV_SYS_ID": "SITL instance",
+    "SDLOG_MODE": "boot to shutdown",
+    "COM_RC_IN_MODE": "MANUAL_CONTROL",
+    "COM_CPU_MAX": "no CPU load",
+    "CBRK_SUPPLY_CHK": "no power module",
+}
+
+
+@pytest.fixture(scope="module")
+def log_parameters() -> dict:
+    return pyulog.ULog(str(X500), ["vehicle_status"]).initial_parameters
+
+
+@pytest.fixture(scope="module")
+def stand_in_build(tmp_path_factory, log_parameters) -> Path:
+    """A folder shaped like a PX4 build whose parameter list holds every name of the log but
+    ADC_ADS1115_EN, with PX4 v1.14's EKF2_GPS_CHECK (9 bits, max 511): enough to plan."""
+    root = tmp_path_factory.mktemp("px4_build")
+    (root / "bin").mkdir()
+    (root / "bin/px4").write_text("#!/bin/sh\nexit 1\n")
+    (root / "bin/px4").chmod(0o755)
+    (root / "etc/init.d-posix").mkdir(parents=True)
+    (root / "etc/init.d-posix/rcS").write_text("")
+    (root / "etc/extras").mkdir()
+    entries = [{"name": name, "type": "Int32" if float(value).is_integer() else "Float"}
+               for name, value in log_parameters.items() if name != "ADC_ADS1115_EN"]  # fmt: skip
+    for entry in entries:
+        if entry["name"] == "EKF2_GPS_CHECK":
+            entry |= {"min": 0, "max": 511, "bitmask": [{"index": i} for i in range(9)]}
+    document = json.dumps({"parameters": entries}).encode()
+    (root / "etc/extras/parameters.json.xz").write_bytes(lzma.compress(document))
+    return root
+
+
+@pytest.fixture(scope="module")
+def plan(stand_in_build):
+    return plan_replay(X500, ReplayOptions(autopilot="px4", px4_dir=stand_in_build))
+
+
+# -- the plan ---------------------------------------------------------------------------------
+
+
+def test_the_logs_parameters_go_to_px4_except_the_vehicles_hardware(plan, log_parameters):
+    """Every parameter of the log that this PX4 has, as logged (float32 exact), but the real
+    vehicle's calibrations, drivers, ports and outputs and what SITL and the rig need; each
+    skipped one is listed with its reason in replay.json and the run's notes."""
+    assert plan.parameters["MC_ROLLRATE_P"] == log_parameters["MC_ROLLRATE_P"]
+    assert plan.parameters["CA_ROTOR0_PX"] == 1.0  # the log's geometry, not the rig's airframe
+    assert plan.parameters["NAV_DLL_ACT"] == 2  # hence the rig's ground-station HEARTBEAT
+    assert "MC_ROLLRATE_P=0.14000000059604645" in plan.autopilot_params
+    assert "COM_RC_IN_MODE=1" in plan.autopilot_params  # the rig's joystick, not the log's 3
+    reasons = {s.name: s.reason for s in plan.skipped}
+    for name, reason in NEVER_COPIED.items():
+        assert reason in reasons[name], name
+        assert name not in plan.parameters
+    assert reasons["ADC_ADS1115_EN"] == "not a parameter of this PX4 build"
+    assert reasons["EKF2_GPS_CHECK"] == "above this build's maximum 511"  # v1.17's bits 9-10
+    assert plan.unknown_parameter_count == 1
+    assert len(plan.parameters) + len(plan.skipped) == len(log_parameters) == 1135
+    summary = plan.summary()
+    assert summary["autopilot"] == "px4"
+    assert summary["log_firmware"] == "PX4 v1.17.0rc (git 0b6e4687) on PX4_FMU_V6XRT"
+    assert {"name": "CAL_ACC0_ID", "value": 2949130.0,
+            "reason": reasons["CAL_ACC0_ID"]} in summary["parameters_skipped"]  # fmt: skip
+    rig_owned = summary["parameters_set_by_the_rig"]
+    assert rig_owned["IMU_INTEG_RATE"] == rig_owned["IMU_GYRO_RATEMAX"] == 800
+    assert (rig_owned["COM_RC_IN_MODE"], rig_owned["SYS_HITL"]) == (1, 0)
+    notes = " ".join(text for _, text in plan.notes)
+    assert f"PX4 v1.17.0rc (git 0b6e4687) on PX4_FMU_V6XRT; PX4 SITL gets {len(plan.parameters)} " \
+           "of its 1135 parameters" in notes  # fmt: skip
+    assert "skipped (lockstep: the rig sets it to its IMU rate): IMU_GYRO_RATEMAX, " in notes
+
+
+def test_the_real_px4_build_takes_most_of_the_logs_parameters(log_parameters):
+    """With PX4 v1.14's own parameter list: 682 of 1135 go in; 325 are unknown to it (the
+    log's PX4 is v1.17), 127 are the vehicle's hardware or the rig's, 3 out of its range."""
+    build = find_px4()
+    if build is None:
+        pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV}")
+    plan = plan_replay(X500, ReplayOptions(autopilot="px4"))
+    applied, skipped = sitl_parameters(log_parameters, build_parameters(build))
+    assert applied == plan.parameters
+    assert (len(applied), len(skipped), plan.unknown_parameter_count) == (682, 453, 325)
+    out_of_range = {s.name for s in plan.skipped if "this build's" in s.reason}
+    assert out_of_range == {"BAT2_N_CELLS", "EKF2_GPS_CHECK", "LND_FLIGHT_T_LO"}
+
+
+def test_the_replay_follows_the_logs_events(plan):
+    """PX4 boots PX4_BOOT_S before the log, so the arm and every mode switch go out at the
+    log's times; failsafe mode changes are PX4's to repeat, never commanded."""
+    described = [(round(e.time_s, 3), e.kind, e.nav_state, e.commanded) for e in plan.events]
+    assert described == [
+        (round(ARMED_S, 3), "arm", None, True),
+        (round(ARMED_S, 3), "mode", POSCTL, True),  # the mode it armed in
+        (MISSION_S, "mode", MISSION, True),  # DO_SET_MODE from the ground station
+        (TAKEOVER_S, "mode", POSCTL, True),  # "Pilot took over using sticks"
+        (474.362, "autopilot", ALTCTL, False),  # "Failsafe: blind land"
+        (476.353, "autopilot", POSCTL, False),
+        (LAND_S, "mode", LAND, True),
+        (DISARMED_S, "disarm", None, True),  # "Disarmed by landing": sent, PX4 landed by then?
+        (DISARMED_S, "mode", POSCTL, False),  # PX4's own after the disarm
+    ]
+    origin = FIRST_S - PX4_BOOT_S
+    assert plan.lead_in_s == PX4_BOOT_S
+    assert plan.arm_s == plan.real_arm_s == ARMED_S
+    commands = [(type(c).__name__, round(c.at_s + origin, 3), getattr(c, "nav_state", None))
+                for c in plan.commands]  # fmt: skip
+    assert commands == [
+        ("Track", round(origin, 3), None),  # the sticks, from PX4's boot on
+        ("UploadMission", round(origin + PX4_SETUP_S, 3), None),
+        ("SetMode", round(ARMED_S - ARM_MODE_LEAD_S, 3), POSCTL),
+        ("Arm", round(ARMED_S, 3), None),
+        ("SetMode", MISSION_S, MISSION),
+        ("SetMode", TAKEOVER_S, POSCTL),
+        ("SetMode", LAND_S, LAND),
+        ("Disarm", DISARMED_S, None),
+    ]
+    assert plan.commands[-1].may_refuse  # PX4 refuses it until it has landed
+    scenario = plan.scenario(Path("x500_v2"))
+    assert scenario.start.clock_s == pytest.approx(origin)
+    assert scenario.duration_s == pytest.approx(plan.end_s - FIRST_S + PX4_BOOT_S)
+    assert scenario.rates.imu_hz == 800  # the log's IMU_GYRO_RATEMAX: its rate loop's rate
+    assert {type(c) for c in scenario.tracks} == {Track, SetMode, UploadMission}
+    notes = [text for _, text in plan.notes]
+    assert "replay: log event 474.362 s PX4 switched to Altitude by itself (failsafe: PX4 " \
+           "decides again): not commanded" in notes  # fmt: skip
+
+
+def test_the_mission_is_uploaded_as_it_was_flown(plan):
+    """navigator_mission_item: items 0-3 (the climb the navigator put before item 0 is not
+    one of them), altitudes above home, moved back by the uploader's whole-degree offset
+    onto the log's home; the log's fifth item never flew, so it is not known."""
+    assert [(i.frame, i.command, i.alt_m) for i in plan.mission] == [
+        (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_CMD_NAV_WAYPOINT, alt)
+        for alt in (5.0, 10.0, 5.0, 10.0)
+    ]
+    home = plan.home
+    distances = [
+        math.hypot(*geodetic_to_ned(i.lat_deg, i.lon_deg, 0.0, home.lat_deg, home.lon_deg, 0.0)[:2])
+        for i in plan.mission
+    ]
+    assert distances[0] < 1.0  # the first waypoint is above the take-off point
+    assert max(distances) < 50.0  # the legs SOURCES.md describes, ~40 m
+    assert all(math.isnan(i.param4) and i.param2 == 0.0 for i in plan.mission)
+    assert plan.mission_notes == (
+        "the log's mission had 5 items; 4 became current and are uploaded (the log holds no more)",
+        "the mission items lie 10° N, 2° E from the log's home: whole degrees, the uploader's "
+        "offset of the log's positions, taken out",
+    )
+    assert plan.summary()["mission"][0]["param4"] is None
+
+
+def test_the_pilots_sticks_are_the_logs(plan):
+    sticks = plan.sticks
+    assert sticks.kind == "manual"
+    assert len(sticks.times_s) == 477  # 476 samples (5 Hz) and the one in force at the start
+    values = np.array(sticks.values)
+    assert np.abs(values).max() <= 1.0
+    assert values[0, 3] == pytest.approx(0.121, abs=1e-3)  # throttle just above centre
+    assert values[:, 3].min() < -0.7  # throttle pulled down on the landing
+
+
+def test_px4_replay_options_fail_in_one_line(stand_in_build, tmp_path, monkeypatch):
+    def error(**options) -> str:
+        with pytest.raises(ReplayError) as raised:
+            plan_replay(X500, ReplayOptions(autopilot="px4", **options))
+        assert "\n" not in str(raised.value)
+        return str(raised.value)
+
+    assert error(px4_dir=stand_in_build, drive="rates", window_s=(455.0, 460.0)) == (
+        "--drive and --window choose the reference autopilot's loop; PX4 flies the log as its "
+        "pilot flew it (sticks, modes, mission)"
+    )
+    assert error(px4_dir=stand_in_build, imu_hz=2000).startswith(
+        "--imu-hz 2000: rates.imu_hz = 2000: PX4 answers every lockstep frame only when"
+    )
+    monkeypatch.delenv(PX4_DIR_ENV, raising=False)
+    assert error() == (
+        "--autopilot px4 needs PX4's build (--px4 DIR or $PX4_DIR): its parameter list decides "
+        "which of the log's parameters PX4 takes"
+    )
+    (stand_in_build / "etc/extras/parameters.json.xz").rename(tmp_path / "kept.xz")
+    try:
+        assert "cannot read the build's parameter metadata" in error(px4_dir=stand_in_build)
+    finally:
+        (tmp_path / "kept.xz").rename(stand_in_build / "etc/extras/parameters.json.xz")
+
+
+def test_rig_replay_with_px4_says_in_one_line_what_it_needs(capsys, monkeypatch):
+    monkeypatch.delenv(PX4_DIR_ENV, raising=False)
+    assert main(["replay", str(X500), "--autopilot", "px4"]) == 1
+    assert capsys.readouterr().err == (
+        "rig: error: --autopilot px4 needs PX4's build (--px4 DIR or $PX4_DIR): its parameter "
+        "list decides which of the log's parameters PX4 takes\n"
+    )
+
+
+# -- the sticks on the link ---------------------------------------------------------------
+
+
+class StickGround:
+    """The GroundLink calls the sticks make, as plain tuples."""
+
+    def manual_control(self, roll, pitch, yaw, throttle):
+        return ("sticks", round(roll, 6), round(pitch, 6), round(yaw, 6), round(throttle, 6))
+
+    def heartbeat(self):
+        return ("heartbeat",)
+
+    def set_mode(self, nav_state):
+        return ("mode", nav_state)
+
+    def attempt(self, conversation):
+        return conversation
+
+
+def test_sticks_are_sent_every_20_ms_interpolated_with_a_heartbeat_each_second():
+    track = SetpointTrack("manual", (0.0, 0.2, 0.4), ((0.0, 0.0, 0.0, -1.0),
+                                                      (0.5, -0.5, 0.0, 0.0),
+                                                      (0.5, -0.5, 0.0, 0.0)))  # fmt: skip
+    commands = (Track(at_s=0.0, track=track), SetMode(at_s=0.1, nav_state=POSCTL))
+    script = CommandScript(commands, StickGround(), barrier=False)
+    sent = []
+    for time_us in range(0, 2_000_001, 4000):  # 250 Hz frames
+        for action in script.due(time_us):
+            sent += [(time_us, message) for message in action.unacknowledged]
+            if action.conversation is not None:
+                sent.append((time_us, action.conversation))
+    sticks = [(t, m) for t, m in sent if m[0] == "sticks"]
+    assert [t for t, _ in sticks] == list(range(0, 2_000_001, STICKS_PERIOD_US))
+    assert dict(sticks)[100_000] == ("sticks", 0.25, -0.25, 0.0, -0.5)  # halfway
+    assert dict(sticks)[1_000_000] == ("sticks", 0.5, -0.5, 0.0, 0.0)  # held after the last
+    assert (100_000, ("mode", POSCTL)) in sent  # a mode switch does not stop the sticks
+    beats = [t for t, m in sent if m == ("heartbeat",)]
+    assert beats == list(range(0, 2_000_001, HEARTBEAT_PERIOD_US))
+
+
+def test_manual_control_carries_px4s_stick_convention(free_instance):
+    """MANUAL_CONTROL x = pitch, y = roll, r = yaw (±1000), z = throttle 0..1000 (PX4
+    reads z/500 − 1): PX4's own manual_control_setpoint comes back out."""
+    ports = Ports(free_instance())
+    ground = GroundLink(ports, home=None)
+    try:
+        message = ground.manual_control(roll=0.25, pitch=-0.5, yaw=1.5, throttle=-1.0)
+        beat = ground.heartbeat()
+    finally:
+        ground.close()
+    assert (message.x, message.y, message.z, message.r) == (-500, 250, 0, 1000)  # yaw at the stop
+    assert message.target == ports.system_id
+    assert (beat.type, beat.autopilot) == (mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID)
+
+
+# -- PX4 flies it -------------------------------------------------------------------------------
+
+#: The flight test's window: armed idle, the POSCTL take-off, the hover, the mission and the
+#: pilot taking over with the sticks (about 40 s of wall time with PX4 on two cores).
+WINDOW_END_S = 460.0
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory):
+    build = find_px4()
+    if build is None:
+        pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl)")
+    from rig.mavlink.px4_api import free_instance
+
+    out = tmp_path_factory.mktemp("px4_replay")
+    plan = plan_replay(X500, ReplayOptions(autopilot="px4", end_s=WINDOW_END_S, seed=3))
+    timeouts = LinkTimeouts(connect_s=60, answer_s=30)
+    result = run_replay(plan, RunOptions(instance=free_instance(60, 40), out_dir=out,
+                                         timeouts=timeouts))  # fmt: skip
+    return (out, pyulog.ULog(str(X500)), pyulog.ULog(str(result.autopilot_log)),
+            pyulog.ULog(str(result.rig_log)))  # fmt: skip
+
+
+def _armed_modes(log, until_s):
+    """(time, nav_state) when armed and at each mode change while armed, before ``until_s``."""
+    data = log.get_dataset("vehicle_status").data
+    times_s, changes = data["timestamp"] / 1e6, []
+    for k in np.nonzero((data["arming_state"] == 2) & (times_s < until_s))[0]:
+        if not changes or changes[-1][1] != data["nav_state"][k]:
+            changes.append((float(times_s[k]), int(data["nav_state"][k])))
+    return changes
+
+
+def _height_gain_m(log, time_s, ground_s=411.0):
+    """Climb since ``ground_s`` by the autopilot's estimate (its origin is not the ground)."""
+    data = log.get_dataset("vehicle_local_position").data
+    z = np.interp([ground_s, time_s], data["timestamp"] / 1e6, data["z"])
+    return float(z[0] - z[1])
+
+
+@pytest.mark.closed_loop
+def test_px4_arms_switches_modes_and_climbs_as_the_real_flight(flown):
+    """PX4 arms at the log's time (within 0.1 s), flies the log's modes in its order (each
+    switch within 0.5 s of the log's; the take-over it makes itself, from the replayed
+    sticks), takes off within 0.5 s of the real take-off and climbs like the real one (its
+    estimate's height gain at 420 s within 1.5 m, 430 s within 2 m)."""
+    out, real, px4, _ = flown
+    flown_changes, real_changes = _armed_modes(px4, WINDOW_END_S), _armed_modes(real, WINDOW_END_S)
+    modes = [POSCTL, MISSION, POSCTL]
+    assert [mode for _, mode in flown_changes] == [mode for _, mode in real_changes] == modes
+    assert flown_changes[0][0] == pytest.approx(ARMED_S, abs=0.1)
+    for flown_change, real_change in zip(flown_changes, real_changes, strict=True):
+        assert flown_change[0] == pytest.approx(real_change[0], abs=0.5)
+    messages = {m.message.strip(): m.timestamp / 1e6 for m in px4.logged_messages}
+    assert messages["[commander] Takeoff detected"] == pytest.approx(411.97, abs=0.5)
+    for time_s, bound_m in ((420.0, 1.5), (430.0, 2.0)):
+        assert _height_gain_m(px4, time_s) == pytest.approx(_height_gain_m(real, time_s),
+                                                             abs=bound_m)  # fmt: skip
+    mission = px4.get_dataset("mission_result").data
+    assert mission["seq_total"].max() == 4  # the flown mission, uploaded
+    assert mission["seq_reached"].max() >= 1
+    summary = json.loads((out / "replay.json").read_text())
+    assert summary["autopilot"] == "px4"
+
+
+@pytest.mark.closed_loop
+def test_px4_ran_with_the_logs_parameters_and_the_rigs_own(flown, log_parameters):
+    _, _, px4, rig = flown
+    flown_parameters = px4.initial_parameters
+    for name in ("MC_ROLLRATE_P", "MC_PITCH_P", "MPC_XY_VEL_MAX", "CA_ROTOR0_PX", "EKF2_MAG_DECL"):
+        assert flown_parameters[name] == pytest.approx(log_parameters[name], rel=1e-6), name
+    assert flown_parameters["IMU_INTEG_RATE"] == flown_parameters["IMU_GYRO_RATEMAX"] == 800
+    assert flown_parameters["COM_RC_IN_MODE"] == 1
+    assert flown_parameters["CAL_ACC0_ID"] != log_parameters["CAL_ACC0_ID"]
+    events = [m.message for m in rig.logged_messages]
+    assert any(text.startswith("replay: the log was flown by PX4 v1.17.0rc") for text in events)
+    assert "mission of 4 items uploaded" in events
