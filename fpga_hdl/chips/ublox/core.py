@@ -1,0 +1,289 @@
+"""u-blox NEO-M8N GNSS receiver on UART1, as PX4's GPS driver sees it (UBX protocol 18)."""
+
+from __future__ import annotations
+
+from amaranth.hdl import Const, Module, Mux, Signal, Value
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from fpga_hdl.buses.signatures import BUS_FAULT
+from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx, divider_for
+from fpga_hdl.chips.ublox import ubx
+from fpga_hdl.chips.ublox.ubx import Source
+from fpga_hdl.host.host_port import CoherentLatch
+
+__all__ = ["BAUD_RATES", "RESET_BAUD", "UbloxM8Core"]
+
+#: Baud rates the core switches to on a CFG-PRT for UART1: PX4's auto-detection list
+#: (38400, 57600, 9600, 115200, 230400, 460800, 921600) and 19200, except 921600: at a
+#: 16 MHz system clock its divider (17) is 2.1 % fast, outside ``MAX_BAUD_ERROR``, and PX4
+#: asks for it only in moving-base heading setups.
+BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 230400, 460800)
+#: UART1's power-on rate on a u-blox M8.
+RESET_BAUD = 9600
+
+#: The frames the sequencer can send, by number.
+FRAMES: dict[str, tuple[Source, ...]] = {
+    "ack": ubx.ACK_SOURCES,
+    "nak": ubx.NAK_SOURCES,
+    "mon_ver": ubx.MON_VER_SOURCES,
+    "nav_pvt": ubx.NAV_PVT_SOURCES,
+}
+
+
+class UbloxM8Core(wiring.Component):
+    """A NEO-M8N's UBX side: NAV-PVT per loaded fix, ACKs for configuration, MON-VER.
+
+    Behaviour emulated:
+
+    - **Output.** Each fix the host loads (``sample_stb``) is one navigation epoch: one
+      NAV-PVT (92-byte M8 payload) once CFG-MSG has enabled it on this port (off at power
+      on unless ``nav_pvt_at_reset``; a nonzero rate sends every epoch, the rig sets the
+      epoch rate). A fix loaded while a frame is on the line is used after it (latest wins).
+    - **Input.** UBX frames are parsed as PX4's own decoder does (sync, class, id, length,
+      payload, CK_A, CK_B). A bad checksum or a framing error drops the frame silently, as
+      a receiver does. Valid CFG-class frames are answered with ACK-ACK (class, id);
+      CFG-VALSET (protocol 27+, unknown to protocol 18), CFG polls (length <= 1) and a
+      CFG-PRT for UART1 at a rate outside :data:`BAUD_RATES` get ACK-NAK. An empty
+      MON-VER poll is answered with MON-VER.
+    - **Baud.** UART1 starts at ``baud``. A CFG-PRT for UART1 switches both directions to
+      its baudRate once its ACK has left at the old rate.
+    - **Order.** At each frame boundary: a pending ACK/NAK, then a rate switch, then
+      MON-VER, then NAV-PVT. One ACK is held; a newer one replaces it (PX4 waits for
+      each ACK before it sends the next CFG).
+
+    Parameters
+    ----------
+    sys_clk_hz : float
+        Frequency of ``sync``; every rate in :data:`BAUD_RATES` must fit its divider.
+    baud : int
+        Power-on rate of UART1 (u-blox default 9600).
+    nav_pvt_at_reset : bool
+        NAV-PVT output enabled at reset (as if stored in the receiver's flash).
+
+    Attributes
+    ----------
+    tx : Out(1)
+        UART1 TXD, receiver to autopilot (idle high).
+    rx : In(1)
+        UART1 RXD, autopilot to receiver.
+    sample : In(ubx.SAMPLE_LAYOUT), sample_stb : In(1)
+        A fix and its strobe (the host port's staging register and commit).
+    sample_pending : Out(1)
+        A loaded fix waits for the frame on the line to end.
+    baud : Out(20)
+        UART1's current rate.
+    fault : In(BUS_FAULT)
+        ``mute`` holds TXD idle (bytes are lost); ``flip`` is XORed into every byte after
+        a frame's 6-byte header (payload and checksum), so the driver finds the frame and
+        drops it for its checksum, as after noise on a real line.
+    """
+
+    def __init__(
+        self, *, sys_clk_hz: float, baud: int = RESET_BAUD, nav_pvt_at_reset: bool = False
+    ) -> None:
+        self.dividers = {rate: divider_for(sys_clk_hz, rate) for rate in BAUD_RATES}
+        if baud not in self.dividers:
+            raise ValueError(f"baud must be one of {BAUD_RATES}, not {baud!r}")
+        self.sys_clk_hz = sys_clk_hz
+        self.reset_baud = baud
+        self.nav_pvt_at_reset = nav_pvt_at_reset
+        super().__init__(
+            {
+                "tx": Out(1, init=1),
+                "rx": In(1, init=1),
+                "sample": In(ubx.SAMPLE_LAYOUT),
+                "sample_stb": In(1),
+                "sample_pending": Out(1),
+                "baud": Out(20, init=baud),
+                "fault": In(BUS_FAULT),
+            }
+        )
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        m.submodules.uart_tx = uart_tx = UartTx()
+        m.submodules.uart_rx = uart_rx = UartRx()
+        divider = Signal(DIVIDER_BITS, init=self.dividers[self.reset_baud])
+        m.d.comb += [
+            uart_tx.divider.eq(divider),
+            uart_rx.divider.eq(divider),
+            uart_rx.rx.eq(self.rx),
+            self.tx.eq(uart_tx.tx | self.fault.mute),
+        ]
+
+        m.submodules.latch = latch = CoherentLatch(ubx.SAMPLE_LAYOUT)
+        sending = Signal()
+        m.d.comb += [
+            latch.offered.eq(self.sample),
+            latch.offered_stb.eq(self.sample_stb),
+            latch.busy.eq(sending),
+            self.sample_pending.eq(latch.pending),
+        ]
+
+        # --- input: PX4's UBX decoder, in gateware ---------------------------------------
+        state = Signal(range(9))
+        SYNC1, SYNC2, CLASS, ID, LEN1, LEN2, PAYLOAD, CKA, CKB = range(9)
+        rx_class, rx_id, rx_len, rx_count = Signal(8), Signal(8), Signal(16), Signal(16)
+        rx_ck_a, rx_ck_b = Signal(8), Signal(8)
+        p0, p1, p2, p_baud = Signal(8), Signal(8), Signal(8), Signal(32)
+        byte = uart_rx.data
+
+        ack_pending, ack_is_ack = Signal(), Signal()
+        ack_class, ack_id = Signal(8), Signal(8)
+        mon_ver_pending = Signal()
+        pvt_enabled = Signal(init=int(self.nav_pvt_at_reset))
+        pvt_pending = Signal()
+        switch_pending, new_divider, new_baud = Signal(), Signal(DIVIDER_BITS), Signal(20)
+
+        def add(b: Value) -> list:
+            return [rx_ck_a.eq(rx_ck_a + b), rx_ck_b.eq(rx_ck_b + rx_ck_a + b)]
+
+        with m.If(uart_rx.frame_error):
+            m.d.sync += state.eq(SYNC1)
+        with m.Elif(uart_rx.stb), m.Switch(state):
+            with m.Case(SYNC1), m.If(byte == ubx.SYNC1):
+                m.d.sync += state.eq(SYNC2)
+            with m.Case(SYNC2):
+                m.d.sync += [rx_ck_a.eq(0), rx_ck_b.eq(0)]
+                m.d.sync += state.eq(Mux(byte == ubx.SYNC2, CLASS, SYNC1))
+            with m.Case(CLASS):
+                m.d.sync += [rx_class.eq(byte), state.eq(ID), *add(byte)]
+            with m.Case(ID):
+                m.d.sync += [rx_id.eq(byte), state.eq(LEN1), *add(byte)]
+            with m.Case(LEN1):
+                m.d.sync += [rx_len[:8].eq(byte), state.eq(LEN2), *add(byte)]
+            with m.Case(LEN2):
+                empty = (rx_len[:8] == 0) & (byte == 0)
+                m.d.sync += [rx_len[8:].eq(byte), rx_count.eq(0), *add(byte)]
+                m.d.sync += state.eq(Mux(empty, CKA, PAYLOAD))
+            with m.Case(PAYLOAD):
+                m.d.sync += [rx_count.eq(rx_count + 1), *add(byte)]
+                with m.Switch(rx_count):
+                    for index, reg in ((0, p0), (1, p1), (2, p2)):
+                        with m.Case(index):
+                            m.d.sync += reg.eq(byte)
+                    for k in range(4):
+                        with m.Case(ubx.CFG_PRT_BAUD_OFFSET + k):
+                            m.d.sync += p_baud.word_select(k, 8).eq(byte)
+                with m.If(rx_count + 1 == rx_len):
+                    m.d.sync += state.eq(CKA)
+            with m.Case(CKA):
+                m.d.sync += state.eq(Mux(byte == rx_ck_a, CKB, SYNC1))
+            with m.Case(CKB):
+                m.d.sync += state.eq(SYNC1)
+                with m.If(byte == rx_ck_b):
+                    self._act(
+                        m,
+                        rx_class,
+                        rx_id,
+                        rx_len,
+                        (p0, p1, p2, p_baud),
+                        ack=(ack_pending, ack_is_ack, ack_class, ack_id),
+                        mon_ver_pending=mon_ver_pending,
+                        pvt_enabled=pvt_enabled,
+                        switch=(switch_pending, new_divider, new_baud),
+                    )
+
+        # --- output: the frame sequencer -------------------------------------------------
+        frame = Signal(range(len(FRAMES)))
+        index = Signal(range(max(len(s) for s in FRAMES.values())))
+        ck_a, ck_b = Signal(8), Signal(8)
+        values = {
+            "ack_class": ack_class,
+            "ack_id": ack_id,
+            **{name: latch.visible[name].as_unsigned() for name, _ in ubx.SAMPLE_LAYOUT},
+        }
+        out_byte, last, summed = Signal(8), Signal(), Signal()
+        with m.Switch(frame):
+            for number, sources in enumerate(FRAMES.values()):
+                with m.Case(number), m.Switch(index):
+                    for position, source in enumerate(sources):
+                        with m.Case(position):
+                            m.d.comb += [
+                                out_byte.eq(_source_value(source, values, ck_a, ck_b)),
+                                last.eq(position == len(sources) - 1),
+                                summed.eq(position >= 2 and source not in (ubx.CK_A, ubx.CK_B)),
+                            ]
+        m.d.comb += [
+            # The header passes intact, so the driver finds the frame and fails its checksum.
+            uart_tx.data.eq(out_byte ^ Mux(index >= ubx.HEADER_LEN, self.fault.flip, 0)),
+            uart_tx.valid.eq(sending),
+        ]
+        frame_number = {name: number for number, name in enumerate(FRAMES)}
+
+        def start(name: str) -> list:
+            return [
+                frame.eq(frame_number[name]),
+                index.eq(0),
+                sending.eq(1),
+                ck_a.eq(0),
+                ck_b.eq(0),
+            ]
+
+        with m.If(sending), m.If(uart_tx.ready):
+            m.d.sync += index.eq(index + 1)
+            with m.If(summed):  # class..payload, as the checksum covers
+                m.d.sync += [ck_a.eq(ck_a + out_byte), ck_b.eq(ck_b + ck_a + out_byte)]
+            with m.If(last):
+                m.d.sync += sending.eq(0)
+        with m.Elif(ack_pending):
+            m.d.sync += [*start("ack"), ack_pending.eq(0)]
+            with m.If(~ack_is_ack):
+                m.d.sync += frame.eq(frame_number["nak"])
+        with m.Elif(switch_pending), m.If(~uart_tx.busy):
+            m.d.sync += [divider.eq(new_divider), self.baud.eq(new_baud)]
+            m.d.sync += switch_pending.eq(0)
+        with m.Elif(mon_ver_pending):
+            m.d.sync += [*start("mon_ver"), mon_ver_pending.eq(0)]
+        with m.Elif(pvt_pending & ~latch.pending):
+            m.d.sync += [*start("nav_pvt"), pvt_pending.eq(0)]
+        # After the sequencer: an epoch in the cycle a NAV-PVT starts is not lost.
+        with m.If(self.sample_stb & pvt_enabled):
+            m.d.sync += pvt_pending.eq(1)
+        return m
+
+    def _act(
+        self, m, rx_class, rx_id, rx_len, captured, *, ack, mon_ver_pending, pvt_enabled, switch
+    ):
+        """A valid frame arrived: queue its ACK/NAK, MON-VER, a rate switch, enable NAV-PVT."""
+        p0, p1, p2, p_baud = captured
+        ack_pending, ack_is_ack, ack_class, ack_id = ack
+        switch_pending, new_divider, new_baud = switch
+        with m.If(rx_class == ubx.CLASS_CFG):
+            m.d.sync += [ack_pending.eq(1), ack_class.eq(rx_class), ack_id.eq(rx_id)]
+            accepted = Signal()
+            m.d.comb += accepted.eq((rx_id != ubx.ID_CFG_VALSET) & (rx_len > 1))
+            with m.If(rx_id == ubx.ID_CFG_PRT):
+                with m.If((p0 == ubx.PORT_UART1) & (rx_len >= ubx.CFG_PRT_BLOCK_LEN)):
+                    supported = Signal()
+                    with m.Switch(p_baud):
+                        for rate, divider in self.dividers.items():
+                            with m.Case(rate):
+                                m.d.comb += supported.eq(1)
+                                m.d.sync += [new_divider.eq(divider), new_baud.eq(rate)]
+                    with m.If(supported & accepted):
+                        m.d.sync += switch_pending.eq(1)
+                    m.d.sync += ack_is_ack.eq(supported & accepted)
+                with m.Else():
+                    m.d.sync += ack_is_ack.eq(accepted)
+            with m.Elif(rx_id == ubx.ID_CFG_MSG):
+                m.d.sync += ack_is_ack.eq(accepted)
+                is_pvt = (p0 == ubx.CLASS_NAV) & (p1 == ubx.ID_NAV_PVT) & (rx_len == 3)
+                with m.If(is_pvt):
+                    m.d.sync += pvt_enabled.eq(p2 != 0)
+            with m.Else():
+                m.d.sync += ack_is_ack.eq(accepted)
+        with m.Elif((rx_class == ubx.CLASS_MON) & (rx_id == ubx.ID_MON_VER) & (rx_len == 0)):
+            m.d.sync += mon_ver_pending.eq(1)
+
+
+def _source_value(source: Source, values: dict[str, Value], ck_a: Value, ck_b: Value) -> Value:
+    if source == ubx.CK_A:
+        return ck_a
+    if source == ubx.CK_B:
+        return ck_b
+    if isinstance(source, tuple):
+        name, byte = source
+        return values[name].word_select(byte, 8)
+    return Const(source, 8)

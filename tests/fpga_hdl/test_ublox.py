@@ -1,0 +1,241 @@
+# amaranth: UnusedElaboratable=no
+"""Unit tests of the u-blox M8: UBX framing and checksum, the TLM twin, PX4's decoder,
+the baud dividers, and the RTL core against the twin in amaranth.sim."""
+
+import math
+import struct
+
+import pytest
+from amaranth.sim import Simulator
+
+from fpga_hdl.buses.uart import MAX_BAUD_ERROR, baud_error, divider_for
+from fpga_hdl.chips.ublox import ubx
+from fpga_hdl.chips.ublox.core import BAUD_RATES, UbloxM8Core
+from fpga_hdl.chips.ublox.driver import (
+    PX4_BAUD_RATES,
+    GpsFix,
+    UbxDecoder,
+    decode_nav_pvt,
+    nav_pvt_for_fix,
+    px4_configuration,
+)
+from fpga_hdl.chips.ublox.model import UbloxM8Model
+from fpga_hdl.chips.ublox.ubx import NavPvt
+from fpga_hdl.top import SYS_CLK_HZ
+
+FIX = GpsFix(
+    fix_type=3,
+    satellites_used=11,
+    latitude_deg=-33.8688197,
+    longitude_deg=151.2092955,
+    altitude_msl_m=58.25,
+    altitude_ellipsoid_m=80.5,
+    eph=1.5,
+    epv=2.25,
+    vel_n_m_s=1.234,
+    vel_e_m_s=-0.5,
+    vel_d_m_s=-0.75,
+    vel_m_s=1.3314,
+    cog_rad=-0.3849,
+    s_variance_m_s=0.3,
+    c_variance_rad=0.05,
+    vel_ned_valid=True,
+)
+CFG_RATE = ubx.frame(ubx.CLASS_CFG, ubx.ID_CFG_RATE, struct.pack("<HHH", 200, 1, 0))
+
+
+# --- UBX framing ---------------------------------------------------------------------------
+
+
+def test_checksum_of_a_known_frame():
+    # MON-VER poll as every u-blox tool sends it: B5 62 0A 04 00 00 0E 34.
+    assert ubx.frame(ubx.CLASS_MON, ubx.ID_MON_VER) == bytes.fromhex("b5620a0400000e34")
+    assert ubx.checksum(bytes([0x06, 0x08, 0x06, 0x00, 0xC8, 0x00, 0x01, 0x00, 0x00, 0x00])) == (
+        0xDD,
+        0x68,
+    )
+
+
+def test_nav_pvt_layout_is_px4s_92_bytes_and_sources_render_the_payload():
+    assert ubx.NAV_PVT_LEN == 92
+    pvt = nav_pvt_for_fix(FIX, itow_ms=123_456)
+    rendered = ubx.render(ubx.NAV_PVT_SOURCES, ubx.field_values(pvt))
+    assert rendered == ubx.frame(ubx.CLASS_NAV, ubx.ID_NAV_PVT, pvt.payload())
+    # PX4's struct offsets: fixType at 20, numSV 23, lon 24, lat 28, velN 48, pDOP 76.
+    payload = pvt.payload()
+    assert payload[20] == 3
+    assert payload[23] == 11
+    assert struct.unpack_from("<ii", payload, 24) == (pvt.lon, pvt.lat)
+    assert struct.unpack_from("<i", payload, 48) == (1234,)
+    assert struct.unpack_from("<H", payload, 76) == (pvt.pDOP,)
+    assert NavPvt.from_payload(payload) == pvt
+
+
+def test_nav_pvt_range_checked():
+    with pytest.raises(ValueError, match=r"^NAV-PVT numSV=256 outside 0\.\.255$"):
+        NavPvt(numSV=256)
+
+
+# --- PX4's decoder -------------------------------------------------------------------------
+
+
+def test_fix_round_trips_through_ubx_bytes_within_the_units():
+    frame = ubx.frame(ubx.CLASS_NAV, ubx.ID_NAV_PVT, nav_pvt_for_fix(FIX).payload())
+    decoder = UbxDecoder()
+    (got,) = decoder.feed(b"\x00\xb5junk" + frame)
+    fix = decode_nav_pvt(got.payload)
+    assert fix.fix_type == 3
+    assert fix.satellites_used == 11
+    assert fix.vel_ned_valid
+    for name, unit in (
+        ("latitude_deg", 1e-7),
+        ("longitude_deg", 1e-7),
+        ("altitude_msl_m", 1e-3),
+        ("eph", 1e-3),
+        ("vel_d_m_s", 1e-3),
+        ("cog_rad", math.radians(1e-5)),
+    ):
+        assert getattr(fix, name) == pytest.approx(getattr(FIX, name), abs=unit / 2 + 1e-12)
+
+
+def test_decoder_drops_bad_checksums_like_px4():
+    good = ubx.frame(ubx.CLASS_ACK, ubx.ID_ACK_ACK, bytes([0x06, 0x08]))
+    bad_a, bad_b = bytearray(good), bytearray(good)
+    bad_a[-2] ^= 1
+    bad_b[-1] ^= 1
+    decoder = UbxDecoder()
+    assert decoder.feed(bytes(bad_a) + bytes(bad_b) + good) == [
+        type(decoder.feed(good)[0])(ubx.CLASS_ACK, ubx.ID_ACK_ACK, bytes([0x06, 0x08]))
+    ]
+    assert decoder.checksum_errors == 2
+
+
+def test_fix_type_rules_of_px4():
+    no_fix = nav_pvt_for_fix(FIX).__class__(fixType=3, flags=0)
+    assert decode_nav_pvt(no_fix.payload()).fix_type == 0  # gnssFixOK clear
+    dgps = NavPvt(fixType=3, flags=ubx.FLAGS_GNSS_FIX_OK | ubx.FLAGS_DIFF_SOLN)
+    assert decode_nav_pvt(dgps.payload()).fix_type == 4
+    rtk_fixed = NavPvt(fixType=3, flags=ubx.FLAGS_GNSS_FIX_OK | 0x80)
+    assert decode_nav_pvt(rtk_fixed.payload()).fix_type == 6
+
+
+# --- TLM twin ------------------------------------------------------------------------------
+
+
+def test_cfg_frames_are_acked_with_their_class_and_id():
+    model = UbloxM8Model()
+    model.receive(CFG_RATE)
+    assert model.transmit() == ubx.frame(ubx.CLASS_ACK, ubx.ID_ACK_ACK, bytes([0x06, 0x08]))
+    assert model.transmit() == b""
+
+
+def test_bad_checksum_input_is_dropped_without_answer():
+    model = UbloxM8Model()
+    bad = bytearray(CFG_RATE)
+    bad[-1] ^= 0x80
+    model.receive(bytes(bad))
+    assert model.transmit() == b""
+    model.receive(CFG_RATE)  # the parser has recovered
+    assert UbxDecoder().feed(model.transmit())[0].msg_id == ubx.ID_ACK_ACK
+
+
+def test_px4_handshake_on_the_twin_ends_at_115200_with_nav_pvt():
+    model = UbloxM8Model()
+    decoder = UbxDecoder()
+    for step in px4_configuration(9600):
+        assert model.baud == step.baud
+        model.receive(step.frame)
+        (reply,) = decoder.feed(model.transmit())
+        if step.expect == "nak":
+            assert (reply.cls, reply.msg_id, reply.payload) == (ubx.CLASS_ACK, 0, b"\x06\x8a")
+        elif step.expect == "mon-ver":
+            assert reply.payload[30:38] == b"00080000"
+        else:
+            assert (reply.cls, reply.msg_id, reply.payload) == (ubx.CLASS_ACK, 1, step.frame[2:4])
+    assert model.baud == 115200
+    assert model.nav_pvt_enabled
+    model.load_fix(nav_pvt_for_fix(FIX))
+    (pvt,) = decoder.feed(model.transmit())
+    assert decode_nav_pvt(pvt.payload).satellites_used == 11
+
+
+def test_nav_pvt_is_off_until_cfg_msg_enables_it():
+    model = UbloxM8Model()
+    model.load_fix(nav_pvt_for_fix(FIX))
+    assert model.transmit() == b""
+
+
+def test_unsupported_rate_is_naked_and_kept():
+    model = UbloxM8Model()
+    block = struct.pack("<BBHIIHHHH", 1, 0, 0, 0x8D0, 921600, 1, 1, 0, 0)
+    model.receive(ubx.frame(ubx.CLASS_CFG, ubx.ID_CFG_PRT, block))
+    assert UbxDecoder().feed(model.transmit())[0].msg_id == ubx.ID_ACK_NAK
+    assert model.baud == 9600
+
+
+# --- baud dividers -------------------------------------------------------------------------
+
+
+def test_every_supported_rate_is_within_the_budget_at_sys_clk():
+    for baud in BAUD_RATES:
+        assert abs(baud_error(SYS_CLK_HZ, baud)) <= MAX_BAUD_ERROR
+    assert set(BAUD_RATES) >= set(PX4_BAUD_RATES) - {921600}
+    with pytest.raises(
+        ValueError, match=r"^921600 baud at 1\.6e\+07 Hz is off by \+2\.12% \(divider 17\)"
+    ):
+        divider_for(SYS_CLK_HZ, 921600)
+
+
+# --- RTL against the twin (amaranth.sim, a slow clock keeps it short) -------------------------
+
+SIM_CLK_HZ = 7.3728e6  # 4 x the classic UART crystal: every divider is exact
+SIM_BAUD = 115200
+
+
+def run_rtl(rx_frames: list[bytes], fixes: list[NavPvt], *, read_len: int) -> bytes:
+    """Drive RXD with ``rx_frames``, then load ``fixes``; read ``read_len`` bytes off TXD."""
+    core = UbloxM8Core(sys_clk_hz=SIM_CLK_HZ, baud=SIM_BAUD)
+    divider = core.dividers[SIM_BAUD]
+    sim = Simulator(core)
+    sim.add_clock(1 / SIM_CLK_HZ)
+    out = bytearray()
+
+    async def drive(ctx):
+        for frame in rx_frames:
+            for byte in frame:
+                for level in (0, *((byte >> k) & 1 for k in range(8)), 1):
+                    ctx.set(core.rx, level)
+                    await ctx.tick().repeat(divider)
+        for fix in fixes:
+            ctx.set(core.sample.as_value(), fix.as_bits())
+            ctx.set(core.sample_stb, 1)
+            await ctx.tick()
+            ctx.set(core.sample_stb, 0)
+
+    async def listen(ctx):
+        while len(out) < read_len:
+            await ctx.tick()
+            if ctx.get(core.tx) == 0:  # a start bit began in the last cycle
+                await ctx.tick().repeat(divider // 2)
+                bits = []
+                for _ in range(9):
+                    await ctx.tick().repeat(divider)
+                    bits.append(ctx.get(core.tx))
+                assert bits[8] == 1, "stop bit low"
+                out.append(sum(b << i for i, b in enumerate(bits[:8])))
+
+    sim.add_testbench(drive, background=True)
+    sim.add_testbench(listen)
+    sim.run()
+    return bytes(out)
+
+
+def test_rtl_equals_twin_for_an_ack_and_a_nav_pvt():
+    enable = ubx.frame(ubx.CLASS_CFG, ubx.ID_CFG_MSG, bytes([1, 7, 1]))
+    fix = nav_pvt_for_fix(FIX, itow_ms=5)
+    model = UbloxM8Model(baud=SIM_BAUD)
+    model.receive(enable)
+    model.load_fix(fix)
+    expected = model.transmit()
+    assert len(expected) == 10 + 100
+    assert run_rtl([enable], [fix], read_len=len(expected)) == expected
