@@ -19,6 +19,7 @@ from fpga_hdl.chips.ublox.driver import (
     nav_pvt_for_fix,
     px4_configuration,
 )
+from fpga_hdl.chips.ublox.link import GpsFault, UbxGpsLink
 from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.chips.ublox.ubx import NavPvt
 from fpga_hdl.top import SYS_CLK_HZ
@@ -239,3 +240,25 @@ def test_rtl_equals_twin_for_an_ack_and_a_nav_pvt():
     expected = model.transmit()
     assert len(expected) == 10 + 100
     assert run_rtl([enable], [fix], read_len=len(expected)) == expected
+
+
+# --- the GNSS path for the sensor layers -----------------------------------------------------
+
+
+def test_link_delivers_the_fix_after_the_uart_time_and_applies_faults():
+    link = UbxGpsLink(sys_clk_hz=SYS_CLK_HZ, nav_latency_us=1000)
+    assert link.baud == 115200
+    transfer_us = 100 * link.byte_time_us()  # one NAV-PVT frame
+    assert transfer_us == pytest.approx(100 * 10 / 115200 * 1e6, rel=0.002)
+    link.epoch(FIX, 200_000)
+    assert link.poll(200_000 + 1000 + round(transfer_us) - 1) == []
+    (got,) = link.poll(200_000 + 1000 + round(transfer_us))
+    assert got.latitude_deg == pytest.approx(FIX.latitude_deg, abs=1e-7)
+    link.epoch(FIX, 400_000, GpsFault.LOSS_OF_FIX)
+    link.epoch(FIX, 600_000, GpsFault.JAMMED)
+    link.epoch(FIX, 800_000, GpsFault.BAD_CHECKSUM)
+    lost, jammed = link.poll(10**6)
+    assert (lost.fix_type, lost.satellites_used, lost.vel_ned_valid) == (0, 0, False)
+    assert (jammed.fix_type, jammed.satellites_used) == (2, 3)
+    assert jammed.eph == pytest.approx(20 * FIX.eph)
+    assert link.decoder.checksum_errors == 1
