@@ -36,8 +36,11 @@ fuzz: $(STAMP)
 	$(BIN)/python -m benchmarks.fuzz --minutes $(FUZZ_MINUTES)
 
 # The paper's section-4 study on the real X500 flight (README "How credible is this rig?"):
-# the flight replayed by the high- (x500_v2) and low-precision (x500_v2_low_precision) models
-# through each loop of the autopilot, the 1-DOF pitch bench sweep, then the two reports.
+# the flight replayed by the high- (x500_v2) and low-precision (x500_v2_low_precision) models,
+# the 1-DOF pitch bench sweep, then the two reports. With PX4_DIR set (CI: ../shared/px4_sitl)
+# PX4 SITL, the firmware that flew it, replays the whole flight with the log's own parameters
+# as its pilot flew it (one replay per model serves every test); without it the reference
+# autopilot replays it through each of its loops.
 # Finished runs are kept (make reruns only what is missing; `make clean` starts over); a run
 # counts as finished by its .complete stamp, so an interrupted run's readable logs are kept
 # until it is flown again (--force).
@@ -51,17 +54,37 @@ MODEL_low   := x500_v2_low_precision
 DRIVE_velocity :=
 DRIVE_attitude := --drive attitude --window 470 480 --end 482
 DRIVE_rates    := --drive rates --window 455 481.5 --end 482
-STUDY_RUNS  := $(foreach run,velocity attitude rates bench,\
+ifdef PX4_DIR
+STUDY_WHAT  := PX4 SITL ($(PX4_DIR)) with the log's own parameters
+REPLAYS     := px4
+STUDY_LOGS  := $(foreach role,sim sim_attitude sim_rates,--log $(role)=$(STUDY)/px4_high/px4.ulg) \
+               $(foreach role,sim_low sim_attitude_low sim_rates_low,\
+                 --log $(role)=$(STUDY)/px4_low/px4.ulg)
+VALIDATION  := x500_validation_px4
+else
+STUDY_WHAT  := the reference autopilot (set PX4_DIR to fly PX4)
+REPLAYS     := velocity attitude rates
+STUDY_LOGS  :=
+VALIDATION  := x500_validation
+endif
+STUDY_RUNS  := $(foreach run,$(REPLAYS) bench,\
                  $(foreach model,high low,$(STUDY)/$(run)_$(model)/.complete))
 
 credibility: $(STUDY_RUNS)
+	@echo "credibility study: the X500 flight flown by $(STUDY_WHAT); models $(MODEL_high)" \
+		"(high precision) and $(MODEL_low) (low)"
 	$(BIN)/credibility report credibility/plans/x500_pitch_bench.toml \
 		--out $(REPORTS)/x500_pitch_bench || [ $$? -eq 1 ]
-	$(BIN)/credibility report credibility/plans/x500_validation.toml \
-		--out $(REPORTS)/x500_validation || [ $$? -eq 1 ]
+	$(BIN)/credibility report credibility/plans/x500_validation.toml $(STUDY_LOGS) \
+		--out $(REPORTS)/$(VALIDATION) || [ $$? -eq 1 ]
 
 $(STUDY)/bench_%/.complete: | $(STAMP)
 	$(BIN)/rig run pitch_sweep_bench --vehicle $(MODEL_$*) --out $(@D) --force
+	touch $@
+
+$(STUDY)/px4_%/.complete: $(X500_LOG) | $(STAMP)
+	$(BIN)/rig replay $(X500_LOG) --autopilot px4 --px4 $(PX4_DIR) --vehicle $(MODEL_$*) \
+		--out $(@D) --force
 	touch $@
 
 $(STUDY)/%/.complete: $(X500_LOG) | $(STAMP)
