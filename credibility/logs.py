@@ -170,6 +170,13 @@ def read_ulog(path: Path, topics: Sequence[str] | None = None) -> tuple[ULog, tu
     )
     if ulog.file_corruption and not warnings:
         warnings = (f"{path.name}: pyulog flagged the file as corrupt; damaged messages skipped",)
+    # Every reader takes a topic's time from its 'timestamp': a topic whose definition lost
+    # it (a damaged format message) or that holds no sample cannot be placed in time.
+    timed = [len(d.data.get("timestamp", ())) > 0 for d in ulog.data_list]
+    warnings += tuple(f"{path.name}: topic {d.name} has no timestamped samples "
+                      "(a damaged definition?); skipped"
+                      for d, ok in zip(ulog.data_list, timed, strict=True) if not ok)  # fmt: skip
+    ulog.data_list[:] = [d for d, ok in zip(ulog.data_list, timed, strict=True) if ok]
     return ulog, warnings
 
 

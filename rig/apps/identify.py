@@ -359,7 +359,9 @@ def _hover_windows(log: _Log) -> tuple[tuple[float, float], ...]:
     landed_now = landed[np.clip(np.searchsorted(t_landed, time_s, "right") - 1, 0, None)]
     # averaged over HOVER_SMOOTH_S: a pilot's small corrections are hover, a manoeuvre not
     span = max(1, round(HOVER_SMOOTH_S / np.median(np.diff(time_s))))
-    steady = (landed_now < 0.5) & (np.sqrt(uniform_filter1d(speed_sq, span)) <= HOVER_MAX_SPEED_MPS)
+    # a running mean of squares can dip below zero by rounding: clip before the root
+    mean_speed_sq = np.maximum(uniform_filter1d(speed_sq, span), 0.0)
+    steady = (landed_now < 0.5) & (np.sqrt(mean_speed_sq) <= HOVER_MAX_SPEED_MPS)
     for axis in range(3):
         t_rate, rate = log.series("vehicle_angular_velocity", f"xyz[{axis}]", "hover detection")
         rate_sq = np.interp(
@@ -367,7 +369,7 @@ def _hover_windows(log: _Log) -> tuple[tuple[float, float], ...]:
             t_rate,
             uniform_filter1d(rate**2, max(1, round(HOVER_SMOOTH_S / np.median(np.diff(t_rate))))),
         )
-        steady &= np.sqrt(rate_sq) <= HOVER_MAX_RATE_RADPS
+        steady &= np.sqrt(np.maximum(rate_sq, 0.0)) <= HOVER_MAX_RATE_RADPS
     windows = []
     start = None
     for t, ok in zip(time_s, np.append(steady[:-1], False), strict=True):

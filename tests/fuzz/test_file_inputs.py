@@ -8,6 +8,7 @@ import functools
 import tempfile
 from pathlib import Path
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -66,3 +67,16 @@ def test_any_configuration_file_is_loaded_or_refused_in_one_line(kind: str, text
             LOADERS[kind](path)
         except REFUSALS as error:
             one_line(error)
+
+
+def test_a_topic_whose_definition_lost_its_timestamp_is_refused_in_one_line(tmp_path):
+    """Found by `make fuzz`: a flipped bit in a format message renamed a topic's
+    'timestamp' field, and every reader failed with a KeyError traceback."""
+    data = seed_log()
+    at = data.index(b"vehicle_land_detected:uint64_t timestamp;")
+    path = tmp_path / "flight.ulg"
+    path.write_bytes(data[:at] + data[at:].replace(b"timestamp;", b"timestamq;", 1))
+    for read in (open_log, plan_replay, lambda p: identify_vehicle(p, _x500())):
+        with pytest.raises(REFUSALS) as refusal:
+            read(path)
+        one_line(refusal.value)
