@@ -96,8 +96,8 @@ BAD = [
     ({"environment": {"home": {"lat_deg": 95, "lon_deg": 0, "alt_amsl_m": 0}}},
      "key 'environment.home.lat_deg' = 95: expected a value <= 90"),
     ({"commands": [{"at_s": 1, "action": "flip"}]}, "key 'commands[0].action' = 'flip': "
-     "expected one of 'arm', 'disarm', 'takeoff', 'land', 'hold', 'goto', 'mission', 'pitch_sweep', "
-     "'motor_test', 'set_param'"),
+     "expected one of 'arm', 'disarm', 'takeoff', 'land', 'hold', 'goto', 'mission', "
+     "'pitch_sweep', 'motor_test', 'set_param'"),
     ({"commands": [{"at_s": 1}]}, "key 'commands[0].action' is missing"),
     ({"commands": [{"at_s": 1, "action": "takeoff"}]}, "key 'commands[0].altitude_m' is missing"),
     ({"commands": [{"at_s": 5, "action": "arm"}]},
