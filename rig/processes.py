@@ -25,17 +25,20 @@ def die_with_parent() -> None:
         _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
-def stop_process_group(process: subprocess.Popen[bytes], grace_s: float) -> None:
+def stop_process_group(process: subprocess.Popen[bytes], grace_s: float) -> bool:
     """SIGINT to the child's process group first, so it closes its logs; SIGKILL if it is
-    still running ``grace_s`` later. Nothing when it has already ended."""
+    still running ``grace_s`` later. Nothing when it has already ended. True when it had
+    to be killed (its logs may then miss what it had not yet written)."""
     if process.poll() is not None:
-        return
+        return False
     os.killpg(process.pid, signal.SIGINT)
     try:
         process.wait(timeout=grace_s)
     except subprocess.TimeoutExpired:
         os.killpg(process.pid, signal.SIGKILL)
         process.wait()
+        return True
+    return False
 
 
 def exit_description(process: subprocess.Popen[bytes]) -> str | None:

@@ -537,9 +537,14 @@ class _Loop:
         return None if self._process is None else exit_description(self._process)
 
     def _stop_autopilot(self) -> None:
-        """SIGINT first, so the autopilot closes its log; then SIGKILL if it hangs."""
-        if self._process is not None:
-            stop_process_group(self._process, AUTOPILOT_STOP_GRACE_S)
+        """SIGINT first, so the autopilot closes its log; then SIGKILL if it hangs, which
+        the run's log records: the autopilot's own log then misses its last buffer."""
+        if self._process is None:
+            return
+        if stop_process_group(self._process, AUTOPILOT_STOP_GRACE_S):
+            self.log.event(self.time_us, f"the autopilot did not stop within "
+                           f"{AUTOPILOT_STOP_GRACE_S:g} s of SIGINT and was killed: its log "
+                           "may miss its last half second", "warn")  # fmt: skip
 
     # -- reporting -------------------------------------------------------------------------
 

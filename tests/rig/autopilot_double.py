@@ -30,6 +30,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import socket
 import sys
 import time
@@ -64,7 +65,10 @@ def main() -> None:
     parser.add_argument("--throttle", type=float, default=None)
     parser.add_argument("--arm-after", type=int, default=0)
     parser.add_argument("--record", default=None)
+    parser.add_argument("--ignore-sigint", action="store_true", help="a hung shutdown")
     args = parser.parse_args()
+    if args.ignore_sigint:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     sock = connect(args.port)
     mav = mavlink.MAVLink(None, 1, 1)

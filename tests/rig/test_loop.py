@@ -20,7 +20,7 @@ import pytest
 import pyulog
 
 from rig.errors import AutopilotStalled
-from rig.lockstep.loop import RunOptions, run_scenario
+from rig.lockstep.loop import AUTOPILOT_STOP_GRACE_S, RunOptions, run_scenario
 from rig.mavlink.px4_api import HilSensorFields, Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
@@ -150,6 +150,16 @@ def test_killed_autopilot_ends_the_run_with_a_clear_message_and_a_readable_log(
     log = pyulog.ULog(str(tmp_path / "run" / "rig.ulg"))
     assert len(data(log, "sensor_combined")["timestamp"]) >= 299
     assert log.logged_messages[-1].message.startswith("run ended: the autopilot closed")
+
+
+def test_an_autopilot_that_ignores_sigint_is_killed_and_the_kill_is_logged(tmp_path, free_instance):
+    """Its own log may then miss its last buffer: the rig's log says so."""
+    _, log, _ = fly(tmp_path, free_instance, "--ignore-sigint", duration_s=0.2)
+    warning = log.logged_messages[-1]
+    assert warning.log_level_str() == "WARNING"
+    assert warning.message == (f"the autopilot did not stop within {AUTOPILOT_STOP_GRACE_S:g} "
+                               "s of SIGINT and was killed: its log may miss its last half "
+                               "second")  # fmt: skip
 
 
 def test_pwm_dropout_times_out_the_capture_and_the_motors_stop(tmp_path, free_instance):
