@@ -1,4 +1,9 @@
-"""``sensor_layer = "rtl"``: the generated Verilog under cocotb, in its own process.
+"""The generated Verilog under cocotb, in its own process: the RTL layer's reference path.
+
+``sensor_layer = "rtl"`` runs the same Verilog compiled in the rig's process
+(:mod:`rig.chips.native`, several times faster); this layer stays for the identity tests
+(the two give the same readouts as ``tlm``) and for comparisons, where the loop makes it
+for the name :data:`COCOTB_LAYER` (``RunOptions.sensor_layer``, not a scenario's).
 
 :class:`RtlSensorLayer` builds fpga_hdl's co-simulation harness (SensorTop, every chip
 and the PWM capture core as RTL, with the flight controller's SPI/I2C controllers and
@@ -40,6 +45,8 @@ from rig.chips.layer import ChipFrame, ChipReadout
 from rig.chips.pwm import PWM_TICK_HZ
 from rig.errors import CosimError
 
+#: ``RunOptions.sensor_layer`` that selects this layer instead of the compiled one.
+COCOTB_LAYER = "rtl-cocotb"
 WORKER_MODULE = "cosim_worker"
 WORKER_DIR = Path(__file__).resolve().parent
 DEFAULT_SIMULATOR = "verilator"

@@ -611,6 +611,10 @@ def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:
         return TlmSensorLayer(pwm_tick_hz=rates.pwm_tick_hz)
     if name == BYPASS:
         return BypassSensorLayer()
-    from rig.chips.rtl import RtlSensorLayer  # imported on demand: it starts a simulator
+    # Imported on demand: each builds its simulator once (cached under build/) and starts it.
+    from rig.chips.native import NativeSensorLayer
+    from rig.chips.rtl import COCOTB_LAYER, RtlSensorLayer
 
-    return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
+    if name == COCOTB_LAYER:  # the same RTL under cocotb (benchmarks and comparisons)
+        return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
+    return NativeSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)

@@ -1,9 +1,11 @@
-"""The RTL sensor layer: its channel codec, and RTL readouts equal to the TLM's.
+"""The RTL sensor layers: the channel codec, and RTL readouts equal to the TLM's.
 
 In ``rtl`` mode every chip and the PWM capture core are RTL on the co-simulation
-harness; the same frames through both layers must give the same decoded values and the
-same captured PWM, frame by frame, at the default 1 µs capture tick and at a coarser one.
-The RTL is read at the frame time, whatever the pulses do; nothing steers it.
+harness, compiled into the rig's process (``rig.chips.native``); the same Verilog also
+runs under cocotb in its own process (``rig.chips.rtl``). The same frames through the
+three layers (TLM, cocotb RTL, compiled RTL) must give the same decoded values, bus
+errors and captured PWM, frame by frame, at the default 1 µs capture tick and at a
+coarser one. The RTL is read at the frame time, whatever the pulses do; nothing steers it.
 """
 
 import numpy as np
@@ -98,10 +100,19 @@ def rtl_layer():
     layer.close()
 
 
+@pytest.fixture(scope="module")
+def native_layer():
+    from rig.chips.native import NativeSensorLayer  # builds the library once (build/native/)
+
+    layer = _started(NativeSensorLayer(pwm_hz=PWM_HZ))
+    yield layer
+    layer.close()
+
+
 @pytest.mark.cosim
-def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer):
-    """The same samples, time, faults and pulses give the same decoded values and the same
-    captured PWM on both layers, every frame (fpga_hdl proves the chips per byte)."""
+def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, native_layer):
+    """The same samples, time, faults and pulses give the same decoded values, bus errors
+    and captured PWM on the three layers, every frame (fpga_hdl proves the chips per byte)."""
     tlm, healthy = _started(TlmSensorLayer()), _started(TlmSensorLayer())
     faults = {k: {"mpu6000": ChipFault(flip=0x40)} for k in range(50, 55)}
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
@@ -109,6 +120,8 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer):
     for frame in _frames(np.random.default_rng(11), 400, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
         assert rtl == reference, f"frame at {frame.now_us} µs: RTL {rtl} != TLM {reference}"
+        native = native_layer.frame(frame)
+        assert native == reference, f"frame at {frame.now_us} µs: compiled RTL {native} != TLM"
         pwm.append(rtl.pwm_widths_us)
         if pwm[-1] == BOUNDARY_WIDTHS_US != pwm[-2]:
             # The falls came 3, 2, 1, 0 µs before the previous frame: there, only motor 0
@@ -137,31 +150,53 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer):
 
 
 @pytest.mark.cosim
-def test_a_coarser_pwm_tick_is_the_same_on_both_layers():
+def test_a_coarser_pwm_tick_is_the_same_on_every_layer():
     """``rates.pwm_tick_hz`` = 250 kHz (4 µs) reaches SensorTop and the TLM model alike:
-    widths come in whole 4 µs ticks, identical on both layers at 250 Hz frames."""
+    widths come in whole 4 µs ticks, identical on the three layers at 250 Hz frames."""
+    from rig.chips.native import NativeSensorLayer
     from rig.chips.rtl import RtlSensorLayer
 
     rtl = _started(RtlSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
+    native = _started(NativeSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
     tlm = _started(TlmSensorLayer(pwm_tick_hz=250e3))
     try:
         for frame in _frames(np.random.default_rng(12), 120, frame_us=4000):
             readout = rtl.frame(frame)
-            assert readout == tlm.frame(frame), f"frame at {frame.now_us} µs"
+            assert readout == tlm.frame(frame) == native.frame(frame), f"frame at {frame.now_us} µs"
             assert all(width % 4 == 0 for width in readout.pwm_widths_us)
     finally:
         rtl.close()
+        native.close()
 
 
 @pytest.mark.cosim
-def test_a_pulse_off_the_pwm_period_is_a_one_line_error(rtl_layer):
+@pytest.mark.parametrize("layer", ["rtl_layer", "native_layer"])
+def test_a_pulse_off_the_pwm_period_is_a_one_line_error(layer, request):
     imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)
     pulses = (Pulse(1, 10**7 - 7, 1500),)
     frame = ChipFrame(10**7, imu, mag=None, baro_d1_d2=None, read_mag=False, pulses=pulses)
     with pytest.raises(CosimError, match=r"^the RTL co-simulation failed: PwmTimingError: "
                        r"PWM pulse on channel 1 at 9999993 µs is not at a period start of this "
                        r"frame \(period 2500 µs from 0\)$"):  # fmt: skip
-        rtl_layer.frame(frame)
+        request.getfixturevalue(layer).frame(frame)
+
+
+@pytest.mark.cosim
+def test_bus_transfers_longer_than_the_frame_are_a_one_line_error():
+    """The compiled layer runs the bus while the capture clock stands still; it still
+    refuses a frame whose transfers (here an IST8310 read, 0.3 ms at 400 kHz) cannot fit
+    in its time, as the cocotb layer does."""
+    from rig.chips.native import NativeSensorLayer
+
+    native = _started(NativeSensorLayer(pwm_hz=PWM_HZ))
+    try:
+        imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)
+        native.frame(ChipFrame(1000, imu, mag=None, baro_d1_d2=None, read_mag=True))
+        with pytest.raises(CosimError, match=r"^the RTL co-simulation failed: PwmTimingError: "
+                           r"the frame's bus transfers ran past its time \(1010 µs\)"):  # fmt: skip
+            native.frame(ChipFrame(1010, imu, mag=None, baro_d1_d2=None, read_mag=True))
+    finally:
+        native.close()
 
 
 @pytest.mark.cosim

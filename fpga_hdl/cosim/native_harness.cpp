@@ -1,0 +1,251 @@
+// The co-simulation harness (fpga_hdl.cosim.harness) driven from compiled code.
+//
+// Built by fpga_hdl.cosim.native with Verilator (--cc, no --timing) into a shared library
+// that Python loads with ctypes. Each call runs one whole transaction inside the
+// simulator: an SPI transfer, an I2C write/read, a host-port burst write or read, or N
+// cycles of the PWM capture clock. So Python pays one call per transaction, never
+// one per clock edge.
+//
+// Clocks. For this build the harness's `cosim_gated_clock` is NATIVE_CLOCK_VERILOG
+// (fpga_hdl.cosim.native): a register that this file sets to 1 and that clears itself
+// on its own rising edge, so one eval() is one whole clock cycle. The system clock
+// follows the gated clock's rule: whole cycles while its `enable` (the harness's
+// `sync_run`) is high, checked after every cycle. The capture clock runs only when
+// asked (nh_pwm_cycles); nothing in the system domain depends on it but the results'
+// synchroniser, which every read lets catch up (HostReader).
+//
+// Errors: every function returns 0 on success and -1 on failure, with the reason in
+// nh_error(). Ports are copied as little-endian bytes, whatever their Verilated type.
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <string>
+
+#include "Vharness.h"
+#include "Vharness___024root.h"
+#include "verilated.h"
+
+// The root members of the two clocks' registers and the system clock's enable, given by
+// fpga_hdl.cosim.native as -D flags (their names follow the harness's hierarchy).
+#if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(PWM_CLOCK)
+#error "build through fpga_hdl.cosim.native: SYNC_CLOCK, SYNC_ENABLE and PWM_CLOCK are needed"
+#endif
+
+static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "ports are copied as little-endian");
+
+namespace {
+
+// More system cycles than any transaction takes (an I2C transfer at 100 kHz is ~20 k):
+// a peripheral that never acknowledges is reported, not waited for forever.
+constexpr uint64_t CYCLE_LIMIT = 10'000'000;
+
+struct Harness {
+    VerilatedContext context;
+    Vharness model;
+    uint64_t sys_cycles = 0;
+    uint64_t pwm_cycles = 0;
+    std::string error;
+
+    Harness() : model{&context, "harness"} {}
+
+    void sync_cycle() {
+        model.rootp->SYNC_CLOCK = 1;
+        model.eval();
+        ++sys_cycles;
+    }
+
+    void pwm_cycle() {
+        model.rootp->PWM_CLOCK = 1;
+        model.eval();
+        ++pwm_cycles;
+    }
+
+    // The gated clock's rule: whole cycles while `enable` is high, checked after each.
+    bool run_sync(const char* what) {
+        model.eval();
+        for (uint64_t cycles = 0; model.rootp->SYNC_ENABLE; ++cycles) {
+            if (cycles == CYCLE_LIMIT) {
+                error = std::string(what) + ": the system clock still runs after " +
+                        std::to_string(CYCLE_LIMIT) + " cycles";
+                return false;
+            }
+            sync_cycle();
+        }
+        return true;
+    }
+
+    // Flip a peripheral's request toggle and clock until it has acknowledged.
+    bool request(CData& request, const CData& acknowledge, const char* what) {
+        request ^= 1;
+        if (!run_sync(what)) return false;
+        if (acknowledge != request) {
+            error = std::string(what) + ": the system clock stopped before the acknowledge";
+            return false;
+        }
+        return true;
+    }
+
+    bool fail(const std::string& why) {
+        error = why;
+        return false;
+    }
+};
+
+template <typename T>
+constexpr size_t port_bytes() {
+    if constexpr (VlIsVlWide<T>::value) {
+        return T::Words * sizeof(EData);
+    } else {
+        return sizeof(T);
+    }
+}
+
+template <typename T>
+bool put(Harness& h, T& port, const uint8_t* bytes, size_t count, const char* name) {
+    if (count > port_bytes<T>()) {
+        return h.fail(std::string(name) + ": " + std::to_string(count) + " bytes for a " +
+                      std::to_string(port_bytes<T>()) + "-byte port");
+    }
+    if constexpr (VlIsVlWide<T>::value) {
+        std::memset(port.data(), 0, port_bytes<T>());
+        std::memcpy(port.data(), bytes, count);
+    } else {
+        T value = 0;
+        std::memcpy(&value, bytes, count);
+        port = value;
+    }
+    return true;
+}
+
+template <typename T>
+bool get(Harness& h, const T& port, uint8_t* bytes, size_t count, const char* name) {
+    if (count > port_bytes<T>()) {
+        return h.fail(std::string(name) + ": " + std::to_string(count) + " bytes asked of a " +
+                      std::to_string(port_bytes<T>()) + "-byte port");
+    }
+    if constexpr (VlIsVlWide<T>::value) {
+        std::memcpy(bytes, port.data(), count);
+    } else {
+        const T value = port;
+        std::memcpy(bytes, &value, count);
+    }
+    return true;
+}
+
+int status(bool ok) { return ok ? 0 : -1; }
+
+}  // namespace
+
+#define EXPORT __attribute__((visibility("default")))
+
+extern "C" {
+
+EXPORT void* nh_create() {
+    auto* harness = new Harness();
+    harness->model.eval();  // initial blocks and the first settle: every port at its reset
+    return harness;
+}
+
+EXPORT void nh_destroy(void* handle) {
+    auto* harness = static_cast<Harness*>(handle);
+    // A model's scopes unregister from this thread's current context, which is the last
+    // one created here, not necessarily theirs: with two harnesses, destroying the first
+    // one through the second's freed context deadlocked.
+    Verilated::threadContextp(&harness->context);
+    harness->model.final();
+    delete harness;
+    Verilated::threadContextp(nullptr);  // and the last context: none is left dangling
+}
+
+EXPORT const char* nh_error(void* handle) { return static_cast<Harness*>(handle)->error.c_str(); }
+
+EXPORT void nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles) {
+    auto* h = static_cast<Harness*>(handle);
+    *sys_cycles = h->sys_cycles;
+    *pwm_cycles = h->pwm_cycles;
+}
+
+// Reset both domains: `rst` high for these cycles of each clock, then the system clock
+// runs until it stops by itself.
+EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles) {
+    auto* h = static_cast<Harness*>(handle);
+    Vharness& m = h->model;
+    m.rst = 1;
+    m.eval();
+    for (uint32_t i = 0; i < sys_cycles; ++i) h->sync_cycle();
+    for (uint32_t i = 0; i < pwm_cycles; ++i) h->pwm_cycle();
+    m.rst = 0;
+    return status(h->run_sync("reset"));
+}
+
+// One SPI transfer of `length` bytes; `tx` and `rx` hold `bytes` (the buffer's size).
+EXPORT int nh_spi(void* handle, uint32_t device, uint32_t length, uint32_t divider, uint32_t mode3,
+           const uint8_t* tx, uint8_t* rx, size_t bytes) {
+    auto* h = static_cast<Harness*>(handle);
+    Vharness& m = h->model;
+    m.spi_device = device;
+    m.spi_length = length;
+    m.spi_divider = divider;
+    m.spi_mode3 = mode3;
+    bool ok = put(*h, m.spi_tx, tx, bytes, "spi_tx") &&
+              h->request(m.spi_request, m.spi_acknowledge, "SPI transfer") &&
+              get(*h, m.spi_rx, rx, bytes, "spi_rx");
+    return status(ok);
+}
+
+// One I2C write/read; `nack_index` is -1 when every byte was acknowledged, else the index
+// of the refused byte (0 the address).
+EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t read_len, uint32_t fast,
+           const uint8_t* tx, size_t tx_bytes, uint8_t* rx, size_t rx_bytes,
+           int32_t* nack_index) {
+    auto* h = static_cast<Harness*>(handle);
+    Vharness& m = h->model;
+    m.i2c_address = address;
+    m.i2c_write_len = write_len;
+    m.i2c_read_len = read_len;
+    m.i2c_fast = fast;
+    bool ok = put(*h, m.i2c_tx, tx, tx_bytes, "i2c_tx") &&
+              h->request(m.i2c_request, m.i2c_acknowledge, "I2C transfer") &&
+              get(*h, m.i2c_rx, rx, rx_bytes, "i2c_rx");
+    *nack_index = m.i2c_nack ? static_cast<int32_t>(m.i2c_nack_index) : -1;
+    return status(ok);
+}
+
+// The host writer's burst: `count` packed (address, data) words, commit, chips settled.
+EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint32_t count) {
+    auto* h = static_cast<Harness*>(handle);
+    Vharness& m = h->model;
+    m.host_count = count;
+    bool ok = put(*h, m.host_words, words, bytes, "host_words") &&
+              h->request(m.host_request, m.host_acknowledge, "host-port write");
+    return status(ok);
+}
+
+// The host reader's burst: every result word, frozen in one cycle.
+EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
+    auto* h = static_cast<Harness*>(handle);
+    Vharness& m = h->model;
+    bool ok = h->request(m.read_request, m.read_acknowledge, "host-port read") &&
+              get(*h, m.read_words, words, bytes, "read_words");
+    return status(ok);
+}
+
+// The PWM generator's inputs: packed widths (ticks) and the period (ticks, 0 stops it).
+EXPORT int nh_pwm_set(void* handle, const uint8_t* widths, size_t bytes, uint32_t period_ticks) {
+    auto* h = static_cast<Harness*>(handle);
+    Vharness& m = h->model;
+    m.pwm_period_ticks = period_ticks;
+    return status(put(*h, m.pwm_width_ticks, widths, bytes, "pwm_width_ticks"));
+}
+
+// `count` cycles of the capture clock (the generator's and the capture core's domains).
+EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
+    auto* h = static_cast<Harness*>(handle);
+    h->model.eval();  // inputs written since the last eval settle before the first edge
+    for (uint64_t i = 0; i < count; ++i) h->pwm_cycle();
+    return 0;
+}
+
+}  // extern "C"
