@@ -170,7 +170,7 @@ _SIGNATURES = {
     "nh_destroy": ([ctypes.c_void_p], None),
     "nh_error": ([ctypes.c_void_p], ctypes.c_char_p),
     "nh_cycles": ([ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint64),
-                   ctypes.POINTER(ctypes.c_uint64)], None),
+                   ctypes.POINTER(ctypes.c_uint64)], ctypes.c_int),
     "nh_reset": ([ctypes.c_void_p, ctypes.c_uint32, ctypes.c_uint32], ctypes.c_int),
     "nh_spi": ([ctypes.c_void_p, *[ctypes.c_uint32] * 4, ctypes.c_char_p, _u8p, ctypes.c_size_t],
                ctypes.c_int),
@@ -182,6 +182,7 @@ _SIGNATURES = {
     "nh_pwm_set": ([ctypes.c_void_p, ctypes.c_char_p, ctypes.c_size_t, ctypes.c_uint32],
                    ctypes.c_int),
     "nh_pwm_cycles": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
+    "nh_pwm_cycles_later": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
 }  # fmt: skip
 
 
@@ -200,13 +201,14 @@ class _Model:
         self.lib = library
         self.handle = library.nh_create()
 
-    def check(self, status: int) -> None:
-        if status != 0:
-            raise NativeHarnessError(self.lib.nh_error(self.handle).decode())
+    def call(self, name: str, *args: object) -> None:
+        """``name(handle, *args)``; a failure inside the simulator is raised here."""
+        if getattr(self.lib, name)(self.handle, *args) != 0:
+            raise NativeHarnessError(f"{name}: {self.lib.nh_error(self.handle).decode()}")
 
     def close(self) -> None:
         if self.handle is not None:
-            self.lib.nh_destroy(self.handle)
+            self.lib.nh_destroy(self.handle)  # waits for a capture run left to its thread
             self.handle = None
 
 
@@ -246,15 +248,12 @@ class NativeSpiBus:
             raise ValueError(
                 f"SPI transfer of {len(tx)} bytes exceeds the {self.depth}-byte buffer"
             )
-        model = self._model
-        model.check(
-            model.lib.nh_spi(
-                model.handle, SPI_DEVICES.index(device), len(tx),
-                divider_for(self.sys_clk_hz, sclk_hz), self.mode3, tx, self._rx, len(tx),
-            )
+        self._model.call(
+            "nh_spi", SPI_DEVICES.index(device), len(tx), divider_for(self.sys_clk_hz, sclk_hz),
+            self.mode3, tx, self._rx, len(tx),
         )  # fmt: skip
         self.transfers += 1
-        return bytes(self._rx[: len(tx)])
+        return ctypes.string_at(self._rx, len(tx))
 
 
 class NativeI2cBus:
@@ -279,17 +278,14 @@ class NativeI2cBus:
             raise ValueError(f"read_len must be in 0..{self.read_depth}, not {read_len}")
         if len(write) > self.write_depth:
             raise ValueError(f"I2C write of {len(write)} bytes exceeds {self.write_depth}")
-        model = self._model
-        model.check(
-            model.lib.nh_i2c(
-                model.handle, address, len(write), read_len, int(rate_hz == RATES_HZ[1]), write,
-                len(write), self._rx, read_len, ctypes.byref(self._nack_index),
-            )
+        self._model.call(
+            "nh_i2c", address, len(write), read_len, int(rate_hz == RATES_HZ[1]), write,
+            len(write), self._rx, read_len, ctypes.byref(self._nack_index),
         )  # fmt: skip
         self.transfers += 1
         if self._nack_index.value >= 0:
             raise I2cNack(address, self._nack_index.value)
-        return bytes(self._rx[:read_len])
+        return ctypes.string_at(self._rx, read_len)
 
 
 class NativeHost:
@@ -300,6 +296,12 @@ class NativeHost:
         self.map = host_map
         self._write_bytes = _bytes_of((8 + WORD_BITS) * max_words)
         self._read = (ctypes.c_uint8 * (WORD_BITS // 8 * len(host_map.reads)))()
+        # HostPortMap.encode finds each word by a linear search, 11 times a frame (about
+        # 12 µs of the loop's budget): the same words from tables built once.
+        self._writes = {(word.channel, word.field): word for word in host_map.writes}
+        self._reads = [((word.channel, word.field), word.address * WORD_BITS,
+                        (1 << word.width) - 1, word.width if word.signed else 0)
+                       for word in host_map.reads]  # fmt: skip
 
     def load(
         self,
@@ -308,23 +310,42 @@ class NativeHost:
         now_us: int | None = None,
         faults: Mapping[str, tuple[bool, int]] | None = None,
     ) -> None:
-        """Stage the fields (and time, faults), commit, and return once the chips took them."""
-        words = self.map.encode_frame(samples, now_us=now_us, faults=faults)
-        packed = _pack([a | d << 8 for a, d in words], 8 + WORD_BITS, self._write_bytes)
-        model = self._model
-        model.check(model.lib.nh_host_write(model.handle, packed, len(packed), len(words)))
+        """Stage the fields (and time, faults), commit, and return once the chips took them.
+
+        The words of :meth:`HostPortMap.encode_frame`, in its order.
+        """
+        words = [
+            self._word(channel, field, value)
+            for channel, fields in samples.items()
+            for field, value in fields.items()
+        ]
+        if now_us is not None:
+            words.append(self._word("time", "now_us", now_us % (1 << 32)))
+        for chip, (mute, flip) in (faults or {}).items():
+            words.append(self._word(chip, "fault", (int(mute) << 8) | flip))
+        packed = _pack(words, 8 + WORD_BITS, self._write_bytes)
+        self._model.call("nh_host_write", packed, len(packed), len(words))
+
+    def _word(self, channel: str, field: str, value: int) -> int:
+        """``address | data << 8`` of one staged field (:meth:`HostPortMap.encode`)."""
+        word = self._writes.get((channel, field))
+        if word is not None:
+            low = -(1 << (word.width - 1)) if word.signed else 0
+            if low <= value < low + (1 << word.width):
+                return word.address | (value & ((1 << WORD_BITS) - 1)) << 8
+        address, data = self.map.encode(channel, field, value)  # raises its one-line error
+        return address | data << 8
 
     def results(self) -> dict[tuple[str, str], int]:
         """Every result word, keyed by (channel, field), sign-extended where signed."""
-        model = self._model
-        model.check(model.lib.nh_host_read(model.handle, self._read, len(self._read)))
-        packed = int.from_bytes(bytes(self._read), "little")
+        self._model.call("nh_host_read", self._read, len(self._read))
+        packed = int.from_bytes(self._read, "little")
         values = {}
-        for word in self.map.reads:
-            raw = packed >> (word.address * WORD_BITS) & ((1 << word.width) - 1)
-            if word.signed and raw >> (word.width - 1):
-                raw -= 1 << word.width
-            values[(word.channel, word.field)] = raw
+        for key, shift, mask, signed_width in self._reads:
+            raw = packed >> shift & mask
+            if signed_width and raw >> (signed_width - 1):
+                raw -= 1 << signed_width
+            values[key] = raw
         return values
 
     def pwm_capture(self) -> list[ChannelCapture]:
@@ -359,13 +380,14 @@ class NativePwm:
             if not 0 <= value <= limit:
                 raise ValueError(f"PWM ticks must be in 0..{limit}, not {value}")
         packed = _pack(widths_ticks, self.counter_bits, self._bytes)
-        model = self._model
-        model.check(model.lib.nh_pwm_set(model.handle, packed, len(packed), period_ticks))
+        self._model.call("nh_pwm_set", packed, len(packed), period_ticks)
 
-    def cycles(self, count: int) -> None:
-        """Run ``count`` capture-clock cycles (generator and capture core)."""
+    def cycles(self, count: int, *, later: bool = False) -> None:
+        """Run ``count`` capture-clock cycles (generator and capture core); with ``later``,
+        on the library's worker thread while the caller goes on (the next call that
+        touches the model waits for them)."""
         if count > 0:
-            self._model.check(self._model.lib.nh_pwm_cycles(self._model.handle, count))
+            self._model.call("nh_pwm_cycles_later" if later else "nh_pwm_cycles", count)
 
 
 class NativeHarness:
@@ -391,13 +413,12 @@ class NativeHarness:
         the generator stopped (period 0), no pulse."""
         self.pwm.write([0] * CHANNELS, period_ticks=0)
         sys_per_tick = round(HARNESS_SYS_CLK_HZ / self.pwm_tick_hz)
-        self._model.check(self._model.lib.nh_reset(self._model.handle, 3 * sys_per_tick, 3))
+        self._model.call("nh_reset", 3 * sys_per_tick, 3)
 
     def cycles(self) -> tuple[int, int]:
         """(system, capture) clock cycles so far: what the simulation has cost."""
         sys_cycles, pwm_cycles = ctypes.c_uint64(), ctypes.c_uint64()
-        self._model.lib.nh_cycles(self._model.handle, ctypes.byref(sys_cycles),
-                                  ctypes.byref(pwm_cycles))  # fmt: skip
+        self._model.call("nh_cycles", ctypes.byref(sys_cycles), ctypes.byref(pwm_cycles))
         return sys_cycles.value, pwm_cycles.value
 
     def close(self) -> None:

@@ -11,17 +11,21 @@
 // on its own rising edge, so one eval() is one whole clock cycle. The system clock
 // follows the gated clock's rule: whole cycles while its `enable` (the harness's
 // `sync_run`) is high, checked after every cycle. The capture clock runs only when
-// asked (nh_pwm_cycles); nothing in the system domain depends on it but the results'
-// synchroniser, which every read lets catch up (HostReader).
+// asked (nh_pwm_cycles, or nh_pwm_cycles_later on a worker thread); nothing in the system
+// domain depends on it but the results' synchroniser, which every read lets catch up
+// (HostReader).
 //
 // Errors: every function returns 0 on success and -1 on failure, with the reason in
 // nh_error(). Ports are copied as little-endian bytes, whatever their Verilated type.
 
 #include <algorithm>
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <mutex>
 #include <string>
+#include <thread>
 
 #include "Vharness.h"
 #include "Vharness___024root.h"
@@ -47,8 +51,57 @@ struct Harness {
     uint64_t sys_cycles = 0;
     uint64_t pwm_cycles = 0;
     std::string error;
+    // Capture-clock cycles left to a worker thread (nh_pwm_cycles_later). Only one of the
+    // two threads touches the model at a time: every call first waits until it is idle.
+    std::thread worker;
+    std::mutex mutex;
+    std::condition_variable changed;
+    uint64_t queued = 0;  // cycles the worker is to run; 0 when it is idle
+    bool quit = false;
 
     Harness() : model{&context, "harness"} {}
+
+    ~Harness() {
+        if (worker.joinable()) {
+            {
+                const std::lock_guard<std::mutex> lock{mutex};
+                quit = true;
+            }
+            changed.notify_all();
+            worker.join();
+        }
+    }
+
+    void work() {
+        std::unique_lock<std::mutex> lock{mutex};
+        while (true) {
+            changed.wait(lock, [this] { return queued != 0 || quit; });
+            if (quit) return;
+            const uint64_t count = queued;
+            lock.unlock();
+            for (uint64_t i = 0; i < count; ++i) pwm_cycle();
+            lock.lock();
+            queued = 0;
+            changed.notify_all();
+        }
+    }
+
+    void wait_idle() {
+        if (!worker.joinable()) return;
+        std::unique_lock<std::mutex> lock{mutex};
+        changed.wait(lock, [this] { return queued == 0; });
+    }
+
+    void run_later(uint64_t count) {
+        wait_idle();
+        if (count == 0) return;
+        if (!worker.joinable()) worker = std::thread{[this] { work(); }};
+        {
+            const std::lock_guard<std::mutex> lock{mutex};
+            queued = count;
+        }
+        changed.notify_all();
+    }
 
     void sync_cycle() {
         model.rootp->SYNC_CLOCK = 1;
@@ -150,6 +203,7 @@ EXPORT void* nh_create() {
 
 EXPORT void nh_destroy(void* handle) {
     auto* harness = static_cast<Harness*>(handle);
+    harness->wait_idle();
     // A model's scopes unregister from this thread's current context, which is the last
     // one created here, not necessarily theirs: with two harnesses, destroying the first
     // one through the second's freed context deadlocked.
@@ -161,16 +215,19 @@ EXPORT void nh_destroy(void* handle) {
 
 EXPORT const char* nh_error(void* handle) { return static_cast<Harness*>(handle)->error.c_str(); }
 
-EXPORT void nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles) {
+EXPORT int nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     *sys_cycles = h->sys_cycles;
     *pwm_cycles = h->pwm_cycles;
+    return 0;
 }
 
 // Reset both domains: `rst` high for these cycles of each clock, then the system clock
 // runs until it stops by itself.
 EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     Vharness& m = h->model;
     m.rst = 1;
     m.eval();
@@ -184,6 +241,7 @@ EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles) {
 EXPORT int nh_spi(void* handle, uint32_t device, uint32_t length, uint32_t divider, uint32_t mode3,
            const uint8_t* tx, uint8_t* rx, size_t bytes) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     Vharness& m = h->model;
     m.spi_device = device;
     m.spi_length = length;
@@ -201,6 +259,7 @@ EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t r
            const uint8_t* tx, size_t tx_bytes, uint8_t* rx, size_t rx_bytes,
            int32_t* nack_index) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     Vharness& m = h->model;
     m.i2c_address = address;
     m.i2c_write_len = write_len;
@@ -216,6 +275,7 @@ EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t r
 // The host writer's burst: `count` packed (address, data) words, commit, chips settled.
 EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint32_t count) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     Vharness& m = h->model;
     m.host_count = count;
     bool ok = put(*h, m.host_words, words, bytes, "host_words") &&
@@ -226,6 +286,7 @@ EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint3
 // The host reader's burst: every result word, frozen in one cycle.
 EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     Vharness& m = h->model;
     bool ok = h->request(m.read_request, m.read_acknowledge, "host-port read") &&
               get(*h, m.read_words, words, bytes, "read_words");
@@ -235,17 +296,31 @@ EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
 // The PWM generator's inputs: packed widths (ticks) and the period (ticks, 0 stops it).
 EXPORT int nh_pwm_set(void* handle, const uint8_t* widths, size_t bytes, uint32_t period_ticks) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     Vharness& m = h->model;
     m.pwm_period_ticks = period_ticks;
     return status(put(*h, m.pwm_width_ticks, widths, bytes, "pwm_width_ticks"));
 }
 
+// `count` cycles of the capture clock on the worker thread; the call returns at once and
+// the next call that touches the model waits for them. Python's own threads would need
+// the GIL to start and finish the call, which the rig's thread holds while it works.
+EXPORT int nh_pwm_cycles_later(void* handle, uint64_t count) {
+    auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
+    h->model.eval();  // inputs written since the last eval settle before the first edge
+    h->run_later(count);
+    return 0;
+}
+
 // `count` cycles of the capture clock (the generator's and the capture core's domains).
 EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
     auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
     h->model.eval();  // inputs written since the last eval settle before the first edge
     for (uint64_t i = 0; i < count; ++i) h->pwm_cycle();
     return 0;
 }
 
 }  // extern "C"
+

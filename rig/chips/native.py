@@ -26,7 +26,11 @@ just before edge ``now_tick`` sees (its reader latches after that edge)
 (``rig/chips/cosim_worker.py``). The bus transfers run while the capture clock stands
 still: the two domains meet only in that synchroniser, so where they fall between two
 capture edges changes nothing read. A frame's transfers must still fit in its span of
-time, as they do on the real bus.
+time, as they do on the real bus. For the same reason the capture clock may run ahead:
+once a frame is read, the edges up to the next frame's read (but not the edge that takes
+the next PWM period's widths, which come with the next frame) run on a worker thread
+while the rig encodes, sends, logs and steps its model, so on a second core they cost
+the loop nothing.
 """
 
 from __future__ import annotations
@@ -54,8 +58,11 @@ class PwmTimingError(RuntimeError):
 class NativeChips:
     """:class:`rig.chips.layer.ChipHost` over the compiled harness: host port, PWM, capture."""
 
-    def __init__(self, harness: NativeHarness, *, pwm_tick_hz: float) -> None:
+    def __init__(
+        self, harness: NativeHarness, *, pwm_tick_hz: float, frame_us: int | None = None
+    ) -> None:
         self.harness = harness
+        self.frame_us = frame_us
         self.tick_us = 1e6 / pwm_tick_hz
         self.tick_ps = round(1e12 / pwm_tick_hz)
         self.period_us = 0
@@ -81,11 +88,16 @@ class NativeChips:
     def _ticks(self, time_us: int) -> int:
         return round(time_us / self.tick_us)
 
-    def _run_to(self, tick: int) -> None:
-        """Run the capture clock's edges up to ``tick`` (excluded)."""
+    def _run_to(self, tick: int, *, later: bool = False) -> None:
+        """Run the capture clock's edges up to ``tick`` (excluded); ``later``: in the
+        background, while the rig goes on (the next use of the harness waits for them)."""
         if tick > self._next_edge:
-            self.harness.pwm.cycles(tick - self._next_edge)
+            self.harness.pwm.cycles(tick - self._next_edge, later=later)
             self._next_edge = tick
+
+    def _read_tick(self, now_us: int) -> int:
+        """The last tick at or before ``now_us``: its edge is the last a read there sees."""
+        return now_us * 1_000_000 // self.tick_ps
 
     async def load(self, frame: ChipFrame) -> None:
         periods = self._periods(frame.pulses, frame.now_us)
@@ -151,9 +163,21 @@ class NativeChips:
             self._preload(start_us, widths)
             previous_us = start_us
         self._check_bus_time(now_us)
-        # Every edge up to that of the last tick at or before now_us, then the read.
-        self._run_to(now_us * 1_000_000 // self.tick_ps + 1)
+        now_tick = self._read_tick(now_us)
+        if self._next_edge > now_tick + 1:
+            raise PwmTimingError(
+                f"the frame at {now_us} µs comes before the expected frame time: the capture "
+                f"clock already ran ahead to {self._next_edge * self.tick_us:g} µs (frames "
+                f"every {self.frame_us} µs)"
+            )
+        self._run_to(now_tick + 1)  # every edge up to now_tick's, then the read
         captures = self.harness.host.pwm_capture()[:MOTOR_CHANNELS]
+        if self.frame_us is not None:
+            # While the rig does the rest of its frame (and the autopilot computes), run the
+            # capture clock on to the next frame's read, stopping before the edge that takes
+            # the next period's widths: they come with the next frame.
+            latch_tick = self._ticks(self._next_start_us) - 1
+            self._run_to(min(self._read_tick(now_us + self.frame_us) + 1, latch_tick), later=True)
         widths_us = tuple(capture.width_ticks * self.tick_us for capture in captures)
         return widths_us, tuple(capture.timeout for capture in captures)
 
@@ -174,10 +198,15 @@ class NativeSensorLayer:
 
     ``pwm_hz`` is the autopilot's PWM rate (its timer period is replayed by the harness's
     PWM generator); ``pwm_tick_hz`` the capture core's tick, a build parameter of the
-    gateware. Failures are :class:`~rig.errors.CosimError` lines, as the cocotb layer's.
+    gateware. With ``frame_us`` (the rig's frames come every ``frame_us``), the capture
+    clock runs on towards the next frame on a worker thread once a frame is read, while
+    the rig does the rest of its frame; a frame earlier than that is then an error.
+    Failures are :class:`~rig.errors.CosimError` lines, as the cocotb layer's.
     """
 
-    def __init__(self, *, pwm_hz: int, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
+    def __init__(
+        self, *, pwm_hz: int, pwm_tick_hz: float = PWM_TICK_HZ, frame_us: int | None = None
+    ) -> None:
         from fpga_hdl.cosim.native import NativeHarness  # builds or reuses the library
 
         self.pwm_period_us = round(1e6 / pwm_hz)
@@ -185,7 +214,7 @@ class NativeSensorLayer:
             self.harness = NativeHarness(pwm_tick_hz=pwm_tick_hz)
         except Exception as error:
             raise CosimError(f"the RTL co-simulation could not start: {error}") from error
-        self.chips = NativeChips(self.harness, pwm_tick_hz=pwm_tick_hz)
+        self.chips = NativeChips(self.harness, pwm_tick_hz=pwm_tick_hz, frame_us=frame_us)
         self.engine = SensorEngine(self.harness.spi, self.harness.i2c, self.chips)
 
     def start(self) -> None:

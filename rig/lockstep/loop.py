@@ -617,4 +617,6 @@ def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:
 
     if name == COCOTB_LAYER:  # the same RTL under cocotb (benchmarks and comparisons)
         return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
-    return NativeSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
+    return NativeSensorLayer(
+        pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz, frame_us=rates.frame_us
+    )
