@@ -23,8 +23,10 @@ instead of 270 ns per capture tick, 230 instead of 520 ns per system cycle). The
 clock keeps the gated clock's rule, whole cycles while its ``enable`` is high, so each
 transaction sees the same edges as under cocotb, where the design sees no time but its
 clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
-caller asks (:meth:`NativePwm.cycles`): its domain and the system domain meet only in the
-results' synchroniser, which a read lets catch up before it freezes the results.
+caller asks (:meth:`NativePwm.cycles`), at once or on the library's worker thread while
+the caller goes on (every other call waits for it first): its domain and the system
+domain meet only in the results' synchroniser, which a read lets catch up before it
+freezes the results.
 
 :class:`NativeHarness` bundles the buses like :class:`fpga_hdl.cosim.peripherals.Harness`
 (whose cocotb classes this mirrors): ``spi`` and ``i2c`` implement the
