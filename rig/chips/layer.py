@@ -9,14 +9,16 @@ at the mag rate, the MS5611 convert/read cycle every 10 ms (D2 then D1, so a pre
 latency and bus faults therefore reach the autopilot as on the real rig.
 
 :class:`SensorEngine` is written once against fpga_hdl's async bus protocols and a
-:class:`ChipHost` (how samples reach the chips). It runs in two places:
+:class:`ChipHost` (how samples reach the chips). It runs in three places:
 
 - ``sensor_layer = "tlm"``: here, over the pure-Python register models
   (:class:`TlmChips`); the coroutines never suspend, so :func:`run_now` drives them
-  without an event loop.
-- ``sensor_layer = "rtl"``: inside the cocotb process (``rig.chips.rtl``), over the
-  co-simulation harness's SPI/I2C controllers, PWM generator and the generated Verilog
-  of every chip and the PWM capture, behind the binary channel of ``rig.chips.channel``.
+  without an event loop;
+- ``sensor_layer = "rtl"``: here too (``rig.chips.native``), over the co-simulation
+  harness's SPI/I2C controllers, PWM generator and the generated Verilog of every chip
+  and the PWM capture, compiled by Verilator and called once per transaction;
+- the same RTL under cocotb (``rig.chips.rtl``, the loop's ``rtl-cocotb``): inside the
+  simulator's process, behind the binary channel of ``rig.chips.channel``.
 """
 
 from __future__ import annotations
@@ -113,7 +115,8 @@ class ChipHost(Protocol):
 
 
 class SensorLayer(Protocol):
-    """What the loop needs of a sensor layer (:class:`TlmSensorLayer`, ``RtlSensorLayer``)."""
+    """What the loop needs of a sensor layer (:class:`TlmSensorLayer`, ``NativeSensorLayer``,
+    ``RtlSensorLayer``)."""
 
     def start(self) -> None: ...
 
