@@ -6,7 +6,7 @@ One frame is one IMU period (1 ms by default):
 2. sensor physics samples the truth (IMU every frame, mag/baro/GPS on their schedules) and
    the sensor-layer faults are applied;
 3. the samples are loaded into the chips and PX4's drivers read them over SPI/I2C
-   (``sensor_layer``: Python register models, or the RTL under cocotb in its own process);
+   (``sensor_layer``: Python register models, or the RTL as Verilator-compiled code);
 4. due scenario commands go to the autopilot on its onboard link (acknowledged first with the
    reference autopilot, so each acts at a known frame);
 5. HIL_SENSOR (+ HIL_GPS, + HIL_STATE_QUATERNION at the asked interval) goes out and, once
