@@ -16,11 +16,23 @@ _PR_SET_PDEATHSIG = 1
 _LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
 
 
+def restore_sigint() -> None:
+    """``preexec_fn`` of a child the rig stops with SIGINT (autopilots, campaign cases):
+    SIGINT back to its default action. A shell ignores SIGINT in what it starts in the
+    background (``nohup … &``, CI jobs, cron) and a child inherits that across exec: the
+    rig's SIGINT would then do nothing, and the child be killed before closing its log."""
+    if _LIBC is not None:  # libc's signal(): no Python-level thread checks between fork and exec
+        _LIBC.signal(signal.SIGINT, signal.SIG_DFL)
+    else:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def die_with_parent() -> None:
     """``preexec_fn`` for a child that must not outlive the rig (PX4 never exits on its
     own once its simulator is gone): SIGKILL when the rig dies, even by SIGKILL itself.
     Linux only; elsewhere nothing (the rig still stops its children on every way out
-    it controls)."""
+    it controls). SIGINT is restored too (:func:`restore_sigint`): PX4 is stopped with it."""
+    restore_sigint()
     if _LIBC is not None:
         _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 

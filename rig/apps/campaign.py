@@ -51,7 +51,7 @@ from hil_config import (
 )
 from quad_model.vehicle import VEHICLES_DIR, VehicleFileError, vehicle_from_dict
 from rig.errors import RigError
-from rig.processes import stop_process_group
+from rig.processes import restore_sigint, stop_process_group
 from rig.scenarios.scenario import SCENARIOS_DIR, FaultSpec, SensorLayer, scenario_from_dict
 
 T = TypeVar("T")
@@ -515,6 +515,7 @@ def run_case(spec: CaseSpec) -> CaseResult:
             stdout=output,
             stderr=subprocess.STDOUT,
             start_new_session=True,
+            preexec_fn=restore_sigint,
         )
         try:
             process.wait(timeout=spec.timeout_s)

@@ -62,7 +62,7 @@ from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
-from rig.processes import exit_description, stop_process_group
+from rig.processes import exit_description, restore_sigint, stop_process_group
 from rig.scenarios.faults import FaultInjector, describe
 from rig.scenarios.scenario import Rates, Scenario
 from rig.scenarios.script import Action, CommandScript
@@ -528,7 +528,8 @@ class _Loop:
             "--instance", str(self.ports.instance), "--log", str(log_path),
             *(arg for param in self.options.autopilot_params for arg in ("--param", param)),
         )  # fmt: skip
-        self._process = subprocess.Popen(list(argv), start_new_session=True)
+        self._process = subprocess.Popen(list(argv), start_new_session=True,
+                                         preexec_fn=restore_sigint)  # fmt: skip
         self._closers.append(self._stop_autopilot)
 
     def _autopilot_exit(self) -> str | None:

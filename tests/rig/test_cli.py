@@ -148,3 +148,22 @@ def test_a_full_disk_ends_the_run_in_one_line_with_whole_logs(tmp_path, free_ins
         log = pyulog.ULog(str(out / name))
         assert not log.file_corruption, name
         assert log.data_list, name
+
+
+@pytest.mark.closed_loop
+def test_a_rig_started_in_the_background_still_stops_its_autopilot_cleanly(tmp_path, free_instance):
+    """A shell ignores SIGINT in what it starts in the background (``nohup rig run … &``,
+    CI); the autopilot inherited that, ignored the rig's SIGINT at the end of the run and
+    was killed before it wrote its last buffer (a 1-hour soak lost its last 2 s)."""
+    out = tmp_path / "run"
+    process = subprocess.run(
+        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--duration", "3",
+         "--instance", str(free_instance()), "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+    )  # fmt: skip
+    assert process.returncode == 0, process.stderr
+    rig_log = pyulog.ULog(str(out / "rig.ulg"), [])
+    assert rig_log.logged_messages[-1].message == "run completed: 3000 frames"
+    status = pyulog.ULog(str(out / "autopilot.ulg"), ["vehicle_status"])
+    assert status.get_dataset("vehicle_status").data["timestamp"][-1] >= 2.9e6
