@@ -16,6 +16,7 @@ counts as a failure: a traceback, a hang, an unreadable log, a missed sensor slo
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -172,7 +173,11 @@ def main(argv: list[str] | None = None) -> int:
         ("failures (tracebacks, hangs, unreadable logs, missed slots)", len(problems), ""),
     )  # fmt: skip
     for name, value, unit in rows:
-        table.add_row(name, f"{value:,.2f}" if isinstance(value, float) else f"{value:,}", unit)
+        if isinstance(value, float) and math.isnan(value):  # a growth from fewer than 3 hours
+            table.add_row(name, "—", f"{unit} (needs 3 simulated hours)")
+        else:
+            table.add_row(name, f"{value:,.2f}" if isinstance(value, float) else f"{value:,}",
+                          unit)  # fmt: skip
     console.print(table)
     for problem in problems:
         console.print(f"[red]failure[/]: {problem}", highlight=False)
