@@ -10,6 +10,7 @@ import pyulog
 
 from rig.apps.cli import main
 from rig.mavlink.px4_api import free_instance as find_free_instance
+from rig.processes import restore_sigint
 
 
 def test_missing_scenario_is_one_line_on_stderr(capsys, tmp_path):
@@ -43,6 +44,7 @@ def test_ctrl_c_stops_cleanly_with_readable_logs(tmp_path, free_instance):
         [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--instance",
          str(free_instance()), "--out", str(out)],
         stderr=subprocess.PIPE, text=True,
+        preexec_fn=restore_sigint,  # as from a terminal, also when pytest runs in the background
     )  # fmt: skip
     deadline = time.monotonic() + 180  # generous: a loaded CI machine compiles numba first
     while not ((out / "rig.ulg").is_file() and (out / "rig.ulg").stat().st_size > 200_000):
