@@ -54,15 +54,8 @@ from rig.chips.channel import (
     receive_message,
     send_message,
 )
-from rig.chips.layer import CHIPS, NO_FAULT, ChipFrame, SensorEngine
-from rig.chips.pwm import MOTOR_CHANNELS, Pulse
-
-#: SensorTop's host-port channel and fault names for the rig's chip names.
-_HOST_CHIP = {"mpu6000": "imu", "ms5611": "baro", "ist8310": "mag"}
-
-
-class PwmTimingError(RuntimeError):
-    """The frame's pulses cannot be replayed, or its capture read, at their exact times."""
+from rig.chips.layer import ChipFrame, SensorEngine, host_port_inputs
+from rig.chips.pwm import MOTOR_CHANNELS, Pulse, PwmTimingError, replay_periods
 
 
 class RtlChips:
@@ -105,44 +98,14 @@ class RtlChips:
         await self.harness.wait_until_s(time_ps * 1e-12)
 
     async def load(self, frame: ChipFrame) -> None:
-        periods = self._periods(frame.pulses, frame.now_us)
+        periods, self._next_start_us = replay_periods(
+            frame.pulses, frame.now_us, self._next_start_us, self.period_us, self.tick_us
+        )
         if periods:
             self._preload(*periods[0])
         self._later = periods[1:]
-        samples: dict[str, dict[str, int]] = {}
-        if frame.imu is not None:
-            samples["imu"] = frame.imu.fields()
-        if frame.mag is not None:
-            samples["mag"] = {"x": frame.mag.x_counts, "y": frame.mag.y_counts,
-                              "z": frame.mag.z_counts}  # fmt: skip
-        if frame.baro_d1_d2 is not None:
-            samples["baro"] = {"d1": frame.baro_d1_d2[0], "d2": frame.baro_d1_d2[1]}
-        faults = {}
-        for chip in CHIPS:
-            fault = frame.faults.get(chip, NO_FAULT)
-            faults[_HOST_CHIP[chip]] = (fault.mute, fault.flip)
+        samples, faults = host_port_inputs(frame)
         await self.harness.host.load(samples, now_us=frame.now_us, faults=faults)
-
-    def _periods(self, pulses: tuple[Pulse, ...], now_us: int) -> list[tuple[int, list[int]]]:
-        """Widths in ticks (0: no pulse) for every PWM period starting up to ``now_us``."""
-        periods = {}
-        while self._next_start_us <= now_us:
-            periods[self._next_start_us] = [0] * CHANNELS
-            self._next_start_us += self.period_us
-        for pulse in pulses:
-            if pulse.start_us not in periods:
-                raise PwmTimingError(
-                    f"PWM pulse on channel {pulse.channel} at {pulse.start_us} µs is not at a "
-                    f"period start of this frame (period {self.period_us} µs from 0)"
-                )
-            ticks = math.ceil(pulse.width_us / self.tick_us - 1e-9)
-            if not 0 < ticks * self.tick_us < self.period_us:
-                raise PwmTimingError(
-                    f"PWM pulse width {pulse.width_us} µs on channel {pulse.channel} is not "
-                    f"within one period ({self.period_us} µs)"
-                )
-            periods[pulse.start_us][pulse.channel] = ticks
-        return sorted(periods.items())
 
     def _preload(self, start_us: int, widths: list[int]) -> None:
         """Write the widths of the period at ``start_us`` before the generator takes them."""

@@ -102,6 +102,30 @@ class ChipReadout:
     bus_errors: tuple[tuple[str, str], ...] = ()
 
 
+#: SensorTop's host-port channel and fault names for the rig's chip names.
+HOST_CHIP = {Chip.MPU6000: "imu", Chip.MS5611: "baro", Chip.IST8310: "mag"}
+
+
+def host_port_inputs(
+    frame: ChipFrame,
+) -> tuple[dict[str, dict[str, int]], dict[str, tuple[bool, int]]]:
+    """The frame's sample fields and fault words as the RTL's host port takes them (the
+    compiled and the cocotb layer load the same)."""
+    samples: dict[str, dict[str, int]] = {}
+    if frame.imu is not None:
+        samples["imu"] = frame.imu.fields()
+    if frame.mag is not None:
+        samples["mag"] = {"x": frame.mag.x_counts, "y": frame.mag.y_counts,
+                          "z": frame.mag.z_counts}  # fmt: skip
+    if frame.baro_d1_d2 is not None:
+        samples["baro"] = {"d1": frame.baro_d1_d2[0], "d2": frame.baro_d1_d2[1]}
+    faults = {}
+    for chip in CHIPS:
+        fault = frame.faults.get(chip, NO_FAULT)
+        faults[HOST_CHIP[chip]] = (fault.mute, fault.flip)
+    return samples, faults
+
+
 class ChipHost(Protocol):
     """How samples, time and faults reach the chips (TLM: models; RTL: the host port)."""
 

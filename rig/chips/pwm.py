@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS
 from quad_model.frames import PWM_MAX_US, PWM_MIN_US, pwm_to_throttle
@@ -45,6 +46,36 @@ class Pulse:
     channel: int
     start_us: int
     width_us: int
+
+
+class PwmTimingError(RuntimeError):
+    """The frame's pulses cannot be replayed, or its capture read, at their exact times."""
+
+
+def replay_periods(
+    pulses: Sequence[Pulse], now_us: int, next_start_us: int, period_us: int, tick_us: float
+) -> tuple[list[tuple[int, list[int]]], int]:
+    """The PWM periods an RTL generator replays for one frame: widths in capture ticks
+    (0: no pulse) for every period starting from ``next_start_us`` up to ``now_us``, and
+    the next period start after them. Both RTL layers replay the autopilot's PWM so."""
+    periods: dict[int, list[int]] = {}
+    while next_start_us <= now_us:
+        periods[next_start_us] = [0] * CHANNELS
+        next_start_us += period_us
+    for pulse in pulses:
+        if pulse.start_us not in periods:
+            raise PwmTimingError(
+                f"PWM pulse on channel {pulse.channel} at {pulse.start_us} µs is not at a "
+                f"period start of this frame (period {period_us} µs from 0)"
+            )
+        ticks = math.ceil(pulse.width_us / tick_us - 1e-9)
+        if not 0 < ticks * tick_us < period_us:
+            raise PwmTimingError(
+                f"PWM pulse width {pulse.width_us} µs on channel {pulse.channel} is not "
+                f"within one period ({period_us} µs)"
+            )
+        periods[pulse.start_us][pulse.channel] = ticks
+    return sorted(periods.items()), next_start_us
 
 
 class PwmOutput:
