@@ -50,7 +50,7 @@ from fpga_hdl.buses.i2c_controller import RATES_HZ, controller_rate_hz
 from fpga_hdl.buses.spi_controller import divider_for
 from fpga_hdl.buses.transactions import I2cNack, UnknownDevice, check_clock_hz
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
-from fpga_hdl.chips.pwm_capture.model import ChannelCapture
+from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, HARNESS_TOPLEVEL, SPI_DEVICES, CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason, simulator_environment, verilator_root
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
@@ -352,16 +352,7 @@ class NativeHost:
 
     def pwm_capture(self) -> list[ChannelCapture]:
         """The PWM capture's results per channel, as the host port shows them."""
-        values = self.results()
-        timeout = values[("pwm", "timeout")]
-        return [
-            ChannelCapture(
-                values[("pwm", f"width_ticks_{ch}")],
-                values[("pwm", f"period_ticks_{ch}")],
-                bool(timeout >> ch & 1),
-            )
-            for ch in range(CHANNELS)
-        ]
+        return channel_captures(self.results())
 
 
 class NativePwm:

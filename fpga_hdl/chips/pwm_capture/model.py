@@ -8,10 +8,10 @@ landing exactly on a clock edge counts as already there. The core acts on a samp
 """
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from fpga_hdl.chips.pwm_capture.core import LATENCY_TICKS, timeout_ticks
+from fpga_hdl.chips.pwm_capture.core import CHANNELS, LATENCY_TICKS, timeout_ticks
 
 __all__ = ["ChannelCapture", "PwmCaptureModel"]
 
@@ -91,3 +91,17 @@ class PwmCaptureModel:
     def _edge(self, time_s: float, first_edge_s: float) -> int:
         """Index of the first clock edge at or after ``time_s``."""
         return max(0, math.ceil((time_s - first_edge_s) * self.tick_hz - 1e-9))
+
+
+def channel_captures(results: Mapping[tuple[str, str], int]) -> list[ChannelCapture]:
+    """The PWM capture's per-channel results out of the host port's result words (the
+    cocotb and the compiled harness read the same words)."""
+    timeout = results[("pwm", "timeout")]
+    return [
+        ChannelCapture(
+            results[("pwm", f"width_ticks_{ch}")],
+            results[("pwm", f"period_ticks_{ch}")],
+            bool(timeout >> ch & 1),
+        )
+        for ch in range(CHANNELS)
+    ]
