@@ -20,8 +20,10 @@ import queue
 import re
 import shutil
 import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -32,7 +34,9 @@ from rig.mavlink.px4_api import Ports
 from tests.rig.background_rig import RigInBackground, wait_until_bound
 
 pytestmark = pytest.mark.closed_loop
-MAVPROXY = shutil.which("mavproxy.py")
+#: The venv's script beside this interpreter (`make test` does not put .venv/bin on PATH).
+_BESIDE_PYTHON = Path(sys.executable).with_name("mavproxy.py")
+MAVPROXY = str(_BESIDE_PYTHON) if _BESIDE_PYTHON.exists() else shutil.which("mavproxy.py")
 #: PX4's DO_SET_MODE arguments: custom-mode flag, main mode AUTO, sub-mode TAKEOFF / LAND.
 TAKEOFF_MODE, LAND_MODE = "1 4 2", "1 4 6"
 #: Wall seconds for any one expected line (MAVProxy starts in ~3 s on a busy machine).
