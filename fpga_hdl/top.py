@@ -7,7 +7,9 @@ Buses, as on a Pixhawk FMU (e.g. FMUv2/v3, where the MPU-6000 and MS5611 share S
   chips, and because a deselected chip must then really release SDO (``miso_oe``): the
   top drives ``spi_miso`` from the selected chip and flags contention if two drive;
 - one I2C bus for the IST8310 (open drain: ``i2c_sda_oe`` = 1 pulls SDA low; the
-  testbench resolves the wired-AND with its own driver).
+  testbench resolves the wired-AND with its own driver);
+- one UART for the u-blox M8 GNSS receiver (``gps_tx`` receiver to autopilot, ``gps_rx``
+  the autopilot's configuration), as on a Pixhawk's GPS port.
 
 - eight PWM inputs (``pwm``) into the PWM capture core, which runs in its own slow
   ``pwm`` domain at ``pwm_tick_hz`` (one tick per cycle, so a simulation pays the tick
@@ -41,6 +43,8 @@ from fpga_hdl.chips.mpu6000.core import Mpu6000
 from fpga_hdl.chips.ms5611 import regs as ms5611_regs
 from fpga_hdl.chips.ms5611.core import Ms5611
 from fpga_hdl.chips.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture, timeout_ticks
+from fpga_hdl.chips.ublox import ubx
+from fpga_hdl.chips.ublox.core import UbloxM8Core
 from fpga_hdl.host.host_port import HostPort, HostPortMap, host_port_map
 from fpga_hdl.host.snapshot_cdc import PUBLISH_TICKS, SnapshotSynchronizer
 
@@ -53,8 +57,9 @@ SAMPLE_CHANNELS = {
     "imu": mpu6000_regs.SAMPLE_LAYOUT,
     "baro": ms5611_regs.SAMPLE_LAYOUT,
     "mag": ist8310_regs.SAMPLE_LAYOUT,
+    "gps": ubx.SAMPLE_LAYOUT,
 }
-FAULT_CHIPS = ("imu", "baro", "mag")
+FAULT_CHIPS = ("imu", "baro", "mag", "gps")
 #: PWM capture tick: 1 µs, the unit PX4 uses for PWM (``fpga_hdl.chips.pwm_capture``).
 PWM_TICK_HZ = 1e6
 #: No rising edge for this long and a channel is flagged (and reads zero): a usual ESC
@@ -124,6 +129,8 @@ class SensorTop(wiring.Component):
         Chip selects of the MPU-6000 and the MS5611.
     i2c_scl, i2c_sda_i : In(1), i2c_sda_oe : Out(1)
         I2C bus of the IST8310 (``i2c_sda_oe`` = 1 pulls SDA low).
+    gps_tx : Out(1), gps_rx : In(1)
+        UART1 of the u-blox receiver: its TXD (idle high) and RXD.
     pwm : In(8)
         PWM inputs from the autopilot, one per channel (asynchronous).
     pwm_clk, pwm_rst : In(1)
@@ -148,6 +155,8 @@ class SensorTop(wiring.Component):
     i2c_scl: In(1, init=1)
     i2c_sda_i: In(1, init=1)
     i2c_sda_oe: Out(1)
+    gps_tx: Out(1, init=1)
+    gps_rx: In(1, init=1)
     pwm: In(CHANNELS)
     pwm_clk: In(1)
     pwm_rst: In(1)
@@ -164,6 +173,7 @@ class SensorTop(wiring.Component):
         self.imu = Mpu6000(sys_clk_hz=sys_clk_hz)
         self.baro = Ms5611(sys_clk_hz=sys_clk_hz)
         self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
+        self.gps = UbloxM8Core(sys_clk_hz=sys_clk_hz)
         self.capture = PwmCapture(tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s)
         # The synchroniser copies a published result within its stages + 1 system
         # cycles, before the next publication (at most one per tick) replaces it.
@@ -179,11 +189,12 @@ class SensorTop(wiring.Component):
 
     def elaborate(self, platform) -> Module:
         m = Module()
-        host, imu, baro, mag = self.host, self.imu, self.baro, self.mag
+        host, imu, baro, mag, gps = self.host, self.imu, self.baro, self.mag, self.gps
         m.submodules.host = host
         m.submodules.imu = imu
         m.submodules.baro = baro
         m.submodules.mag = mag
+        m.submodules.gps = gps
         m.domains.pwm = ClockDomain(local=True)
         m.d.comb += [ClockSignal("pwm").eq(self.pwm_clk), ResetSignal("pwm").eq(self.pwm_rst)]
         m.submodules.capture = capture = DomainRenamer("pwm")(self.capture)
@@ -195,7 +206,7 @@ class SensorTop(wiring.Component):
             host.read_addr.eq(self.read_addr),
             self.read_data.eq(host.read_data),
         ]
-        for name, chip in (("imu", imu), ("baro", baro), ("mag", mag)):
+        for name, chip in (("imu", imu), ("baro", baro), ("mag", mag), ("gps", gps)):
             m.d.comb += [
                 chip.sample.eq(getattr(host, name)),
                 chip.sample_stb.eq(getattr(host, f"{name}_stb")),
@@ -203,7 +214,9 @@ class SensorTop(wiring.Component):
                 chip.fault.flip.eq(getattr(host, f"{name}_fault_flip")),
             ]
         m.d.comb += [baro.now_us.eq(host.now_us), mag.now_us.eq(host.now_us)]
-        m.d.comb += self.pending.eq(imu.sample_pending | baro.sample_pending | mag.sample_pending)
+        m.d.comb += self.pending.eq(
+            imu.sample_pending | baro.sample_pending | mag.sample_pending | gps.sample_pending
+        )
 
         for chip, cs_n in ((imu, self.imu_cs_n), (baro, self.baro_cs_n)):
             m.d.comb += [chip.spi.sclk.eq(self.spi_sclk), chip.spi.mosi.eq(self.spi_mosi)]
@@ -219,6 +232,7 @@ class SensorTop(wiring.Component):
             mag.i2c.sda_i.eq(self.i2c_sda_i),
             self.i2c_sda_oe.eq(mag.i2c.sda_oe),
         ]
+        m.d.comb += [self.gps_tx.eq(gps.tx), gps.rx.eq(self.gps_rx)]
         self._capture_results(m, capture)
         return m
 

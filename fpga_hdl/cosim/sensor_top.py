@@ -17,8 +17,8 @@ class SensorTopPins:
     """Host port, SPI controller (``imu``, ``baro``) and I2C controller on a SensorTop DUT.
 
     Construction drives every input to its idle level (chip selects high, SCL and SDA
-    released, PWM inputs low with their domain unclocked); ``await pins.host.reset()``
-    then resets the design before the first transfer.
+    released, PWM inputs low with their domain unclocked, the GPS UART's RXD high);
+    ``await pins.host.reset()`` then resets the design before the first transfer.
     """
 
     def __init__(
@@ -49,3 +49,4 @@ class SensorTopPins:
         )
         for name in ("pwm", "pwm_clk", "pwm_rst"):
             getattr(dut, name).value = 0
+        dut.gps_rx.value = 1  # the GPS UART's RXD idles high (a low line is a break)
