@@ -14,7 +14,7 @@ logged messages; the scenario, seed and vehicle are info entries and parameters.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -68,7 +68,6 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
                                ("float[3]", "force_frd_n"), ("float[3]", "moment_frd_nm")],
 }  # fmt: skip
 
-_ZERO_Q = np.zeros(4)
 _ZERO_3 = np.zeros(3)
 #: ``actuator_motors.control`` and ``actuator_outputs.output`` lengths (PX4 msg/*.msg).
 _CONTROLS, _OUTPUTS = 12, 16
@@ -93,46 +92,46 @@ class RigLog:
         self._previous_rates: np.ndarray | None = None
         self._previous_rates_us = 0
         self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0}
-        # Reused every frame (the writer packs them at once): unused slots stay NaN / 0.
-        self._control = np.full(_CONTROLS, math.nan)
-        self._output = np.zeros(_OUTPUTS)
+        self._rows: dict[str, Callable[..., None]] = {}
+
+    def _row(self, topic: str) -> Callable[..., None]:
+        """The row writer of a topic logged every frame (subscribed when first written)."""
+        write = self._rows.get(topic)
+        if write is None:
+            write = self._rows[topic] = self.writer.row_writer(topic)
+        return write
 
     def truth(self, time_us: int, truth: VehicleTruth) -> None:
-        w = self.writer
-        w.write("vehicle_attitude_groundtruth", time_us, timestamp_sample=time_us,
-                q=truth.attitude_quat, delta_q_reset=_ZERO_Q, quat_reset_counter=0)  # fmt: skip
-        # Plain floats: the writer turns each numpy scalar back into one anyway.
-        p, v = truth.position_ned_m.tolist(), truth.velocity_ned_mps.tolist()
-        a, q = truth.acceleration_ned_mps2.tolist(), truth.attitude_quat.tolist()
-        lat, lon, alt = self._home
-        w.write(
-            "vehicle_local_position_groundtruth", time_us, timestamp_sample=time_us,
-            ref_lat=lat, ref_lon=lon, ref_alt=alt, x=p[0], y=p[1], z=p[2], vx=v[0], vy=v[1],
-            vz=v[2], ax=a[0], ay=a[1], az=a[2], heading=yaw_from_quat(q), xy_valid=True,
-            z_valid=True, v_xy_valid=True, v_z_valid=True,
-        )  # fmt: skip
+        # Rows in the topics' field order (TOPICS): see ULogWriter.row_writer for why.
+        q = truth.attitude_quat.tolist()
         rates = truth.angular_rate_frd_radps
         derivative = _ZERO_3
         if self._previous_rates is not None and time_us > self._previous_rates_us:
             dt_s = (time_us - self._previous_rates_us) / 1e6
             derivative = (rates - self._previous_rates) / dt_s
         self._previous_rates, self._previous_rates_us = rates, time_us
-        w.write("vehicle_angular_velocity_groundtruth", time_us, timestamp_sample=time_us,
-                xyz=rates, xyz_derivative=derivative)  # fmt: skip
-        w.write("battery_status_groundtruth", time_us, voltage_v=truth.battery_voltage_v,
-                current_a=truth.battery_current_a)  # fmt: skip
-        w.write("rig_propulsion_groundtruth", time_us, rotor_speed_radps=truth.rotor_speed_radps,
-                thrust_n=truth.rotor_thrust_n, force_frd_n=truth.force_frd_n,
-                moment_frd_nm=truth.moment_frd_nm)  # fmt: skip
+        lat, lon, alt = self._home
+        row = self._row
+        row("vehicle_attitude_groundtruth")(time_us, time_us, *q, 0.0, 0.0, 0.0, 0.0, 0)
+        row("vehicle_local_position_groundtruth")(
+            time_us, time_us, lat, lon, *truth.position_ned_m.tolist(),
+            *truth.velocity_ned_mps.tolist(), *truth.acceleration_ned_mps2.tolist(),
+            yaw_from_quat(q), alt, True, True, True, True,
+        )  # fmt: skip
+        row("vehicle_angular_velocity_groundtruth")(time_us, time_us, *rates.tolist(),
+                                                    *derivative.tolist())  # fmt: skip
+        row("battery_status_groundtruth")(time_us, truth.battery_voltage_v,
+                                          truth.battery_current_a)  # fmt: skip
+        row("rig_propulsion_groundtruth")(
+            time_us, *truth.rotor_speed_radps.tolist(), *truth.rotor_thrust_n.tolist(),
+            *truth.force_frd_n.tolist(), *truth.moment_frd_nm.tolist(),
+        )  # fmt: skip
 
     def imu(
         self, time_us: int, frame_us: int, accel_mps2: Sequence[float], gyro_radps: Sequence[float]
     ) -> None:
-        self.writer.write(
-            "sensor_combined", time_us, gyro_rad=gyro_radps, gyro_integral_dt=frame_us,
-            accelerometer_timestamp_relative=0, accelerometer_m_s2=accel_mps2,
-            accelerometer_integral_dt=frame_us, accelerometer_clipping=0, gyro_clipping=0,
-        )  # fmt: skip
+        self._row("sensor_combined")(time_us, *gyro_radps, frame_us, 0, *accel_mps2, frame_us,
+                                     0, 0)  # fmt: skip
 
     def bus_error(self, chip: str) -> None:
         """Count a failed transfer: PX4 reports it as the sensor's ``error_count``."""
@@ -160,15 +159,12 @@ class RigLog:
         )  # fmt: skip
 
     def motors(self, time_us: int, commanded_us: int, controls: Sequence[float]) -> None:
-        self._control[: len(controls)] = controls
-        self._control[len(controls) :] = math.nan
-        self.writer.write("actuator_motors", time_us, timestamp_sample=commanded_us,
-                          control=self._control, reversible_flags=0)  # fmt: skip
+        unused = (math.nan,) * (_CONTROLS - len(controls))
+        self._row("actuator_motors")(time_us, commanded_us, *controls, *unused, 0)
 
     def pwm(self, time_us: int, widths_us: Sequence[float]) -> None:
-        self._output[: len(widths_us)] = widths_us
-        self._output[len(widths_us) :] = 0.0
-        self.writer.write("actuator_outputs", time_us, noutputs=len(widths_us), output=self._output)
+        unused = (0.0,) * (_OUTPUTS - len(widths_us))
+        self._row("actuator_outputs")(time_us, len(widths_us), *widths_us, *unused)
 
     def event(self, time_us: int, text: str, level: str = "info") -> None:
         self.writer.log(level, time_us, text)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import re
 import struct
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -179,6 +179,31 @@ class ULogWriter:
         self._pending += prefix
         self._pending += payload
         self._maybe_flush()
+
+    def row_writer(self, topic: str, multi_id: int = 0) -> Callable[..., None]:
+        """A writer of ``topic`` that takes a sample as its format's values in order
+        (timestamp first, arrays flattened), for the topics a run logs every frame.
+
+        :meth:`write` matches values to fields by name, which costs more than packing them;
+        a caller that builds the row itself skips that (the rig log's tests check its rows
+        against :meth:`write`'s).
+        """
+        spec = self._topics.get(topic)
+        if spec is None:
+            raise ULogWriteError(f"topic {topic!r} was not declared when the log was opened")
+        prefix = self._data_prefixes.get((topic, multi_id)) or self._subscribe(spec, multi_id)
+        pack, pending, maybe_flush = spec.packer.pack, self._pending, self._maybe_flush
+
+        def write_row(*values: object) -> None:
+            try:
+                payload = pack(*values)
+            except struct.error as error:
+                raise ULogWriteError(f"topic {topic!r}: {error}") from None
+            pending.extend(prefix)  # the writer's buffer: flush() empties it in place
+            pending.extend(payload)
+            maybe_flush()
+
+        return write_row
 
     def _subscribe(self, spec: _Topic, multi_id: int) -> bytes:
         """Add the subscription of an instance; returns its data-message prefix."""
