@@ -148,6 +148,43 @@ def open_log(path: Path) -> LogFile:
     return LogFile(path, sha256_of(path), fmt, topics, warnings)
 
 
+class _ParserLooped(ULogException):
+    """pyulog stepped back to where it had already resumed: it would loop for ever."""
+
+
+class _LoopGuard:
+    """The file as pyulog reads it, refusing a resynchronisation that goes backwards.
+
+    Why: after a damaged message header pyulog seeks back by the size the header claimed
+    (``seek(-2 - size, 1)``) to resume one byte later; when the file ended inside that
+    message the read was short, the seek lands before the header, and pyulog parses the
+    same bytes again for ever (pyulog 1.x, found by ``tests/fuzz``). Each backward relative
+    seek of a resync lands further into the file than the one before, so one that does not
+    is that loop.
+    """
+
+    def __init__(self, stream: io.BufferedReader) -> None:
+        self._stream = stream
+        self._resumed_at = -1
+
+    def read(self, size: int = -1) -> bytes:
+        return self._stream.read(size)
+
+    def tell(self) -> int:
+        return self._stream.tell()
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        position = self._stream.seek(offset, whence)
+        if whence == io.SEEK_CUR and offset < 0:
+            if position <= self._resumed_at:
+                raise _ParserLooped(f"a damaged message at byte {position} ends past the file")
+            self._resumed_at = position
+        return position
+
+    def close(self) -> None:
+        self._stream.close()
+
+
 def read_ulog(path: Path, topics: Sequence[str] | None = None) -> tuple[ULog, tuple[str, ...]]:
     """Parse a ULog (only ``topics`` if given) → (ULog, pyulog's warnings as lines).
 
@@ -159,7 +196,7 @@ def read_ulog(path: Path, topics: Sequence[str] | None = None) -> tuple[ULog, tu
     try:
         # pyulog leaves its own file handle open when parsing fails; pass it ours.
         with path.open("rb") as stream, contextlib.redirect_stdout(captured):
-            ulog = ULog(stream, None if topics is None else list(topics))
+            ulog = ULog(_LoopGuard(stream), None if topics is None else list(topics))
     # A damaged file can fail anywhere in pyulog's parser; each of these means "not readable"
     # (OSError: a bogus length makes pyulog seek before the file's start).
     except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError,

@@ -1,5 +1,7 @@
 """Reading real ULogs and tables; every bad input is one clear line."""
 
+import struct
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -71,6 +73,23 @@ def test_truncated_and_foreign_files(tmp_path, quad4001_log):
     (tmp_path / "x.bin").write_bytes(b"")
     with pytest.raises(CredibilityError, match=r"unknown log format '.bin'"):
         open_log(tmp_path / "x.bin")
+
+
+def test_a_damaged_header_that_ends_past_the_file_is_refused_not_looped(tmp_path):
+    """pyulog resumes after a damaged header by seeking back the size the header claims;
+    when the file ends inside that message it lands before the header and reads the same
+    bytes for ever. Here it lands on the info message before, which leads back to it."""
+    key = b"char[3] abc"
+    body = bytes([len(key)]) + key + b"xyz"
+    info = struct.pack("<HB", len(body), ord("I")) + body
+    tail = b"\x00" * 4  # what is left of the damaged message
+    claimed = len(info) + 1 + len(tail)  # seeking back 2 + this from the end lands on info
+    damaged = struct.pack("<HB", claimed, 0)  # message type 0: pyulog's "corrupt" mark
+    path = tmp_path / "looping.ulg"
+    path.write_bytes(b"ULog\x01\x12\x35\x01" + bytes(8) + info + damaged + tail)
+    with pytest.raises(CredibilityError, match=r"looping.ulg: not a readable ULog file \(a "
+                       r"damaged message at byte 16 ends past the file\)"):  # fmt: skip
+        open_log(path)
 
 
 def test_tables_nan_and_gaps(tmp_path):
