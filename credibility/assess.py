@@ -332,6 +332,16 @@ def _windowed(log: LogFile, spec: SignalSpec, segment_s, plan: Plan) -> signals.
     return signals.window(log.signal(spec), segment_s, plan.max_gap_s, spec.drop_nan)
 
 
+def _performance_signal(
+    test: PerformanceTest, log: LogFile, spec: SignalSpec, segment_s, plan: Plan
+) -> signals.Signal:
+    """The test's window of one log, averaged to the test's ``average_hz`` when it has one."""
+    sig = _windowed(log, spec, segment_s, plan)
+    if test.average_hz is None:
+        return sig
+    return signals.interval_means(sig, 1.0 / test.average_hz)
+
+
 # --- performance ---------------------------------------------------------------------------
 
 
@@ -385,14 +395,16 @@ def _performance(
         )
         return PerformanceResult(test, rows)
     real_role = test.roles.real
-    real = _windowed(logs[real_role], test.signal, test.segment_s, plan)
+    real = _performance_signal(test, logs[real_role], test.signal, test.segment_s, plan)
     real_values = _statistic_values(test, real)
     p_e = _parameter(test, real, real_values)
     consequence = RATE_CONSEQUENCES.get(test.parameter)
     sims: dict[str, signals.Signal] = {}
 
     def row(role: str) -> PerformanceRow:
-        sim = sims[role] = _windowed(logs[role], test.signal_sim, test.segment_sim_s, plan)
+        sim = sims[role] = _performance_signal(
+            test, logs[role], test.signal_sim, test.segment_sim_s, plan
+        )
         if consequence:
             real_logged, sim_logged = Logged.of(real_role, real), Logged.of(role, sim)
             _note(notes, rate_mismatch(test.name, real_logged, sim_logged, consequence))

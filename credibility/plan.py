@@ -130,6 +130,11 @@ class PerformanceTest(_Test):
     segment_sim_s: Span | None = None
     threshold: Positive | None = None
     highpass_hz: Positive | None = None
+    #: Each log faster than this is averaged over 1/average_hz intervals before the statistic
+    #: (:func:`credibility.signals.interval_means`): a SITL in lockstep logs sensor_combined
+    #: per IMU sample (IMU_INTEG_RATE = its IMU rate) where the real vehicle logged PX4's
+    #: means at IMU_INTEG_RATE, and a σ compares only at the same bandwidth.
+    average_hz: Positive | None = None
     settling_band: Positive = 0.02
     #: None: a tenth of the segment.
     steady_window_s: Positive | None = None

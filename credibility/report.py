@@ -114,6 +114,7 @@ def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
             "segment_s": test.segment_s,
             "segment_sim_s": test.segment_sim_s,
             "highpass_hz": test.highpass_hz,
+            "average_hz": test.average_hz,
             "settling_band": test.settling_band if test.parameter == "settling_time" else None,
             "steady_window_s": test.steady_window_s,
             "rows": [vars(row) for row in result.rows],
@@ -433,6 +434,8 @@ def _performance_section(result: PerformanceResult, pass_mark: float) -> dict[st
             f"(sim {list(test.segment_sim_s)} s)"
         )
     hp = f", {test.highpass_hz:g} Hz high-pass" if test.highpass_hz else ""
+    if test.average_hz:
+        hp = f", averaged to {test.average_hz:g} Hz{hp}"
     rows = [
         [r.role, f"{r.p_e:.6g}", f"{r.p_s:.6g}", f"{r.error:.4g}",
          f"{r.threshold:.4g} ({r.threshold_rule})", _pct(r.eta), Verdict(r.eta >= pass_mark)]

@@ -89,6 +89,20 @@ def max_gap(sig: Signal) -> float:
     return float(np.diff(sig.time_s).max()) if sig.time_s.size > 1 else 0.0
 
 
+def interval_means(sig: Signal, interval_s: float) -> Signal:
+    """The samples averaged over consecutive ``interval_s`` intervals from the first sample,
+    each mean stamped at its interval's last sample: what PX4's vehicle_imu does to the raw
+    IMU at IMU_INTEG_RATE. A signal already logged at about that interval (median interval
+    above two thirds of it) is returned as is: its samples are such means already."""
+    if sig.median_interval_s() > interval_s * 2.0 / 3.0:
+        return sig
+    bins = np.floor((sig.time_s - sig.time_s[0]) / interval_s).astype(np.int64)
+    starts = np.flatnonzero(np.diff(bins, prepend=-1))
+    counts = np.diff(np.append(starts, bins.size))
+    means = np.add.reduceat(sig.values, starts) / counts
+    return Signal(sig.name, sig.source, sig.time_s[starts + counts - 1], means)
+
+
 def resample(sig: Signal, grid_s: np.ndarray) -> np.ndarray:
     """Values on ``grid_s`` by linear interpolation (the paper's t_1 … t_{n_t} of eq. (RQ))."""
     return np.interp(grid_s, sig.time_s, sig.values)

@@ -263,3 +263,40 @@ def test_log_override_replaces_a_role(logs):
     assert result.results[0].rows[1].p_s == pytest.approx(10.2)
     with pytest.raises(CredibilityError, match=r"the plan has no log role 'foo'"):
         load_plan(_write_plan(logs), {"foo": logs / "sim.csv"})
+
+
+def test_average_hz_compares_per_sample_noise_with_interval_means(tmp_path):
+    """White noise of σ = 1 logged per sample at 800 Hz (a SITL in lockstep) against PX4's
+    means of it over 5 ms (a real sensor_combined at 200 Hz): the means have σ = 1/√4 = 0.5,
+    so the 800 Hz log reads 2× too high unless it is averaged the same way first."""
+    rng = np.random.default_rng(3)
+    fast_t = np.arange(0.0, 30.0, 1 / 800.0)
+    fast = rng.standard_normal(fast_t.size)
+    real_noise = rng.standard_normal(fast_t.size).reshape(-1, 4).mean(axis=1)
+    pd.DataFrame({"time_s": fast_t[3::4], "imu.x": real_noise}).to_csv(
+        tmp_path / "real.csv", index=False
+    )
+    pd.DataFrame({"time_s": fast_t, "imu.x": fast}).to_csv(tmp_path / "sim.csv", index=False)
+    plan = """
+[plan]
+name = "averaging"
+k_p = 0.1
+
+[logs]
+real = "real.csv"
+sim = "sim.csv"
+
+[[tests]]
+name = "sigma"
+kind = "performance"
+parameter = "std"
+signal = "imu.x"
+segment_s = [1.0, 29.0]
+"""
+    raw = assess(load_plan(_write_plan(tmp_path, plan))).results[0].rows[0]
+    averaged_plan = _write_plan(tmp_path, plan + "average_hz = 200.0\n")
+    averaged = assess(load_plan(averaged_plan)).results[0].rows[0]
+    assert raw.p_e == pytest.approx(0.5, rel=0.03)
+    assert raw.p_s == pytest.approx(1.0, rel=0.03)
+    assert averaged.p_e == raw.p_e  # already 200 Hz means: left as logged
+    assert averaged.p_s == pytest.approx(0.5, rel=0.03)
