@@ -1,9 +1,11 @@
 """SI values → the MAVLink messages of PX4's simulator API, and actuator controls → SI.
 
-One encoder per message the rig sends (HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION) and one
+One encoder per message the rig sends (HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION,
+DISTANCE_SENSOR) and one
 decoder for what it receives (HIL_ACTUATOR_CONTROLS). Units, masks and ranges follow
 PX4-Autopilot ``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``
-(``update_sensors``, ``handle_message_hil_gps``, ``actuator_controls_from_outputs``) and
+(``update_sensors``, ``handle_message_hil_gps``, ``publish_distance_topic``,
+``actuator_controls_from_outputs``) and
 ``shared/PX4_SIM_CONTRACT.md``. Pure functions: no sockets, so the protocol tests can check
 every field against pymavlink's message definitions.
 """
@@ -172,6 +174,34 @@ def hil_state_quaternion(
         _int16_cm(vn), _int16_cm(ve), _int16_cm(vd),
         speed_cmps, speed_cmps,
         *milli_g,
+    )  # fmt: skip
+
+
+def distance_sensor(
+    mav: mavlink.MAVLink,
+    time_us: int,
+    *,
+    distance_m: float,
+    signal_quality: int,
+    min_m: float,
+    max_m: float,
+) -> mavlink.MAVLink_distance_sensor_message:
+    """DISTANCE_SENSOR of a downward laser rangefinder, as PX4's own driver publishes it.
+
+    PX4's ``publish_distance_topic`` reads the distances in cm, ignores ``time_boot_ms``
+    (it stamps the arrival), maps ``orientation`` PITCH_270 to downward facing and turns
+    MAVLink's quality (0 unknown, 1..100) into uORB's (-1 unknown, 0..100) as
+    ``100·(q − 1)/99`` in integers: uORB 0 (a reading the estimator must not use) is sent
+    as 1, 100 % as 100, and every uORB value arrives as itself except 99, which no q gives
+    (it arrives as 98). ``signal_quality`` is the uORB value (0..100).
+    """
+    if not 0 <= signal_quality <= 100:
+        raise ValueError(f"signal_quality must be 0..100 (uORB), not {signal_quality}")
+    quality = 1 + math.ceil(signal_quality * 99 / 100)
+    return mav.distance_sensor_encode(
+        time_us // 1000, _uint16_cm(min_m), _uint16_cm(max_m), _uint16_cm(distance_m),
+        mavlink.MAV_DISTANCE_SENSOR_LASER, 0, mavlink.MAV_SENSOR_ROTATION_PITCH_270, 0,
+        signal_quality=quality,
     )  # fmt: skip
 
 

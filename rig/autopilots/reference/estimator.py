@@ -9,7 +9,8 @@ estimator's errors.
   integrator and acceleration compensation.
 - :class:`PositionEstimator`: a linear Kalman filter in the local NED frame, predicting with
   the accelerometer rotated to NED, corrected by GPS position/velocity and barometric height
-  (noise figures under PX4's ``EKF2_*`` names). With the attitude given, the model is linear
+  (noise figures under PX4's ``EKF2_*`` names), and near the ground by a rangefinder
+  (PX4's conditional range aid). With the attitude given, the model is linear
   and the three axes decouple, so it runs as three 3-state filters (position, velocity,
   accelerometer bias) updated together in numpy.
 """
@@ -231,6 +232,7 @@ class PositionEstimator:
         self.gps_pos_noise_m = 0.5
         self.gps_vel_noise_mps = 0.3
         self.baro_noise_m = 3.5
+        self.range_noise_m = 0.1
         self.rejected = 0
         self._dt_cached = -1.0
         self.reset()
@@ -240,6 +242,7 @@ class PositionEstimator:
         self.gps_pos_noise_m = params["EKF2_GPS_P_NOISE"]
         self.gps_vel_noise_mps = params["EKF2_GPS_V_NOISE"]
         self.baro_noise_m = params["EKF2_BARO_NOISE"]
+        self.range_noise_m = params["EKF2_RNG_NOISE"]
         self._dt_cached = -1.0
 
     def reset(self) -> None:
@@ -249,6 +252,8 @@ class PositionEstimator:
         self.origin: tuple[float, float, float] | None = None  # lat, lon deg; alt AMSL m
         self.origin_time_us = 0
         self.baro_reference_m: float | None = None
+        #: NED down of the (flat) ground under a rangefinder; None before a reading.
+        self.ground_down_m: float | None = None
 
     @property
     def position_ned_m(self) -> NDArray[np.float64]:
@@ -302,6 +307,17 @@ class PositionEstimator:
         down = self.baro_reference_m - altitude_m
         self._fuse(slice(2, 3), 0, np.array([down]), self.baro_noise_m**2)
 
+    def fuse_range(self, dist_bottom_m: float, aid: bool) -> None:
+        """A rangefinder's height above the ground. Until the aid applies (PX4's conditions,
+        judged by the caller) it only places the ground under the estimate; while it does,
+        the range measures the height below that ground, as PX4 EKF2 fuses it near the
+        ground on a flat field."""
+        if not aid or self.ground_down_m is None:
+            self.ground_down_m = float(self.x[2, 0]) + dist_bottom_m
+            return
+        down = self.ground_down_m - dist_bottom_m
+        self._fuse(slice(2, 3), 0, np.array([down]), self.range_noise_m**2)
+
     def set_origin(self, lat_deg: float, lon_deg: float, alt_amsl_m: float, time_us: int,
                    velocity_ned_mps: NDArray[np.float64]) -> None:  # fmt: skip
         """Start the horizontal frame here; height keeps its baro reference."""
@@ -309,9 +325,12 @@ class PositionEstimator:
         self.origin_time_us = time_us
         self.x[:2, 0] = 0.0
         self.x[:, 1] = velocity_ned_mps
-        self.p[:2, 0, 0] = self.gps_pos_noise_m**2
+        # A reset state loses its correlations: keeping the height's correlation with a
+        # replaced vertical velocity left P indefinite once a rangefinder had tightened it.
+        self.p[:, 1, :] = self.p[:, :, 1] = 0.0
         self.p[:, 1, 1] = self.gps_vel_noise_mps**2
-        self.p[:2, 0, 1:] = self.p[:2, 1:, 0] = 0.0
+        self.p[:2, 0, :] = self.p[:2, :, 0] = 0.0
+        self.p[:2, 0, 0] = self.gps_pos_noise_m**2
 
     def _fuse(self, axes: slice, state: int, measured: NDArray[np.float64], variance: float):
         """Scalar Kalman update of one state on several axes at once, with a 5σ gate."""
@@ -323,3 +342,51 @@ class PositionEstimator:
         gain = p[:, :, state] / innovation_var[:, None] * accept[:, None]
         x += gain * innovation[:, None]
         p -= gain[:, :, None] * p[:, state, None, :]
+
+
+class DistanceToGround:
+    """Height above the ground below the vehicle from a downward rangefinder: PX4 EKF2's
+    ``dist_bottom`` when a rangefinder is fitted (``EKF2_RNG_CTRL`` not 0).
+
+    A reading counts as PX4's ``SensorRangeFinder`` judges it: within the sensor's
+    (inclusive) min..max, quality not 0, the beam within 45° of vertical, and no older than
+    :data:`RANGE_TIMEOUT_US`. The height is the range times the cosine of the tilt (the
+    beam along the body's z axis). It is not fused into the height estimate: the autopilot
+    uses it where PX4 uses ``dist_bottom``, the landing speed and the land detector.
+    """
+
+    #: PX4 ``SensorRangeFinder``: readings from a beam tilted further are not used.
+    COS_MAX_TILT = math.cos(math.radians(45.0))
+    #: Four of the LIDAR-Lite's 50 ms cycles without a usable reading end the estimate.
+    RANGE_TIMEOUT_US = 200_000
+
+    def __init__(self) -> None:
+        self.enabled = True
+        self.height_m = math.nan
+        self._time_us: int | None = None
+
+    def configure(self, params: Parameters) -> None:
+        self.enabled = bool(params["EKF2_RNG_CTRL"])
+
+    def update(self, distance_m: float, signal_quality: int, limits_m: tuple[float, float],
+               q: NDArray[np.float64], time_us: int) -> bool:  # fmt: skip
+        """A new reading (``q`` the attitude body → NED at that time); True when usable."""
+        cos_tilt = float(_quat_to_dcm(q)[2, 2])
+        usable = (
+            self.enabled
+            and limits_m[0] <= distance_m <= limits_m[1]
+            and signal_quality != 0
+            and cos_tilt > self.COS_MAX_TILT
+        )
+        if usable:
+            self.height_m = distance_m * cos_tilt
+            self._time_us = time_us
+        return usable
+
+    def valid(self, time_us: int) -> bool:
+        """PX4 ``dist_bottom_valid``."""
+        return self._time_us is not None and time_us - self._time_us <= self.RANGE_TIMEOUT_US
+
+    def height(self, time_us: int) -> float | None:
+        """The height above the ground while valid, else None."""
+        return self.height_m if self.valid(time_us) else None

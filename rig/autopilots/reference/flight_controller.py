@@ -34,6 +34,7 @@ from rig.autopilots.reference.control import (
 )
 from rig.autopilots.reference.estimator import (
     AttitudeEstimator,
+    DistanceToGround,
     GyroRestCalibration,
     PositionEstimator,
     pressure_altitude_m,
@@ -42,7 +43,7 @@ from rig.autopilots.reference.flight_log import ImuAverage
 from rig.autopilots.reference.land_detector import LandDetector
 from rig.autopilots.reference.navigator import MissionItem, Navigator, NavState, Setpoint
 from rig.autopilots.reference.params import Parameters
-from rig.autopilots.reference.sensors import GroundTruth, SensorFrame, SensorMonitor
+from rig.autopilots.reference.sensors import GroundTruth, RangeReading, SensorFrame, SensorMonitor
 from rig.logs.ulog_writer import ULogWriter
 from rig.mavlink.px4_api import mavlink
 
@@ -112,6 +113,7 @@ class FlightController:
         self.log = log
         self.attitude = AttitudeEstimator()
         self.position = PositionEstimator()
+        self.ground = DistanceToGround()
         self.gyro_calibration = GyroRestCalibration()
         self.rate_control = RateController(self.params)
         self.attitude_control = AttitudeController(self.params)
@@ -379,6 +381,7 @@ class FlightController:
         p = self.params
         self.attitude.configure(p)
         self.position.configure(p)
+        self.ground.configure(p)
         self.rate_control.configure(p)
         self.attitude_control.configure(p)
         self.position_control.configure(p)
@@ -424,6 +427,8 @@ class FlightController:
                 self.attitude.gyro_bias_radps = offsets
         self.attitude.update(sensors.gyro_radps, sensors.accel_mps2, mag, dt_s, compensation)
         self._rates_filter.update(self.attitude.rates_radps, time_us)
+        if sensors.range is not None:
+            self._fuse_range(sensors.range, time_us)
         self.position.predict(quat_to_dcm(self.attitude.q) @ sensors.accel_mps2, dt_s)
         baro_ok = self.monitors["baro"].healthy(time_us)
         if sensors.baro_pressure_pa is not None and baro_ok:
@@ -450,6 +455,24 @@ class FlightController:
             return
         local = self._to_local(gps.lat_deg, gps.lon_deg, gps.alt_amsl_m)
         self.position.fuse_gps(local, velocity, use_height=self._use_gps_height)
+
+    def _fuse_range(self, reading: RangeReading, time_us: int) -> None:
+        """The rangefinder: height above the ground, and the height aid near it (PX4
+        ``EKF2_RNG_CTRL``: 1 below ``EKF2_RNG_A_HMAX`` and slower than ``EKF2_RNG_A_VMAX``
+        horizontally, 2 always)."""
+        ground, p = self.ground, self.params
+        limits = (reading.min_m, reading.max_m)
+        if not ground.update(reading.distance_m, reading.signal_quality, limits,
+                             self.attitude.q, time_us):  # fmt: skip
+            return
+        mode = p["EKF2_RNG_CTRL"]
+        velocity = self.position.velocity_ned_mps
+        aid = mode == 2 or (
+            mode == 1
+            and ground.height_m < p["EKF2_RNG_A_HMAX"]
+            and math.hypot(velocity[0], velocity[1]) < p["EKF2_RNG_A_VMAX"]
+        )
+        self.position.fuse_range(ground.height_m, aid)
 
     def _update_gps_acceleration(self, velocity: NDArray[np.float64], time_us: int) -> None:
         """Acceleration from successive GPS velocities, low-passed, for the attitude filter's
@@ -530,6 +553,7 @@ class FlightController:
             p, time_us, float(velocity[2]),
             math.hypot(velocity[0], velocity[1]) if self.position_valid() else None,
             float(self.velocity_sp[2]), self.collective_thrust, math.hypot(rates[0], rates[1]),
+            self.ground.height(time_us),
         ):  # fmt: skip
             self._landed_since_us = time_us
             self.notify(mavlink.MAV_SEVERITY_INFO, "Landing detected")
@@ -588,6 +612,7 @@ class FlightController:
         est = self.position
         position = est.position_ned_m
         nav = self.navigator
+        dist_bottom = self.ground.height(time_us)
         if self._idle():
             self.setpoint = None
             self.position_control.reset_integral()
@@ -602,9 +627,9 @@ class FlightController:
                 self.nav_state = self.user_nav_state = NavState.AUTO_LOITER
         elif self.nav_state == NavState.AUTO_MISSION:
             step = nav.mission_step(position, self.landed, time_us, dt_s)
-            setpoint = nav.land(position, dt_s) if step == "land" else step
+            setpoint = nav.land(position, dt_s, dist_bottom) if step == "land" else step
         elif self.nav_state == NavState.AUTO_LAND:
-            setpoint = nav.land(position, dt_s)
+            setpoint = nav.land(position, dt_s, dist_bottom)
         elif self.nav_state == NavState.DESCEND:
             setpoint = nav.descend()
         elif self.nav_state == NavState.OFFBOARD and self._offboard_body is not None:
@@ -738,7 +763,8 @@ class FlightController:
             z_global=est.origin is not None, ref_lat=origin[0], ref_lon=origin[1],
             ref_alt=origin[2], eph=math.hypot(pos_std[0], pos_std[1]), epv=pos_std[2],
             evh=math.hypot(vel_std[0], vel_std[1]), evv=vel_std[2],
-            dead_reckoning=not self._gps_good,
+            dead_reckoning=not self._gps_good, dist_bottom=self.ground.height_m,
+            dist_bottom_valid=self.ground.valid(time_us),
         )  # fmt: skip
         thrust_body = np.array([0.0, 0.0, -self.collective_thrust])
         sp = self.setpoint

@@ -36,6 +36,7 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
         ("float", "az"), ("float", "heading"), ("bool", "xy_global"), ("bool", "z_global"),
         ("double", "ref_lat"), ("double", "ref_lon"), ("float", "ref_alt"), ("float", "eph"),
         ("float", "epv"), ("float", "evh"), ("float", "evv"), ("bool", "dead_reckoning"),
+        ("float", "dist_bottom"), ("bool", "dist_bottom_valid"),
     ],
     "vehicle_attitude_setpoint": [("float", "yaw_sp_move_rate"), ("float[4]", "q_d"),
                                   ("float[3]", "thrust_body")],

@@ -4,10 +4,12 @@ Landing goes through PX4's three stages (``MulticopterLandDetector.cpp``), each 
 must hold for a third of ``LNDMC_TRIG_TIME`` before the next one is considered:
 
 1. *ground contact*: descent commanded, thrust below 30 % of the range from ``MPC_THR_MIN``
-   to ``MPC_THR_HOVER``, and no vertical (``LNDMC_Z_VEL_MAX``) or horizontal
-   (``LNDMC_XY_VEL_MAX``) movement. The position controller then cuts thrust to its minimum
-   and resets its integrators (PX4 ``mc_pos_control``: "flying but ground contact"), which
-   is what lets the next stages trigger within a second of touchdown;
+   to ``MPC_THR_HOVER``, no vertical (``LNDMC_Z_VEL_MAX``) or horizontal
+   (``LNDMC_XY_VEL_MAX``) movement, and, when a rangefinder gives the height above the
+   ground, less than 1 m of it (PX4 ``_is_close_to_ground``). The position controller
+   then cuts thrust to its minimum and resets its integrators (PX4 ``mc_pos_control``:
+   "flying but ground contact"), which is what lets the next stages trigger within a
+   second of touchdown;
 2. *maybe landed*: ground contact, thrust below 10 % of that range, and no roll/pitch
    rotation faster than ``LNDMC_ROT_MAX``;
 3. *landed*: maybe landed for its third of the trigger time.
@@ -23,6 +25,8 @@ import math
 
 from rig.autopilots.reference.params import Parameters
 
+#: PX4 ``DIST_FROM_GROUND_THRESHOLD``: ground contact needs the rangefinder's height below it.
+CLOSE_TO_GROUND_M = 1.0
 #: Takeoff: with the motors above idle, climbing this far above the arming height or this
 #: fast (a simpler test than PX4's throttle-based one, enough without a pilot on sticks).
 TAKEOFF_CLIMB_M = 0.5
@@ -94,24 +98,30 @@ class LandDetector:
         velocity_sp_down_mps: float,
         collective_thrust: float,
         roll_pitch_rate_radps: float,
+        dist_bottom_m: float | None = None,
     ) -> bool:
         """In flight: advance the three stages; True at the frame landing is detected.
 
         ``horizontal_speed_mps`` is None without a horizontal velocity estimate (no GPS):
-        PX4 then counts no horizontal movement.
+        PX4 then counts no horizontal movement. ``dist_bottom_m`` is the rangefinder's
+        height above the ground, None without one (the close-to-ground check is skipped).
+        The descent counted as commanded is 90 % of the slowest the navigator commands:
+        MPC_LAND_SPEED, or MPC_LAND_CRWL under a rangefinder.
         """
         hover, thr_min = params["MPC_THR_HOVER"], params["MPC_THR_MIN"]
         land_speed = params["MPC_LAND_SPEED"]
         stage_us = round(params["LNDMC_TRIG_TIME"] * 1e6 / 3)
         # after ground contact the controller commands minimum thrust, no velocity: PX4 then
         # counts the cut itself as the commanded descent (its 100 m/s² down set-point)
-        descending = velocity_sp_down_mps >= 0.9 * land_speed or self.ground_contact
+        slowest = land_speed if dist_bottom_m is None else min(land_speed, params["MPC_LAND_CRWL"])
+        descending = velocity_sp_down_mps >= 0.9 * slowest or self.ground_contact
         still = abs(velocity_down_mps) <= min(0.45 * land_speed, params["LNDMC_Z_VEL_MAX"]) and (
             horizontal_speed_mps is None or horizontal_speed_mps <= params["LNDMC_XY_VEL_MAX"]
         )
         low_thrust = collective_thrust <= thr_min + 0.3 * (hover - thr_min)
+        close_to_ground = dist_bottom_m is None or dist_bottom_m < CLOSE_TO_GROUND_M
         self.ground_contact = self._ground_contact.update(
-            descending and still and low_thrust, time_us, stage_us
+            descending and still and low_thrust and close_to_ground, time_us, stage_us
         )
         minimal_thrust = collective_thrust <= thr_min + 0.1 * (hover - thr_min)
         not_rotating = roll_pitch_rate_radps <= math.radians(params["LNDMC_ROT_MAX"])

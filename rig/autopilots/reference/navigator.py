@@ -305,14 +305,19 @@ class Navigator:
         speeds = (speeds[0], min(speeds[1], self.params["MPC_TKO_SPEED"]), speeds[2])
         return self._track(self.takeoff_target_ned, dt_s, speeds)
 
-    def land(self, position, dt_s: float) -> Setpoint:
-        """Hold the horizontal position and descend, slowing between MPC_LAND_ALT1/2."""
+    def land(self, position, dt_s: float, dist_bottom_m: float | None = None) -> Setpoint:
+        """Hold the horizontal position and descend, slowing between MPC_LAND_ALT1/2 and,
+        with a rangefinder's height above the ground, to MPC_LAND_CRWL below MPC_LAND_ALT3
+        (PX4 ``FlightTaskAuto``: the heights are the rangefinder's when it has one, else
+        above home)."""
         p = self.params
-        height = self.home_ned[2] - position[2]
+        height = self.home_ned[2] - position[2] if dist_bottom_m is None else dist_bottom_m
         alt1, alt2 = p["MPC_LAND_ALT1"], p["MPC_LAND_ALT2"]
         fast, slow = p["MPC_Z_V_AUTO_DN"], p["MPC_LAND_SPEED"]
         fraction = min(max((height - alt2) / max(alt1 - alt2, 1e-3), 0.0), 1.0)
         speed = slow + fraction * (fast - slow)
+        if dist_bottom_m is not None and height < p["MPC_LAND_ALT3"]:
+            speed = min(speed, p["MPC_LAND_CRWL"])
         self.trajectory.update(
             np.array([self.hold_ned[0], self.hold_ned[1], self.trajectory.position[2]]),
             dt_s, *self._auto_limits(),

@@ -111,6 +111,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("MPC_LAND_SPEED", 0.7, 0.6, _INF, "m/s", "Landing descend rate"),
     _p("MPC_LAND_ALT1", 10.0, 0.0, 122.0, "m", "Below: descent slows towards MPC_LAND_SPEED"),
     _p("MPC_LAND_ALT2", 5.0, 0.0, 122.0, "m", "Below: descent at MPC_LAND_SPEED"),
+    _p("MPC_LAND_ALT3", 1.0, 0.0, 122.0, "m", "Below (rangefinder): descent at MPC_LAND_CRWL"),
+    _p("MPC_LAND_CRWL", 0.3, 0.1, _INF, "m/s", "Landing crawl speed (rangefinder only)"),
     # src/modules/attitude_estimator_q/attitude_estimator_q_params.yaml
     _p("ATT_W_ACC", 0.2, 0.0, 1.0, "", "Complementary filter accelerometer weight"),
     _p("ATT_W_MAG", 0.1, 0.0, 1.0, "", "Complementary filter magnetometer weight"),
@@ -130,6 +132,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("EKF2_BARO_NOISE", 3.5, 0.01, 15.0, "m", "Barometric altitude noise"),
     _p("EKF2_REQ_EPH", 3.0, 2.0, 100.0, "m", "Required GPS horizontal accuracy to start"),
     _p("EKF2_REQ_NSATS", 6, 4, 12, "", "Required satellite count to start"),
+    _p("EKF2_RNG_CTRL", 1, 0, 2, "", "Rangefinder height aid: 0 off, 1 low and slow, 2 always"),
+    _p("EKF2_RNG_A_HMAX", 5.0, 1.0, 10.0, "m", "Range aid: below this height above ground"),
+    _p("EKF2_RNG_A_VMAX", 1.0, 0.1, 2.0, "m/s", "Range aid: below this horizontal speed"),
+    _p("EKF2_RNG_NOISE", 0.1, 0.01, 1.0, "m", "Rangefinder height noise"),
     # src/modules/commander/commander_params.yaml
     _p("COM_SPOOLUP_TIME", 1.0, 0.0, 5.0, "s", "Motor spool-up time before takeoff"),
     _p("COM_DISARM_LAND", 2.0, -1.0, 20.0, "s", "Auto-disarm after landing (-1: never)"),

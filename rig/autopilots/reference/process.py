@@ -22,7 +22,7 @@ from rig.autopilots.reference.flight_controller import FlightController
 from rig.autopilots.reference.flight_log import open_flight_log
 from rig.autopilots.reference.gcs import GroundStation, MavlinkLink
 from rig.autopilots.reference.params import Parameters
-from rig.autopilots.reference.sensors import GpsFix, GroundTruth, SensorFrame
+from rig.autopilots.reference.sensors import GpsFix, GroundTruth, RangeReading, SensorFrame
 from rig.mavlink.px4_api import (
     DEFAULT_HOME_ALT_AMSL_M,
     DEFAULT_HOME_LAT_DEG,
@@ -47,7 +47,7 @@ IDLE_HEARTBEAT_S = 1.0
 SIM_SILENCE_NOTE_S = 5.0
 
 
-def sensor_frame(message, gps: GpsFix | None) -> SensorFrame:
+def sensor_frame(message, gps: GpsFix | None, ranged: RangeReading | None = None) -> SensorFrame:
     """HIL_SENSOR (SI units after PX4's conversions: hPa → Pa) → :class:`SensorFrame`."""
     fields = message.fields_updated
 
@@ -65,7 +65,20 @@ def sensor_frame(message, gps: GpsFix | None) -> SensorFrame:
         baro_pressure_pa=pressure,
         baro_temperature_degc=message.temperature if pressure is not None else None,
         gps=gps,
+        range=ranged,
     )  # fmt: skip
+
+
+def range_reading(message) -> RangeReading:
+    """DISTANCE_SENSOR (cm; quality 0 unknown, else 1..100) as PX4's
+    ``publish_distance_topic`` turns it into ``distance_sensor``."""
+    quality = -1 if message.signal_quality == 0 else 100 * (message.signal_quality - 1) // 99
+    return RangeReading(
+        distance_m=message.current_distance * 0.01,
+        signal_quality=quality,
+        min_m=message.min_distance * 0.01,
+        max_m=message.max_distance * 0.01,
+    )
 
 
 def gps_fix(message) -> GpsFix:
@@ -138,6 +151,7 @@ class Autopilot:
         self.sim: socket.socket | None = None
         self.sim_malformed = 0
         self._gps: GpsFix | None = None
+        self._range: RangeReading | None = None
         self._last_frame_wall_s = time.monotonic()
         self._silence_noted = False
 
@@ -213,8 +227,8 @@ class Autopilot:
                 return  # only IMU 0 drives the lockstep clock, as in PX4
             self._last_frame_wall_s = time.monotonic()
             self._silence_noted = False
-            frame = sensor_frame(message, self._gps)
-            self._gps = None
+            frame = sensor_frame(message, self._gps, self._range)
+            self._gps = self._range = None
             controls = self.fc.update(frame, message.time_usec)
             mode = ActuatorMode.CUSTOM_MODE_ENABLED
             if controls.armed:
@@ -225,6 +239,8 @@ class Autopilot:
             self.ground.stream(message.time_usec)
         elif kind == "HIL_GPS":
             self._gps = gps_fix(message)
+        elif kind == "DISTANCE_SENSOR":
+            self._range = range_reading(message)
         elif kind == "HIL_STATE_QUATERNION":
             self.fc.observe_truth(ground_truth(message))
         elif kind == "BAD_DATA":

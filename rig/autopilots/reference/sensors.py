@@ -1,6 +1,6 @@
 """What the autopilot receives from the simulator, in SI units, and how it judges freshness.
 
-The process wrapper turns PX4's simulator messages (HIL_SENSOR, HIL_GPS,
+The process wrapper turns PX4's simulator messages (HIL_SENSOR, HIL_GPS, DISTANCE_SENSOR,
 HIL_STATE_QUATERNION) into these objects; the flight controller core sees nothing else, so
 it can be driven in-process by tests without sockets.
 """
@@ -32,6 +32,17 @@ class GpsFix:
 
 
 @dataclass(frozen=True)
+class RangeReading:
+    """One DISTANCE_SENSOR of a downward rangefinder, as PX4 reads it (metres, uORB quality:
+    -1 unknown, 0 unusable, 1..100)."""
+
+    distance_m: float
+    signal_quality: int
+    min_m: float
+    max_m: float
+
+
+@dataclass(frozen=True)
 class SensorFrame:
     """One IMU frame (HIL_SENSOR id 0) plus whatever else arrived since the last one.
 
@@ -44,6 +55,7 @@ class SensorFrame:
     baro_pressure_pa: float | None = None
     baro_temperature_degc: float | None = None
     gps: GpsFix | None = None
+    range: RangeReading | None = None
 
 
 @dataclass(frozen=True)
