@@ -25,8 +25,10 @@ from quad_model.frames import STANDARD_GRAVITY_MPS2
 
 ROTORS = 4
 
-# The same convention functions the Python side uses, compiled for the kernel.
-_quat_to_dcm = njit(cache=True)(_frames.quat_to_dcm)
+# The rotation's entries as numbers (the Python side's convention): a matrix allocated at
+# each of the four derivative evaluations per substep cost half the step's time.
+_dcm_entries = _frames.dcm_entries
+
 _DRY_AIR_R = _env.DRY_AIR_GAS_CONSTANT
 
 
@@ -158,7 +160,7 @@ def derivative(x, params, throttle, wind_ned, xdot, aux):
     """
     mount = int(params[P_MOUNT])
     q0, q1, q2, q3 = x[X_QUAT], x[X_QUAT + 1], x[X_QUAT + 2], x[X_QUAT + 3]
-    dcm = _quat_to_dcm(x[X_QUAT : X_QUAT + 4])
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _dcm_entries(q0, q1, q2, q3)
     rho = air_density_kgpm3(params, x[X_POS + 2])
     density_ratio = rho / params[P_RHO_REF]
 
@@ -177,9 +179,9 @@ def derivative(x, params, throttle, wind_ned, xdot, aux):
     va_n = x[X_VEL] - wind_ned[0]
     va_e = x[X_VEL + 1] - wind_ned[1]
     va_d = x[X_VEL + 2] - wind_ned[2]
-    vb0 = dcm[0, 0] * va_n + dcm[1, 0] * va_e + dcm[2, 0] * va_d
-    vb1 = dcm[0, 1] * va_n + dcm[1, 1] * va_e + dcm[2, 1] * va_d
-    vb2 = dcm[0, 2] * va_n + dcm[1, 2] * va_e + dcm[2, 2] * va_d
+    vb0 = r00 * va_n + r10 * va_e + r20 * va_d
+    vb1 = r01 * va_n + r11 * va_e + r21 * va_d
+    vb2 = r02 * va_n + r12 * va_e + r22 * va_d
 
     # Body drag, quadratic per axis.
     half_rho = 0.5 * rho
@@ -257,9 +259,9 @@ def derivative(x, params, throttle, wind_ned, xdot, aux):
         xdot[X_RATE] = inv[0] * tx + inv[1] * ty + inv[2] * tz
         xdot[X_RATE + 1] = inv[3] * tx + inv[4] * ty + inv[5] * tz
         xdot[X_RATE + 2] = inv[6] * tx + inv[7] * ty + inv[8] * tz
-        an = (dcm[0, 0] * fx + dcm[0, 1] * fy + dcm[0, 2] * fz) / mass
-        ae = (dcm[1, 0] * fx + dcm[1, 1] * fy + dcm[1, 2] * fz) / mass
-        ad = (dcm[2, 0] * fx + dcm[2, 1] * fy + dcm[2, 2] * fz) / mass + STANDARD_GRAVITY_MPS2
+        an = (r00 * fx + r01 * fy + r02 * fz) / mass
+        ae = (r10 * fx + r11 * fy + r12 * fz) / mass
+        ad = (r20 * fx + r21 * fy + r22 * fz) / mass + STANDARD_GRAVITY_MPS2
     else:
         # Benches hold the centre of mass still. A gimbal leaves one body axis free; about
         # a fixed principal-frame axis e the motion is I_ee·ω̇ = e·M (gyroscopic terms of a
@@ -293,12 +295,14 @@ def derivative(x, params, throttle, wind_ned, xdot, aux):
 @njit(cache=True)
 def _specific_force(x, aux):
     """Specific force in FRD, f = Rᵀ·(a - g): (0, 0, -g) when level and held still."""
-    dcm = _quat_to_dcm(x[X_QUAT : X_QUAT + 4])
+    q = X_QUAT
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _dcm_entries(x[q], x[q + 1], x[q + 2], x[q + 3])
     an = aux[A_ACCEL_NED]
     ae = aux[A_ACCEL_NED + 1]
     ad = aux[A_ACCEL_NED + 2] - STANDARD_GRAVITY_MPS2
-    for j in range(3):
-        aux[A_SPECIFIC_FORCE + j] = dcm[0, j] * an + dcm[1, j] * ae + dcm[2, j] * ad
+    aux[A_SPECIFIC_FORCE] = r00 * an + r10 * ae + r20 * ad
+    aux[A_SPECIFIC_FORCE + 1] = r01 * an + r11 * ae + r21 * ad
+    aux[A_SPECIFIC_FORCE + 2] = r02 * an + r12 * ae + r22 * ad
 
 
 @njit(cache=True)

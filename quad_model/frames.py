@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 from numpy.typing import ArrayLike, NDArray
 
 #: Standard gravity (m/s²), CGPM 1901; PX4's ``CONSTANTS_ONE_G``.
@@ -41,16 +42,20 @@ def quat_multiply(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.
     )
 
 
+@register_jitable  # callable from Python, and from compiled kernels (and their quat_to_dcm)
+def dcm_entries(w: float, x: float, y: float, z: float) -> tuple[float, ...]:
+    """:func:`quat_to_dcm`'s nine entries, row by row, as plain numbers: compiled kernels
+    that need them at every 5 kHz substep take them so, without allocating a matrix."""
+    return (
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )  # fmt: skip
+
+
 def quat_to_dcm(q: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rotation matrix ``R`` with ``v_ned = R @ v_frd`` for a unit quaternion body→NED."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return np.array(dcm_entries(q[0], q[1], q[2], q[3])).reshape(3, 3)
 
 
 def body_to_ned(q: NDArray[np.float64], v_frd: NDArray[np.float64]) -> NDArray[np.float64]:
