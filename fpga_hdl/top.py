@@ -6,8 +6,10 @@ Buses, as on a Pixhawk FMU (e.g. FMUv2/v3, where the MPU-6000 and MS5611 share S
   ``baro_cs_n``). Shared because that is how the boards PX4 runs on wire these two
   chips, and because a deselected chip must then really release SDO (``miso_oe``): the
   top drives ``spi_miso`` from the selected chip and flags contention if two drive;
-- one I2C bus for the IST8310 (open drain: ``i2c_sda_oe`` = 1 pulls SDA low; the
-  testbench resolves the wired-AND with its own driver);
+- one I2C bus shared by the IST8310 (0x0E) and the LIDAR-Lite v3 rangefinder (0x62), as
+  on a Pixhawk's external I2C port: open drain, ``i2c_sda_oe`` = 1 when either target
+  pulls SDA low (the wired-AND inside the FPGA); the testbench resolves it with its own
+  driver;
 - one UART for the u-blox M8 GNSS receiver (``gps_tx`` receiver to autopilot, ``gps_rx``
   the autopilot's configuration), as on a Pixhawk's GPS port.
 
@@ -32,12 +34,14 @@ to every chip with a conversion time. ``pending`` tells a simulation that gates 
 system clock that a chip still waits to take a sample at a transfer's end.
 """
 
-from amaranth.hdl import ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal, Signal
+from amaranth.hdl import Cat, ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from fpga_hdl.chips.ist8310 import regs as ist8310_regs
 from fpga_hdl.chips.ist8310.core import Ist8310Core
+from fpga_hdl.chips.lidarlite import regs as lidarlite_regs
+from fpga_hdl.chips.lidarlite.core import LidarLiteCore
 from fpga_hdl.chips.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.chips.mpu6000.core import Mpu6000
 from fpga_hdl.chips.ms5611 import regs as ms5611_regs
@@ -58,8 +62,9 @@ SAMPLE_CHANNELS = {
     "baro": ms5611_regs.SAMPLE_LAYOUT,
     "mag": ist8310_regs.SAMPLE_LAYOUT,
     "gps": ubx.SAMPLE_LAYOUT,
+    "range": lidarlite_regs.SAMPLE_LAYOUT,
 }
-FAULT_CHIPS = ("imu", "baro", "mag", "gps")
+FAULT_CHIPS = ("imu", "baro", "mag", "gps", "range")
 #: PWM capture tick: 1 µs, the unit PX4 uses for PWM (``fpga_hdl.chips.pwm_capture``).
 PWM_TICK_HZ = 1e6
 #: No rising edge for this long and a channel is flagged (and reads zero): a usual ESC
@@ -128,7 +133,7 @@ class SensorTop(wiring.Component):
     imu_cs_n, baro_cs_n : In(1)
         Chip selects of the MPU-6000 and the MS5611.
     i2c_scl, i2c_sda_i : In(1), i2c_sda_oe : Out(1)
-        I2C bus of the IST8310 (``i2c_sda_oe`` = 1 pulls SDA low).
+        I2C bus of the IST8310 and the LIDAR-Lite (``i2c_sda_oe`` = 1: one pulls SDA low).
     gps_tx : Out(1), gps_rx : In(1)
         UART1 of the u-blox receiver: its TXD (idle high) and RXD.
     pwm : In(8)
@@ -174,6 +179,7 @@ class SensorTop(wiring.Component):
         self.baro = Ms5611(sys_clk_hz=sys_clk_hz)
         self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
         self.gps = UbloxM8Core(sys_clk_hz=sys_clk_hz)
+        self.range = LidarLiteCore(sys_clk_hz=sys_clk_hz)
         self.capture = PwmCapture(tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s)
         # The synchroniser copies a published result within its stages + 1 system
         # cycles, before the next publication (at most one per tick) replaces it.
@@ -190,11 +196,13 @@ class SensorTop(wiring.Component):
     def elaborate(self, platform) -> Module:
         m = Module()
         host, imu, baro, mag, gps = self.host, self.imu, self.baro, self.mag, self.gps
+        rangefinder = self.range
         m.submodules.host = host
         m.submodules.imu = imu
         m.submodules.baro = baro
         m.submodules.mag = mag
         m.submodules.gps = gps
+        m.submodules.range = rangefinder
         m.domains.pwm = ClockDomain(local=True)
         m.d.comb += [ClockSignal("pwm").eq(self.pwm_clk), ResetSignal("pwm").eq(self.pwm_rst)]
         m.submodules.capture = capture = DomainRenamer("pwm")(self.capture)
@@ -206,17 +214,16 @@ class SensorTop(wiring.Component):
             host.read_addr.eq(self.read_addr),
             self.read_data.eq(host.read_data),
         ]
-        for name, chip in (("imu", imu), ("baro", baro), ("mag", mag), ("gps", gps)):
+        chips = (("imu", imu), ("baro", baro), ("mag", mag), ("gps", gps), ("range", rangefinder))
+        for name, chip in chips:
             m.d.comb += [
                 chip.sample.eq(getattr(host, name)),
                 chip.sample_stb.eq(getattr(host, f"{name}_stb")),
                 chip.fault.mute.eq(getattr(host, f"{name}_fault_mute")),
                 chip.fault.flip.eq(getattr(host, f"{name}_fault_flip")),
             ]
-        m.d.comb += [baro.now_us.eq(host.now_us), mag.now_us.eq(host.now_us)]
-        m.d.comb += self.pending.eq(
-            imu.sample_pending | baro.sample_pending | mag.sample_pending | gps.sample_pending
-        )
+        m.d.comb += [chip.now_us.eq(host.now_us) for chip in (baro, mag, rangefinder)]
+        m.d.comb += self.pending.eq(Cat(chip.sample_pending for _, chip in chips).any())
 
         for chip, cs_n in ((imu, self.imu_cs_n), (baro, self.baro_cs_n)):
             m.d.comb += [chip.spi.sclk.eq(self.spi_sclk), chip.spi.mosi.eq(self.spi_mosi)]
@@ -227,11 +234,9 @@ class SensorTop(wiring.Component):
             self.spi_miso_oe.eq(imu_spi.miso_oe | baro_spi.miso_oe),
             self.spi_contention.eq(imu_spi.miso_oe & baro_spi.miso_oe),
         ]
-        m.d.comb += [
-            mag.i2c.scl.eq(self.i2c_scl),
-            mag.i2c.sda_i.eq(self.i2c_sda_i),
-            self.i2c_sda_oe.eq(mag.i2c.sda_oe),
-        ]
+        for chip in (mag, rangefinder):
+            m.d.comb += [chip.i2c.scl.eq(self.i2c_scl), chip.i2c.sda_i.eq(self.i2c_sda_i)]
+        m.d.comb += self.i2c_sda_oe.eq(mag.i2c.sda_oe | rangefinder.i2c.sda_oe)
         m.d.comb += [self.gps_tx.eq(gps.tx), gps.rx.eq(self.gps_rx)]
         self._capture_results(m, capture)
         return m

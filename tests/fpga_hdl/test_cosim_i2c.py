@@ -1,4 +1,5 @@
-"""cocotb interface-timing tests of SensorTop's IST8310 on I2C, on every simulator."""
+"""cocotb interface-timing tests of SensorTop's I2C bus (the IST8310, and the LIDAR-Lite beside
+it), on every simulator."""
 
 from pathlib import Path
 
@@ -14,4 +15,11 @@ HERE = Path(__file__).parent
 def test_ist8310_on_generated_verilog(simulator):
     run_cocotb(
         SensorTop(), "sensor_top", "cocotb_i2c_ist8310", module_dir=HERE, simulator=simulator
+    )
+
+
+@pytest.mark.parametrize("simulator", SIMULATOR_PARAMS)
+def test_ist8310_and_lidarlite_share_the_i2c_bus(simulator):
+    run_cocotb(
+        SensorTop(), "sensor_top", "cocotb_i2c_shared_bus", module_dir=HERE, simulator=simulator
     )
