@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 
@@ -56,6 +57,24 @@ class I2cBus(Protocol):
     async def write_read(
         self, address: int, write: bytes, read_len: int, *, scl_hz: float
     ) -> bytes: ...
+
+
+@dataclass(frozen=True)
+class UartTransfer:
+    """What one UART exchange brought back from the receiver."""
+
+    data: bytes
+    #: From the first start bit's falling edge to the strobe of the last byte in the
+    #: autopilot's UART, in µs rounded up (``fpga_hdl.buses.uart.line_cycles``); 0 when
+    #: nothing arrived.
+    line_us: int
+
+
+class UartPort(Protocol):
+    """The autopilot's UART to a receiver (8N1): send ``tx`` at ``baud``, then everything
+    the receiver sends until its line rests (it answers at once, or not at all)."""
+
+    async def exchange(self, tx: bytes, *, baud: int) -> UartTransfer: ...
 
 
 class I2cByteController(Protocol):

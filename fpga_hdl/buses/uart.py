@@ -16,6 +16,10 @@ from amaranth.lib.wiring import In, Out
 MAX_BAUD_ERROR = 0.02
 #: Divider counter width: enough for 9600 baud at 100 MHz.
 DIVIDER_BITS = 14
+#: Cycles :class:`UartRx` adds to a byte's nine and a half bit times before its strobe:
+#: the line passes two synchroniser flip-flops and the edge detector's register before
+#: the start bit is seen (checked cycle-exact against the RTL in test_native_harness).
+RX_DELAY_CYCLES = 3
 
 
 def divider_for(sys_clk_hz: float, baud: int) -> int:
@@ -34,6 +38,21 @@ def divider_for(sys_clk_hz: float, baud: int) -> int:
             f"the budget is ±{MAX_BAUD_ERROR:.0%}"
         )
     return divider
+
+
+def line_cycles(byte_count: int, divider: int) -> int:
+    """System cycles from the first start bit's falling edge of ``byte_count`` bytes sent
+    back to back by :class:`UartTx` to :class:`UartRx`'s strobe of the last byte: ten bits
+    per byte before it, then the last byte's nine bits and half (the stop bit is sampled
+    mid-bit) and the receiver's synchroniser and edge detector (:data:`RX_DELAY_CYCLES`)."""
+    if byte_count == 0:
+        return 0
+    return (byte_count - 1) * 10 * divider + 9 * divider + divider // 2 + RX_DELAY_CYCLES
+
+
+def cycles_to_us(cycles: int, sys_clk_hz: float) -> int:
+    """``cycles`` of ``sys_clk_hz`` in whole µs, rounded up (a byte is there after it)."""
+    return -(-cycles * 1_000_000 // round(sys_clk_hz))
 
 
 def baud_error(sys_clk_hz: float, baud: int) -> float:

@@ -7,7 +7,8 @@ inside the simulator and Python only asks and waits once:
 - the flight controller MCU's peripherals: :class:`~fpga_hdl.buses.spi_controller.SpiController`
   on the shared SPI bus (chip selects ``imu``, ``baro``),
   :class:`~fpga_hdl.buses.i2c_controller.I2cController` on the IST8310's bus (the wired-AND of
-  SDA resolved here), :class:`~fpga_hdl.buses.pwm_generator.PwmGenerator` on the PWM pins;
+  SDA resolved here), :class:`~fpga_hdl.buses.pwm_generator.PwmGenerator` on the PWM pins,
+  :class:`UartPeer` on the GPS receiver's UART;
 - the real-time computer's side of the host port: :class:`HostWriter` writes a list of
   staged words, commits and waits until every chip has taken its sample;
   :class:`HostReader` lets the PWM results settle in ``sync``, freezes them with
@@ -52,6 +53,7 @@ from amaranth.lib.wiring import In, Out
 from fpga_hdl.buses.i2c_controller import I2cController
 from fpga_hdl.buses.pwm_generator import PwmGenerator
 from fpga_hdl.buses.spi_controller import SpiController
+from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
 from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, SensorTop
 
@@ -63,6 +65,7 @@ __all__ = [
     "CosimHarness",
     "HostReader",
     "HostWriter",
+    "UartPeer",
 ]
 
 HARNESS_TOPLEVEL = "cosim_harness"
@@ -230,6 +233,121 @@ class HostReader(wiring.Component):
         return m
 
 
+class UartPeer(wiring.Component):
+    """The autopilot's UART on the GPS port: sends a burst, then listens until the line rests.
+
+    A request sends ``tx[:tx_len]`` back to back at ``divider``, then keeps the system
+    clock running until the receiver's line has been idle for :data:`QUIET_BITS` bit
+    times with nothing left to send; the acknowledge then publishes what was received
+    since the previous acknowledge (``rx[:rx_len]``, bytes past ``rx_depth`` counted in
+    ``rx_len`` but dropped) and ``line_cycles``: system cycles from the first start bit's
+    falling edge to the strobe of the last byte (``fpga_hdl.chips.ublox.link.line_cycles``
+    predicts it for the TLM twin). The receiver always listens, also between requests, so
+    bytes sent while the clock ran for another peripheral are kept.
+
+    Attributes
+    ----------
+    request : In(1), acknowledge : Out(1), busy : Out(1)
+        Request toggle and its acknowledge.
+    divider : In(DIVIDER_BITS)
+        System cycles per bit, both directions (the autopilot's UART rate).
+    tx : In(ArrayLayout(8, tx_depth)), tx_len : In(range(tx_depth + 1))
+        The bytes to send.
+    rx : Out(ArrayLayout(8, rx_depth)), rx_len : Out(16), line_cycles : Out(32)
+        What the last request received.
+    line_tx : Out(1), line_rx : In(1)
+        The autopilot's TXD (to the receiver's RXD) and RXD (from its TXD).
+    """
+
+    #: Idle bit times that end a request: the receiver answers within a few cycles of a
+    #: frame's last byte and sends its frames back to back, so two byte times of silence
+    #: mean it has nothing more to say.
+    QUIET_BITS = 20
+
+    def __init__(self, *, tx_depth: int = 64, rx_depth: int = 256) -> None:
+        self.tx_depth = tx_depth
+        self.rx_depth = rx_depth
+        super().__init__(
+            {
+                "request": In(1),
+                "acknowledge": Out(1),
+                "busy": Out(1),
+                "divider": In(DIVIDER_BITS),
+                "tx": In(data.ArrayLayout(8, tx_depth)),
+                "tx_len": In(range(tx_depth + 1)),
+                "rx": Out(data.ArrayLayout(8, rx_depth)),
+                "rx_len": Out(16),
+                "line_cycles": Out(32),
+                "line_tx": Out(1, init=1),
+                "line_rx": In(1, init=1),
+            }
+        )
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        m.submodules.uart_tx = uart_tx = UartTx()
+        m.submodules.uart_rx = uart_rx = UartRx()
+        m.d.comb += [
+            uart_tx.divider.eq(self.divider),
+            uart_rx.divider.eq(self.divider),
+            uart_rx.rx.eq(self.line_rx),
+            self.line_tx.eq(uart_tx.tx),
+        ]
+        # The receiving side, always on: bytes and the line's timing since the last publish.
+        received = Signal(data.ArrayLayout(8, self.rx_depth))
+        count = Signal(16)
+        cycle = Signal(32)  # system cycles since the first start bit's edge
+        started, previous = Signal(), Signal(init=1)
+        last_cycles = Signal(32)
+        m.d.sync += previous.eq(self.line_rx)
+        with m.If(started):
+            m.d.sync += cycle.eq(cycle + 1)
+        with m.Elif(previous & ~self.line_rx):
+            m.d.sync += [started.eq(1), cycle.eq(1)]
+        with m.If(uart_rx.stb):
+            with m.If(count < self.rx_depth):
+                m.d.sync += received[count[: len(range(self.rx_depth))]].eq(uart_rx.data)
+            m.d.sync += [count.eq(count + 1), last_cycles.eq(cycle)]
+        # Silence on the line, in cycles, up to the quiet limit.
+        quiet = Signal(32)
+        limit = Signal(32)
+        m.d.comb += limit.eq(self.divider * self.QUIET_BITS)
+        with m.If(~self.line_rx | uart_rx.busy):
+            m.d.sync += quiet.eq(0)
+        with m.Elif(quiet < limit):
+            m.d.sync += quiet.eq(quiet + 1)
+
+        index = Signal(range(self.tx_depth + 1))
+        m.d.comb += uart_tx.data.eq(self.tx[index[: len(range(self.tx_depth))]])
+        with m.FSM() as fsm:
+            with m.State("IDLE"), m.If(self.request != self.acknowledge):
+                m.d.sync += index.eq(0)
+                m.next = "SEND"
+            with m.State("SEND"):
+                with m.If(index < self.tx_len):
+                    m.d.comb += uart_tx.valid.eq(1)
+                    with m.If(uart_tx.ready):
+                        m.d.sync += index.eq(index + 1)
+                with m.Elif(~uart_tx.busy):
+                    m.d.sync += quiet.eq(0)
+                    m.next = "LISTEN"
+            with m.State("LISTEN"), m.If(quiet == limit):
+                m.d.sync += [
+                    self.rx.eq(received),
+                    self.rx_len.eq(count),
+                    self.line_cycles.eq(last_cycles),
+                    count.eq(0),
+                    started.eq(0),
+                    last_cycles.eq(0),
+                ]
+                m.next = "DONE"
+            with m.State("DONE"):  # a cycle after the results, as HostReader's
+                m.d.sync += self.acknowledge.eq(self.request)
+                m.next = "IDLE"
+        m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
+        return m
+
+
 #: Harness ports forwarded to each peripheral, by the peripheral's own port names.
 _SPI_PORTS = ("request", "acknowledge", "device", "length", "divider", "mode3", "tx", "rx")
 _I2C_PORTS = (
@@ -239,6 +357,7 @@ _I2C_PORTS = (
 _HOST_PORTS = ("request", "acknowledge", "words", "count")
 _READ_PORTS = ("request", "acknowledge", "words")
 _PWM_PORTS = ("period_ticks", "width_ticks")
+_UART_PORTS = ("request", "acknowledge", "divider", "tx", "tx_len", "rx", "rx_len", "line_cycles")
 
 
 class CosimHarness(wiring.Component):
@@ -246,9 +365,10 @@ class CosimHarness(wiring.Component):
 
     Ports: ``rst`` and ``pwm_run`` (see the module docstring); per peripheral the ports
     of that peripheral prefixed with ``spi_``, ``i2c_``, ``host_``, ``read_`` and
-    ``pwm_`` (``spi_request``, ``i2c_nack_index``, ``host_words`` ...); the bus wires as
-    monitor outputs (``spi_sclk``, ``spi_mosi``, ``spi_miso``, ``imu_cs_n``,
-    ``baro_cs_n``, ``i2c_scl``, ``i2c_sda``, ``pwm``, ``clk``, ``pwm_clk``); and the cycle
+    ``pwm_``, ``uart_`` (``spi_request``, ``i2c_nack_index``, ``host_words`` ...); the bus
+    wires as monitor outputs (``spi_sclk``, ``spi_mosi``, ``spi_miso``, ``imu_cs_n``,
+    ``baro_cs_n``, ``i2c_scl``, ``i2c_sda``, ``pwm``, ``gps_tx``, ``gps_rx``, ``clk``,
+    ``pwm_clk``); and the cycle
     counters ``sync_cycles`` and ``pwm_cycles``, the simulation's cost.
     """
 
@@ -261,6 +381,7 @@ class CosimHarness(wiring.Component):
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz)
         self.pwm_generator = PwmGenerator()
+        self.uart = UartPeer()
         self.host_writer = HostWriter(self.top.host.map)
         self.host_reader = HostReader(self.top.host.map)
         members = {"rst": In(1), "pwm_run": In(1)}
@@ -272,6 +393,7 @@ class CosimHarness(wiring.Component):
         }
         members |= {name: Out(1) for name in ("spi_contention", "imu_cs_n", "baro_cs_n")}
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
+        members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
         members |= {"sync_cycles": Out(32), "pwm_cycles": Out(32)}
         super().__init__(members)
 
@@ -282,6 +404,7 @@ class CosimHarness(wiring.Component):
             ("host", self.host_writer, _HOST_PORTS),
             ("read", self.host_reader, _READ_PORTS),
             ("pwm", self.pwm_generator, _PWM_PORTS),
+            ("uart", self.uart, _UART_PORTS),
         )
 
     def elaborate(self, platform) -> Module:
@@ -294,6 +417,7 @@ class CosimHarness(wiring.Component):
         m.submodules.pwm_generator = DomainRenamer("pwm_out")(self.pwm_generator)
         m.submodules.host_writer = writer
         m.submodules.host_reader = reader
+        m.submodules.uart = uart = self.uart
         for prefix, part, names in self._forwarded():
             for name in names:
                 outer, inner = getattr(self, f"{prefix}_{name}"), getattr(part, name)
@@ -318,6 +442,8 @@ class CosimHarness(wiring.Component):
             | (writer.request != writer.acknowledge)
             | reader.busy
             | (reader.request != reader.acknowledge)
+            | uart.busy
+            | (uart.request != uart.acknowledge)
         )
         pwm_clk = Signal()
         m.submodules.sync_clock = Instance(
@@ -373,6 +499,7 @@ class CosimHarness(wiring.Component):
             i2c.sda_i.eq(sda),
         ]
         m.d.comb += top.pwm.eq(self.pwm_generator.pwm.pulses)
+        m.d.comb += [top.gps_rx.eq(uart.line_tx), uart.line_rx.eq(top.gps_tx)]
         # Monitor outputs: the pins as a logic analyser on the rig would see them.
         m.d.comb += [
             self.spi_sclk.eq(spi.sclk),
@@ -385,5 +512,7 @@ class CosimHarness(wiring.Component):
             self.i2c_scl.eq(i2c.scl),
             self.i2c_sda.eq(sda),
             self.pwm.eq(self.pwm_generator.pwm.pulses),
+            self.gps_tx.eq(top.gps_tx),
+            self.gps_rx.eq(uart.line_tx),
         ]
         return m

@@ -7,8 +7,8 @@ as Verilator ``--timing`` coroutines and every transaction wakes Python twice th
 the VPI: 1.8 ms of wall time per 1 ms frame. Here the same generated Verilog of
 :class:`~fpga_hdl.cosim.harness.CosimHarness` is Verilated to C++ without ``--timing`` and
 linked with ``native_harness.cpp`` (a C ABI: reset, one SPI transfer, one I2C write/read,
-one host-port burst write or read, N capture-clock cycles) into a shared library under
-``build/native/``, keyed by the hash of everything that goes into it.
+one host-port burst write or read, one GPS UART exchange, N capture-clock cycles) into a
+shared library under ``build/native/``, keyed by the hash of everything that goes into it.
 
 Python loads it with :mod:`ctypes` (standard library): the ABI is a dozen functions of
 integers and byte buffers, so a binding generator (pybind11, nanobind, cffi) would add a
@@ -48,7 +48,9 @@ from pathlib import Path
 from fpga_hdl.build import BUILD_DIR, generate_verilog
 from fpga_hdl.buses.i2c_controller import RATES_HZ, controller_rate_hz
 from fpga_hdl.buses.spi_controller import divider_for
-from fpga_hdl.buses.transactions import I2cNack, UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import I2cNack, UartTransfer, UnknownDevice, check_clock_hz
+from fpga_hdl.buses.uart import cycles_to_us
+from fpga_hdl.buses.uart import divider_for as uart_divider
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, HARNESS_TOPLEVEL, SPI_DEVICES, CosimHarness
@@ -64,6 +66,7 @@ __all__ = [
     "NativeI2cBus",
     "NativePwm",
     "NativeSpiBus",
+    "NativeUart",
     "build_native_harness",
 ]
 
@@ -185,6 +188,9 @@ _SIGNATURES = {
                    ctypes.c_int),
     "nh_pwm_cycles": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
     "nh_pwm_cycles_later": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
+    "nh_uart": ([ctypes.c_void_p, ctypes.c_uint32, ctypes.c_char_p, ctypes.c_size_t,
+                 ctypes.c_uint32, _u8p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint32),
+                 ctypes.POINTER(ctypes.c_uint32)], ctypes.c_int),
 }  # fmt: skip
 
 
@@ -355,6 +361,42 @@ class NativeHost:
         return channel_captures(self.results())
 
 
+class NativeUart:
+    """:class:`~fpga_hdl.buses.transactions.UartPort` over the harness's GPS UART peer."""
+
+    def __init__(self, model: _Model, tx_depth: int, rx_depth: int, *,
+                 sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:  # fmt: skip
+        self._model = model
+        self.tx_depth = tx_depth
+        self.sys_clk_hz = sys_clk_hz
+        self.exchanges = 0
+        self._rx = (ctypes.c_uint8 * rx_depth)()
+        self._rx_len = ctypes.c_uint32()
+        self._line_cycles = ctypes.c_uint32()
+
+    @property
+    def line_cycles(self) -> int:
+        """The last exchange's line time in system cycles (``UartTransfer.line_us`` rounds)."""
+        return self._line_cycles.value
+
+    async def exchange(self, tx: bytes, *, baud: int) -> UartTransfer:
+        if len(tx) > self.tx_depth:
+            raise ValueError(f"UART burst of {len(tx)} bytes exceeds {self.tx_depth}")
+        self._model.call(
+            "nh_uart", uart_divider(self.sys_clk_hz, baud), tx, len(tx), len(tx), self._rx,
+            len(self._rx), ctypes.byref(self._rx_len), ctypes.byref(self._line_cycles),
+        )  # fmt: skip
+        self.exchanges += 1
+        count = self._rx_len.value
+        if count > len(self._rx):
+            raise NativeHarnessError(
+                f"the GPS UART received {count} bytes in one exchange; the peer keeps "
+                f"{len(self._rx)}"
+            )
+        data = ctypes.string_at(self._rx, count)
+        return UartTransfer(data, cycles_to_us(self._line_cycles.value, self.sys_clk_hz))
+
+
 class NativePwm:
     """The autopilot's PWM outputs (widths and period in ticks) and the capture clock."""
 
@@ -400,6 +442,7 @@ class NativeHarness:
         self.spi = NativeSpiBus(model, gateware.spi.depth, mode=spi_mode)
         self.i2c = NativeI2cBus(model, gateware.i2c.write_depth, gateware.i2c.read_depth)
         self.pwm = NativePwm(model, gateware.pwm_generator.counter_bits, tick_hz=pwm_tick_hz)
+        self.uart = NativeUart(model, gateware.uart.tx_depth, gateware.uart.rx_depth)
 
     def reset(self) -> None:
         """Reset both clock domains for three capture ticks, as the cocotb harness does;

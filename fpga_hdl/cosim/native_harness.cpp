@@ -2,9 +2,9 @@
 //
 // Built by fpga_hdl.cosim.native with Verilator (--cc, no --timing) into a shared library
 // that Python loads with ctypes. Each call runs one whole transaction inside the
-// simulator: an SPI transfer, an I2C write/read, a host-port burst write or read, or N
-// cycles of the PWM capture clock. So Python pays one call per transaction, never
-// one per clock edge.
+// simulator: an SPI transfer, an I2C write/read, a host-port burst write or read, a GPS
+// UART exchange, or N cycles of the PWM capture clock. So Python pays one call per
+// transaction, never one per clock edge.
 //
 // Clocks. For this build the harness's `cosim_gated_clock` is NATIVE_CLOCK_VERILOG
 // (fpga_hdl.cosim.native): a register that this file sets to 1 and that clears itself
@@ -290,6 +290,25 @@ EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
     Vharness& m = h->model;
     bool ok = h->request(m.read_request, m.read_acknowledge, "host-port read") &&
               get(*h, m.read_words, words, bytes, "read_words");
+    return status(ok);
+}
+
+// The GPS UART: send `tx_len` bytes at `divider` cycles per bit, then listen until the
+// receiver's line rests; what arrived since the previous call is copied to `rx` (up to
+// `rx_bytes`), its count to `rx_len` and the line time of the last byte to `line_cycles`.
+EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_bytes,
+                   uint32_t tx_len, uint8_t* rx, size_t rx_bytes, uint32_t* rx_len,
+                   uint32_t* line_cycles) {
+    auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
+    Vharness& m = h->model;
+    m.uart_divider = divider;
+    m.uart_tx_len = tx_len;
+    bool ok = put(*h, m.uart_tx, tx, tx_bytes, "uart_tx") &&
+              h->request(m.uart_request, m.uart_acknowledge, "UART exchange") &&
+              get(*h, m.uart_rx, rx, rx_bytes, "uart_rx");
+    *rx_len = m.uart_rx_len;
+    *line_cycles = m.uart_line_cycles;
     return status(ok);
 }
 

@@ -1,4 +1,4 @@
-"""The fast path: ``SpiBus``, ``I2cBus``, host port and PWM over the harness's peripherals.
+"""The fast path: ``SpiBus``, ``I2cBus``, ``UartPort``, host port and PWM over the harness.
 
 Each class drives one peripheral of :class:`fpga_hdl.cosim.harness.CosimHarness` under
 cocotb: it sets the peripheral's inputs, flips its request toggle and awaits the
@@ -24,7 +24,9 @@ from cocotb.utils import get_sim_time
 
 from fpga_hdl.buses.i2c_controller import RATES_HZ, controller_rate_hz
 from fpga_hdl.buses.spi_controller import divider_for
-from fpga_hdl.buses.transactions import I2cNack, UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import I2cNack, UartTransfer, UnknownDevice, check_clock_hz
+from fpga_hdl.buses.uart import cycles_to_us
+from fpga_hdl.buses.uart import divider_for as uart_divider
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, SPI_DEVICES
@@ -37,6 +39,7 @@ __all__ = [
     "HarnessI2cBus",
     "HarnessPwm",
     "HarnessSpiBus",
+    "HarnessUart",
 ]
 
 #: Where the PWM clock's edges sit relative to the system clock's 31.25 ns grid: a
@@ -152,6 +155,37 @@ class HarnessI2cBus:
         return int(dut.i2c_rx.value).to_bytes(self.read_depth, "little")[:read_len]
 
 
+class HarnessUart:
+    """:class:`~fpga_hdl.buses.transactions.UartPort` over the harness's GPS UART peer."""
+
+    def __init__(self, dut, *, sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:
+        self.dut = dut
+        self.sys_clk_hz = sys_clk_hz
+        self.tx_depth = len(dut.uart_tx) // 8
+        self.rx_depth = len(dut.uart_rx) // 8
+        self._request = _Requester(dut, "uart", ("divider", "tx", "tx_len"))
+
+    def reset(self) -> None:
+        self._request.reset()
+
+    async def exchange(self, tx: bytes, *, baud: int) -> UartTransfer:
+        if len(tx) > self.tx_depth:
+            raise ValueError(f"UART burst of {len(tx)} bytes exceeds {self.tx_depth}")
+        dut = self.dut
+        dut.uart_divider.value = uart_divider(self.sys_clk_hz, baud)
+        dut.uart_tx.value = int.from_bytes(tx, "little")
+        dut.uart_tx_len.value = len(tx)
+        await self._request()
+        count = int(dut.uart_rx_len.value)
+        if count > self.rx_depth:
+            raise ValueError(
+                f"the GPS UART received {count} bytes in one exchange; the peer keeps "
+                f"{self.rx_depth}"
+            )
+        data = int(dut.uart_rx.value).to_bytes(self.rx_depth, "little")[:count]
+        return UartTransfer(data, cycles_to_us(int(dut.uart_line_cycles.value), self.sys_clk_hz))
+
+
 class HarnessHost:
     """The rig's side of SensorTop's host port: one burst write per load, one burst read."""
 
@@ -240,11 +274,12 @@ class Harness:
         self.spi = HarnessSpiBus(dut, mode=spi_mode)
         self.i2c = HarnessI2cBus(dut)
         self.pwm = HarnessPwm(dut, tick_hz=pwm_tick_hz)
+        self.uart = HarnessUart(dut)
 
     async def reset(self) -> None:
         """Reset both clock domains (both clocks run for it), then leave them stopped."""
         dut = self.dut
-        for part in (self.host, self.spi, self.i2c):
+        for part in (self.host, self.spi, self.i2c, self.uart):
             part.reset()
         dut.pwm_run.value = 0
         self.pwm.write([0] * CHANNELS, period_ticks=0)

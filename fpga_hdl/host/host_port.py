@@ -248,7 +248,10 @@ class HostPort(wiring.Component):
             for word in self.map.writes:
                 with m.Case(word.address):
                     m.d.sync += staged[word.address].eq(self.write_data[: word.width])
-                    if word.channel in dirty:
+                    # A chip's fault word is not its sample: writing it offers nothing new
+                    # (the rig writes every fault word every frame; a GPS receiver would
+                    # take each re-offered fix for a new epoch).
+                    if word.channel in dirty and word.field != "fault":
                         m.d.sync += dirty[word.channel].eq(1)
 
         with m.Switch(self.read_addr):

@@ -40,6 +40,7 @@ import socket
 import cocotb
 from cocotb.utils import get_sim_time
 
+from fpga_hdl.buses.transactions import UartTransfer
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.cosim.peripherals import PWM_PHASE_PS, Harness
 from rig.chips.channel import (
@@ -121,6 +122,32 @@ class RtlChips:
         self.harness.pwm.write(widths, period_ticks=round(self.period_us / self.tick_us))
         self._loaded = widths
 
+    async def exchange(self, tx: bytes, *, baud: int) -> UartTransfer:
+        """The GPS UART (:class:`~fpga_hdl.buses.transactions.UartPort`).
+
+        A NAV-PVT takes 8.7 ms on the line, longer than a frame, while the bus transfers of
+        a frame must end before its capture read. On the board the UART runs beside the
+        other buses; here the capture clock (and the PWM generator on it) stands still while
+        the exchange runs and rig time resumes after it: the epoch moves on by whole ticks,
+        as in the compiled layer, whose capture clock runs only when asked.
+        """
+        if not self.period_us:  # start-up: the capture clock does not run yet
+            return await self.harness.uart.exchange(tx, baud=baud)
+        paused_ps = get_sim_time("ps")
+        self.harness.dut.pwm_run.value = 0
+        # The gated clock finishes the cycle it has begun (its rise comes half a tick after
+        # the cycle starts): the last edge is the last one whose cycle began before now.
+        half = self.tick_ps // 2
+        last = math.ceil((paused_ps + half - self._edge_ps(0)) / self.tick_ps) - 1
+        transfer = await self.harness.uart.exchange(tx, baud=baud)
+        resume_ps = self._edge_ps(last + 1) - PWM_PHASE_PS - half
+        late_ps = get_sim_time("ps") - resume_ps
+        if late_ps > 0:
+            self._epoch_ps += math.ceil(late_ps / self.tick_ps) * self.tick_ps
+        await self._wait_until_ps(self._edge_ps(last + 1) - PWM_PHASE_PS - half)
+        await self.harness.pwm.run()
+        return transfer
+
     async def capture(
         self, pulses: tuple[Pulse, ...], now_us: int
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
@@ -158,7 +185,7 @@ async def serve(dut) -> None:
     harness = Harness(dut, pwm_tick_hz=pwm_tick_hz)
     await harness.reset()
     chips = RtlChips(harness, pwm_tick_hz=pwm_tick_hz)
-    engine = SensorEngine(harness.spi, harness.i2c, chips)
+    engine = SensorEngine(harness.spi, harness.i2c, chips, chips)
     while True:
         request = receive_message(channel)
         kind = request[0]

@@ -8,6 +8,12 @@ at the mag rate, the MS5611 convert/read cycle every 10 ms (D2 then D1, so a pre
 20 ms), and the PWM capture's widths. Quantization, full-scale saturation, conversion
 latency and bus faults therefore reach the autopilot as on the real rig.
 
+GPS: at start-up PX4's u-blox driver configures the receiver over its UART (every step
+ACKed, at the rates it switches through); each navigation epoch's solution is loaded
+into the receiver, which sends NAV-PVT over the UART at 115200 baud, and PX4's decoder
+hands the fix to the loop only once its last byte has arrived (about 8.7 ms later), as
+:class:`~fpga_hdl.chips.ublox.driver.ReceivedFix`.
+
 :class:`SensorEngine` is written once against fpga_hdl's async bus protocols and a
 :class:`ChipHost` (how samples reach the chips). It runs in three places:
 
@@ -23,12 +29,20 @@ latency and bus faults therefore reach the autopilot as on the real rig.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Coroutine, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, TypeVar
 
-from fpga_hdl.buses.transactions import BusError, I2cBus, SpiBus, TlmI2cBus, TlmSpiBus
+from fpga_hdl.buses.transactions import (
+    BusError,
+    I2cBus,
+    SpiBus,
+    TlmI2cBus,
+    TlmSpiBus,
+    UartPort,
+)
 from fpga_hdl.chips.ist8310 import regs as ist_regs
 from fpga_hdl.chips.ist8310.driver import Ist8310Driver
 from fpga_hdl.chips.ist8310.model import Ist8310Model
@@ -38,7 +52,12 @@ from fpga_hdl.chips.mpu6000.model import Mpu6000Model
 from fpga_hdl.chips.ms5611 import regs as ms_regs
 from fpga_hdl.chips.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
 from fpga_hdl.chips.ms5611.model import Ms5611Model
-from quad_model.sensors import SensorReadings
+from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix, UbloxDriver
+from fpga_hdl.chips.ublox.link import TlmUbloxUart
+from fpga_hdl.chips.ublox.model import UbloxM8Model
+from fpga_hdl.chips.ublox.ubx import NavPvt
+from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
+from quad_model.sensors import GpsSample, SensorReadings
 from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
 
 
@@ -48,6 +67,7 @@ class Chip(StrEnum):
     MPU6000 = "mpu6000"
     MS5611 = "ms5611"
     IST8310 = "ist8310"
+    UBLOX = "ublox"
 
 
 CHIPS = tuple(Chip)
@@ -84,6 +104,8 @@ class ChipFrame:
     pulses: tuple[Pulse, ...] = ()
     #: The SI samples the words came from; only :class:`BypassSensorLayer` reads them.
     si: SensorReadings | None = None
+    #: The GPS receiver's solution of a navigation epoch output now (receiver faults in).
+    gps: NavPvt | None = None
 
 
 @dataclass(frozen=True)
@@ -100,10 +122,35 @@ class ChipReadout:
     pwm_timed_out: tuple[bool, ...]
     #: ``(chip, message)`` for each failed transfer this frame.
     bus_errors: tuple[tuple[str, str], ...] = ()
+    #: The GPS fixes PX4's driver decoded by this frame's time, oldest first.
+    gps: tuple[ReceivedFix, ...] = ()
 
 
 #: SensorTop's host-port channel and fault names for the rig's chip names.
-HOST_CHIP = {Chip.MPU6000: "imu", Chip.MS5611: "baro", Chip.IST8310: "mag"}
+HOST_CHIP = {Chip.MPU6000: "imu", Chip.MS5611: "baro", Chip.IST8310: "mag", Chip.UBLOX: "gps"}
+
+
+def gps_fix(sample: GpsSample) -> GpsFix:
+    """The model's GPS sample in PX4's ``sensor_gps`` terms (what the receiver reports)."""
+    vn, ve, vd = (float(v) for v in sample.vel_ned_mps)
+    return GpsFix(
+        fix_type=sample.fix_type,
+        satellites_used=sample.satellites_visible,
+        latitude_deg=sample.lat_deg,
+        longitude_deg=sample.lon_deg,
+        altitude_msl_m=sample.alt_amsl_m,
+        altitude_ellipsoid_m=sample.alt_amsl_m,
+        eph=sample.eph_m,
+        epv=sample.epv_m,
+        vel_n_m_s=vn,
+        vel_e_m_s=ve,
+        vel_d_m_s=vd,
+        vel_m_s=math.hypot(vn, ve),
+        cog_rad=math.atan2(ve, vn),
+        s_variance_m_s=0.0,
+        c_variance_rad=0.0,
+        vel_ned_valid=sample.fix_type >= 2,
+    )
 
 
 def host_port_inputs(
@@ -119,6 +166,8 @@ def host_port_inputs(
                           "z": frame.mag.z_counts}  # fmt: skip
     if frame.baro_d1_d2 is not None:
         samples["baro"] = {"d1": frame.baro_d1_d2[0], "d2": frame.baro_d1_d2[1]}
+    if frame.gps is not None:
+        samples["gps"] = frame.gps.fields()
     faults = {}
     for chip in CHIPS:
         fault = frame.faults.get(chip, NO_FAULT)
@@ -164,13 +213,14 @@ def run_now(coroutine: Coroutine[Any, Any, _T]) -> _T:
 
 
 class SensorEngine:
-    """PX4's three sensor drivers on one SPI bus and one I2C bus, frame by frame."""
+    """PX4's sensor drivers on one SPI bus, one I2C bus and the GPS UART, frame by frame."""
 
-    def __init__(self, spi: SpiBus, i2c: I2cBus, host: ChipHost) -> None:
+    def __init__(self, spi: SpiBus, i2c: I2cBus, uart: UartPort, host: ChipHost) -> None:
         self.host = host
         self.imu = Mpu6000Driver(spi, "imu")
         self.baro = Ms5611Driver(spi, self._boot_sleep, "baro")
         self.mag = Ist8310Driver(i2c)
+        self.gps = UbloxDriver(uart)
         self._next_baro_us = 0
         self._baro_phase_d1 = False  # False: a D2 (temperature) conversion is running
         self._d2 = 0
@@ -190,12 +240,15 @@ class SensorEngine:
             await self.mag.reset()
             if not (await self.mag.reset_done() and await self.mag.configure()):
                 raise SensorLayerError("IST8310 configuration registers do not hold")
+            await self.gps.configure()
         except BusError as error:
             raise SensorLayerError(f"sensor start-up failed: {error}") from None
 
     async def frame(self, frame: ChipFrame) -> ChipReadout:
         """Load the frame's samples, then read as PX4's drivers would at this time."""
         await self.host.load(frame)
+        if frame.gps is not None:
+            await self.gps.receive(frame.now_us)
         errors: list[tuple[str, str]] = []
         imu = decode(await self.imu.read_raw(), self.imu.gyro_config, self.imu.accel_config)
         mag = None
@@ -222,6 +275,7 @@ class SensorEngine:
             pwm_widths_us=widths_us,
             pwm_timed_out=timed_out,
             bus_errors=tuple(errors),
+            gps=self.gps.poll(frame.now_us),
         )
 
     async def _baro_cycle(self) -> tuple[float, float] | None:
@@ -244,14 +298,20 @@ class SensorEngine:
 
 
 class TlmChips:
-    """The three chips as fpga_hdl's Python register models, behind TLM buses."""
+    """The chips as fpga_hdl's Python register models, behind TLM buses.
+
+    The GPS UART's line time is the RTL harness's (its system clock sets the divider), so
+    fixes arrive at the same frames as through the RTL.
+    """
 
     def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
         self.mpu6000 = Mpu6000Model()
         self.ms5611 = Ms5611Model()
         self.ist8310 = Ist8310Model()
+        self.ublox = UbloxM8Model()
         self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
         self.i2c = TlmI2cBus({self.ist8310.address: self.ist8310})
+        self.uart = TlmUbloxUart(self.ublox, sys_clk_hz=HARNESS_SYS_CLK_HZ)
         self.pwm = PwmCapture(MOTOR_CHANNELS, tick_hz=pwm_tick_hz)
         self._faults: Mapping[str, ChipFault] | None = None  # the fault inputs set last
 
@@ -263,6 +323,8 @@ class TlmChips:
             self.ist8310.load_sample(frame.mag)
         if frame.baro_d1_d2 is not None:
             self.ms5611.load_sample(*frame.baro_d1_d2)
+        if frame.gps is not None:
+            self.ublox.load_fix(frame.gps)
         if frame.faults is not self._faults:  # the injector hands the same map until it changes
             self._faults = frame.faults
             for name in CHIPS:
@@ -281,7 +343,7 @@ class TlmSensorLayer:
 
     def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
         self.chips = TlmChips(pwm_tick_hz=pwm_tick_hz)
-        self.engine = SensorEngine(self.chips.spi, self.chips.i2c, self.chips)
+        self.engine = SensorEngine(self.chips.spi, self.chips.i2c, self.chips.uart, self.chips)
 
     def start(self) -> None:
         run_now(self.engine.start())
@@ -294,8 +356,9 @@ class TlmSensorLayer:
 
 
 class BypassSensorLayer:
-    """No chips: the SI samples go straight into HIL_SENSOR and the commanded pulse widths
-    straight to the motors, as a bare simulator (Gazebo's) feeds PX4. For measuring what
+    """No chips: the SI samples go straight into HIL_SENSOR and HIL_GPS (no receiver, no
+    UART time) and the commanded pulse widths straight to the motors, as a bare simulator
+    (Gazebo's) feeds PX4. For measuring what
     the chips cost (``make bench``); the credible rig is ``tlm`` or ``rtl``."""
 
     def __init__(self) -> None:
@@ -311,7 +374,8 @@ class BypassSensorLayer:
         for pulse in frame.pulses:
             if pulse.channel < MOTOR_CHANNELS:
                 self._widths_us[pulse.channel] = float(pulse.width_us)
-        imu, mag, baro = readings.imu, readings.mag, readings.baro
+        imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
+        now_us = frame.now_us
         return ChipReadout(
             accel_mps2=tuple(map(float, imu.accel_mps2)),
             gyro_radps=tuple(map(float, imu.gyro_radps)),
@@ -320,6 +384,7 @@ class BypassSensorLayer:
             baro_pa_degc=None if baro is None else (baro.pressure_pa, baro.temperature_degc),
             pwm_widths_us=tuple(self._widths_us),
             pwm_timed_out=(False,) * MOTOR_CHANNELS,
+            gps=() if gps is None else (ReceivedFix(now_us, now_us, gps_fix(gps)),),
         )
 
     def close(self) -> None:

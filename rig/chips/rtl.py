@@ -19,8 +19,8 @@ tick costs fewer simulated cycles (the capture clock runs all the time, one cycl
 tick) and measures widths in coarser steps. ``benchmarks/bench_rig.py`` has the figures.
 
 Every wait is bounded: the first build of the Verilator model takes a minute or two
-(``build_timeout_s``); each frame must come back within ``frame_timeout_s`` of wall time,
-else the co-simulation is reported as the stalled side.
+(``build_timeout_s``); the start-up within ``start_timeout_s`` and each frame within
+``frame_timeout_s`` of wall time, else the co-simulation is reported as the stalled side.
 """
 
 from __future__ import annotations
@@ -67,11 +67,13 @@ class RtlSensorLayer:
         pwm_tick_hz: float = PWM_TICK_HZ,
         build_timeout_s: float = 600.0,
         frame_timeout_s: float = 10.0,
+        start_timeout_s: float = 120.0,
     ) -> None:
         self.simulator = simulator
         self.pwm_period_us = round(1e6 / pwm_hz)
         self.pwm_tick_hz = pwm_tick_hz
         self.frame_timeout_s = frame_timeout_s
+        self.start_timeout_s = start_timeout_s
         self._folder = tempfile.TemporaryDirectory(prefix="rig-cosim-")
         path = os.path.join(self._folder.name, "channel.sock")
         self._server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -122,13 +124,15 @@ class RtlSensorLayer:
         reason = str(self._failure).splitlines()[0] if self._failure else "no reason given"
         return f"the RTL co-simulation ({self.simulator}) ended {when}: {reason}"
 
-    def _request(self, payload: bytes) -> bytes:
+    def _request(self, payload: bytes, timeout_s: float | None = None) -> bytes:
+        timeout_s = timeout_s or self.frame_timeout_s
+        self._conn.settimeout(timeout_s)
         try:
             send_message(self._conn, payload)
             answer = receive_message(self._conn)
         except TimeoutError:
             raise CosimError(
-                f"the RTL co-simulation stalled: no answer within {self.frame_timeout_s:g} s "
+                f"the RTL co-simulation stalled: no answer within {timeout_s:g} s "
                 "of wall time (the rig is waiting for it)"
             ) from None
         except OSError as error:
@@ -138,7 +142,9 @@ class RtlSensorLayer:
         return answer[1:]
 
     def start(self) -> None:
-        self._request(encode_start(self.pwm_period_us))
+        """PX4's start-up sequences; the GPS handshake alone runs about 2.4 million system
+        cycles (its first steps at 9600 baud), hence its own, longer bound."""
+        self._request(encode_start(self.pwm_period_us), self.start_timeout_s)
 
     def frame(self, frame: ChipFrame) -> ChipReadout:
         return decode_readout(self._request(encode_frame(frame)))

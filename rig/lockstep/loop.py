@@ -5,8 +5,10 @@ One frame is one IMU period (1 ms by default):
 1. the model advances one frame holding the motor throttles the PWM capture measured;
 2. sensor physics samples the truth (IMU every frame, mag/baro/GPS on their schedules) and
    the sensor-layer faults are applied;
-3. the samples are loaded into the chips and PX4's drivers read them over SPI/I2C
-   (``sensor_layer``: Python register models, or the RTL as Verilator-compiled code);
+3. the samples are loaded into the chips and PX4's drivers read them over SPI/I2C, and a
+   GPS epoch's solution goes into the u-blox receiver, whose NAV-PVT PX4's driver decodes
+   from its UART once the last byte is in (``sensor_layer``: Python register models, or
+   the RTL as Verilator-compiled code);
 4. due scenario commands go to the autopilot on its onboard link (acknowledged first with the
    reference autopilot, so each acts at a known frame);
 5. HIL_SENSOR (+ HIL_GPS, + HIL_STATE_QUATERNION at the asked interval) goes out and, once
@@ -47,13 +49,21 @@ import numpy as np
 from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
+from fpga_hdl.chips.ublox.link import receiver_solution
 from quad_model import QuadModel, SensorSuite, load_vehicle
 from quad_model.frames import ned_to_geodetic, yaw_quat
 from quad_model.model import Mount, VehicleTruth
 from quad_model.sensors import SensorReadings
 from quad_model.vehicle import VehicleFileError
 from rig.autopilots.px4 import Px4Sitl, check_imu_rate, find_px4, px4_parameters
-from rig.chips.layer import BypassSensorLayer, ChipFrame, ChipReadout, SensorLayer, TlmSensorLayer
+from rig.chips.layer import (
+    BypassSensorLayer,
+    ChipFrame,
+    ChipReadout,
+    SensorLayer,
+    TlmSensorLayer,
+    gps_fix,
+)
 from rig.chips.pwm import PwmOutput, throttle_from_capture
 from rig.errors import RigError, ScenarioError
 from rig.lockstep.pacing import Pacer
@@ -428,7 +438,9 @@ class _Loop:
             faults=self.faults.chip_faults(),
             pulses=tuple(pulses),
             si=readings,
-        )
+            gps=None if readings.gps is None else receiver_solution(
+                gps_fix(readings.gps), self.run_us, self.faults.gps_fault()),
+        )  # fmt: skip
         out = self.layer.frame(chip_frame)
         self._delivered = out
         for chip, error in out.bus_errors:
@@ -449,8 +461,8 @@ class _Loop:
             self.log.mag(self.time_us, out.mag_gauss, out.imu_temperature_degc)
         if out.baro_pa_degc is not None:
             self.log.baro(self.time_us, out.baro_pa_degc)
-        if readings.gps is not None:
-            self.log.gps(self.time_us, readings.gps)
+        for received in out.gps:
+            self.log.gps(self.time_us, self.clock_start_us + received.sent_us, received.fix)
 
     def _sensor_messages(
         self, readings: SensorReadings, out: ChipReadout
@@ -461,14 +473,14 @@ class _Loop:
                 mag_gauss=out.mag_gauss, baro=out.baro_pa_degc,
             )
         ]  # fmt: skip
-        if readings.gps is not None:
-            gps = readings.gps
+        for received in out.gps:  # as PX4's u-blox driver decoded them (bypass: the model's)
+            fix = received.fix
             messages.append(
                 hil_gps(
-                    self.link.mav, self.time_us, lat_deg=gps.lat_deg, lon_deg=gps.lon_deg,
-                    alt_amsl_m=gps.alt_amsl_m, vel_ned_mps=gps.vel_ned_mps, eph_m=gps.eph_m,
-                    epv_m=gps.epv_m, fix_type=gps.fix_type,
-                    satellites_visible=gps.satellites_visible,
+                    self.link.mav, self.time_us, lat_deg=fix.latitude_deg,
+                    lon_deg=fix.longitude_deg, alt_amsl_m=fix.altitude_msl_m,
+                    vel_ned_mps=(fix.vel_n_m_s, fix.vel_e_m_s, fix.vel_d_m_s), eph_m=fix.eph,
+                    epv_m=fix.epv, fix_type=fix.fix_type, satellites_visible=fix.satellites_used,
                 )
             )  # fmt: skip
         return messages

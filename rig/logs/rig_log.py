@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fpga_hdl.chips.ublox.driver import GpsFix
 from quad_model.frames import yaw_from_quat
 from quad_model.model import VehicleTruth
-from quad_model.sensors import GpsSample
 from rig.logs.ulog_writer import ULogWriter
 
 _ATTITUDE = [("uint64_t", "timestamp_sample"), ("float[4]", "q"), ("float[4]", "delta_q_reset"),
@@ -148,14 +148,15 @@ class RigLog:
                           pressure=reading[0], temperature=reading[1],
                           error_count=self._errors["ms5611"])  # fmt: skip
 
-    def gps(self, time_us: int, sample: GpsSample) -> None:
-        vn, ve, vd = sample.vel_ned_mps
+    def gps(self, time_us: int, sent_us: int, fix: GpsFix) -> None:
+        """A fix as the autopilot got it, at ``time_us``; ``timestamp_sample`` is when the
+        receiver sent it (the UART's time between the two)."""
         self.writer.write(
-            "sensor_gps", time_us, timestamp_sample=time_us, latitude_deg=sample.lat_deg,
-            longitude_deg=sample.lon_deg, altitude_msl_m=sample.alt_amsl_m, eph=sample.eph_m,
-            epv=sample.epv_m, vel_m_s=math.hypot(vn, ve), vel_n_m_s=vn, vel_e_m_s=ve,
-            vel_d_m_s=vd, cog_rad=math.atan2(ve, vn), fix_type=sample.fix_type,
-            vel_ned_valid=True, satellites_used=sample.satellites_visible,
+            "sensor_gps", time_us, timestamp_sample=sent_us, latitude_deg=fix.latitude_deg,
+            longitude_deg=fix.longitude_deg, altitude_msl_m=fix.altitude_msl_m, eph=fix.eph,
+            epv=fix.epv, vel_m_s=fix.vel_m_s, vel_n_m_s=fix.vel_n_m_s, vel_e_m_s=fix.vel_e_m_s,
+            vel_d_m_s=fix.vel_d_m_s, cog_rad=fix.cog_rad, fix_type=fix.fix_type,
+            vel_ned_valid=fix.vel_ned_valid, satellites_used=fix.satellites_used,
         )  # fmt: skip
 
     def motors(self, time_us: int, commanded_us: int, controls: Sequence[float]) -> None:

@@ -13,6 +13,7 @@ and is logged when it starts and when it ends:
 | ``bus_bit_flip`` | chip (RTL or TLM) | ``fault_flip``: XOR ``mask`` on every byte sent |
 | ``chip_mute`` | chip (RTL or TLM) | ``fault_mute``: the chip stops answering |
 | ``gps_loss`` | GPS receiver | no HIL_GPS is sent |
+| ``gps_receiver`` | u-blox chip | ``loss_of_fix``/``jammed`` solution; ``bad_checksum`` on UART |
 | ``pwm_dropout`` | PWM lines | no pulses on ``channel`` (all if absent): the capture times out |
 """
 
@@ -25,8 +26,9 @@ from typing import Protocol
 
 import numpy as np
 
+from fpga_hdl.chips.ublox.link import BAD_CHECKSUM_FLIP, GpsFault
 from quad_model.sensors import SensorReadings
-from rig.chips.layer import ChipFault
+from rig.chips.layer import Chip, ChipFault
 from rig.scenarios.scenario import FaultSpec
 
 #: Which sample and field each sensor name of a scenario refers to.
@@ -76,6 +78,7 @@ class FaultInjector:
         # What the chips and the PWM lines see changes only when a fault starts or ends.
         self._chip_faults: Mapping[str, ChipFault] = MappingProxyType({})
         self._pwm_dropped: frozenset[int] = frozenset()
+        self._gps_fault: GpsFault | None = None
 
     def update(self, time_us: int, model: MotorHealth) -> None:
         """Start and end faults at this frame; motor faults act on the model here."""
@@ -100,6 +103,7 @@ class FaultInjector:
             self._active = tuple(self.faults[i] for i in sorted(now_active))
             self._chip_faults = MappingProxyType(self._chip_inputs())
             self._pwm_dropped = self._dropped_channels()
+            self._gps_fault = self._receiver_fault()
 
     def samples(self, readings: SensorReadings) -> SensorReadings:
         """Sensor-physics faults: stuck, bias, noise burst, GPS loss."""
@@ -134,6 +138,17 @@ class FaultInjector:
         """Bus faults for the chips' ``fault_mute`` / ``fault_flip`` inputs."""
         return self._chip_faults
 
+    def gps_fault(self) -> GpsFault | None:
+        """The GPS receiver's solution fault now (``loss_of_fix`` / ``jammed``); a line
+        fault (``bad_checksum``) is in :meth:`chip_faults` as the receiver's flip."""
+        return self._gps_fault
+
+    def _receiver_fault(self) -> GpsFault | None:
+        """The latest-started solution fault wins (both at once is not one receiver state)."""
+        solution = [f.fault for f in self._active if f.kind == "gps_receiver"]
+        solution = [fault for fault in solution if fault is not GpsFault.BAD_CHECKSUM]
+        return solution[-1] if solution else None
+
     def pwm_dropped(self) -> frozenset[int]:
         """PWM channels that emit no pulses now."""
         return self._pwm_dropped
@@ -149,6 +164,9 @@ class FaultInjector:
                 faults[chip] = dataclasses.replace(current, mute=True)
             elif fault.kind == "bus_bit_flip":
                 faults[chip] = dataclasses.replace(current, flip=current.flip | fault.mask)
+        if any(getattr(f, "fault", None) is GpsFault.BAD_CHECKSUM for f in self._active):
+            current = faults.get(Chip.UBLOX, ChipFault())
+            faults[Chip.UBLOX] = dataclasses.replace(current, flip=current.flip | BAD_CHECKSUM_FLIP)
         return faults
 
     def _dropped_channels(self) -> frozenset[int]:

@@ -24,6 +24,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, InstanceOf
 from pydantic.json_schema import SkipJsonSchema
 
+from fpga_hdl.chips.ublox.link import GpsFault
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
 from hil_config import (
     FieldError,
@@ -419,6 +420,16 @@ class GpsLoss(_Fault):
 
 
 @table(kw_only=True)
+class GpsReceiverFault(_Fault):
+    """A fault of the u-blox receiver or its UART, at the chip layer (``tlm``, ``rtl``):
+    ``loss_of_fix`` (fix type 0), ``jammed`` (2D from 3 satellites, 20x worse accuracy),
+    ``bad_checksum`` (each frame corrupted on the line: PX4 drops it)."""
+
+    kind: Literal["gps_receiver"] = "gps_receiver"
+    fault: GpsFault
+
+
+@table(kw_only=True)
 class PwmDropout(_Fault):
     """A PWM line goes quiet; no channel: all four."""
 
@@ -428,7 +439,7 @@ class PwmDropout(_Fault):
 
 FaultSpec = Annotated[
     MotorLoss | MotorDegradation | SensorStuck | SensorBias | NoiseBurst | BusBitFlip
-    | ChipMute | GpsLoss | PwmDropout,
+    | ChipMute | GpsLoss | GpsReceiverFault | PwmDropout,
     Field(discriminator="kind"),
 ]  # fmt: skip
 

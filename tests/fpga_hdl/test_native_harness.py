@@ -14,7 +14,11 @@ import sys
 import pytest
 
 from fpga_hdl.buses.transactions import UnknownDevice
-from fpga_hdl.cosim.harness import CosimHarness
+from fpga_hdl.buses.uart import divider_for, line_cycles
+from fpga_hdl.chips.ublox.driver import px4_configuration
+from fpga_hdl.chips.ublox.link import TlmUbloxUart
+from fpga_hdl.chips.ublox.model import UbloxM8Model
+from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason
 from tests.fpga_hdl.transcript import run_script, tlm_transcript
 
@@ -72,6 +76,21 @@ def test_the_capture_clock_runs_only_when_asked(harness):
     assert captures[0].width_ticks == 100
     assert captures[0].period_ticks == 400
     assert captures[1].timeout  # never a pulse on channel 1
+
+
+def test_px4s_gps_handshake_is_answered_and_timed_as_the_twin_predicts(harness):
+    """The u-blox core answers each step of PX4's configuration over the UART peer with the
+    twin's bytes, and the line time the peer measures is ``line_cycles`` to the cycle."""
+    model = UbloxM8Model()
+    twin = TlmUbloxUart(model, sys_clk_hz=HARNESS_SYS_CLK_HZ)
+    for step in px4_configuration():
+        rtl = _run(harness.uart.exchange(step.frame, baud=step.baud))
+        assert rtl == asyncio.run(twin.exchange(step.frame, baud=step.baud))
+        divider = divider_for(HARNESS_SYS_CLK_HZ, step.baud)
+        assert harness.uart.line_cycles == line_cycles(len(rtl.data), divider)
+    assert model.baud == 115200
+    silence = _run(harness.uart.exchange(b"", baud=115200))
+    assert (silence.data, silence.line_us) == (b"", 0)
 
 
 def test_an_unknown_spi_device_is_refused_before_the_simulator(harness):

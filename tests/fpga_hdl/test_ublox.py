@@ -2,6 +2,7 @@
 """Unit tests of the u-blox M8: UBX framing and checksum, the TLM twin, PX4's decoder,
 the baud dividers, and the RTL core against the twin in amaranth.sim."""
 
+import asyncio
 import math
 import struct
 
@@ -14,12 +15,19 @@ from fpga_hdl.chips.ublox.core import BAUD_RATES, UbloxM8Core
 from fpga_hdl.chips.ublox.driver import (
     PX4_BAUD_RATES,
     GpsFix,
+    UbloxDriver,
+    UbloxHandshakeError,
     UbxDecoder,
     decode_nav_pvt,
     nav_pvt_for_fix,
     px4_configuration,
 )
-from fpga_hdl.chips.ublox.link import GpsFault, UbxGpsLink
+from fpga_hdl.chips.ublox.link import (
+    BAD_CHECKSUM_FLIP,
+    GpsFault,
+    TlmUbloxUart,
+    receiver_solution,
+)
 from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.chips.ublox.ubx import NavPvt
 from fpga_hdl.top import SYS_CLK_HZ
@@ -245,20 +253,53 @@ def test_rtl_equals_twin_for_an_ack_and_a_nav_pvt():
 # --- the GNSS path for the sensor layers -----------------------------------------------------
 
 
-def test_link_delivers_the_fix_after_the_uart_time_and_applies_faults():
-    link = UbxGpsLink(sys_clk_hz=SYS_CLK_HZ, nav_latency_us=1000)
-    assert link.baud == 115200
-    transfer_us = 100 * link.byte_time_us()  # one NAV-PVT frame
-    assert transfer_us == pytest.approx(100 * 10 / 115200 * 1e6, rel=0.002)
-    link.epoch(FIX, 200_000)
-    assert link.poll(200_000 + 1000 + round(transfer_us) - 1) == []
-    (got,) = link.poll(200_000 + 1000 + round(transfer_us))
-    assert got.latitude_deg == pytest.approx(FIX.latitude_deg, abs=1e-7)
-    link.epoch(FIX, 400_000, GpsFault.LOSS_OF_FIX)
-    link.epoch(FIX, 600_000, GpsFault.JAMMED)
-    link.epoch(FIX, 800_000, GpsFault.BAD_CHECKSUM)
-    lost, jammed = link.poll(10**6)
-    assert (lost.fix_type, lost.satellites_used, lost.vel_ned_valid) == (0, 0, False)
-    assert (jammed.fix_type, jammed.satellites_used) == (2, 3)
-    assert jammed.eph == pytest.approx(20 * FIX.eph)
-    assert link.decoder.checksum_errors == 1
+def test_px4_driver_configures_the_twin_then_gets_each_fix_after_its_line_time():
+    model = UbloxM8Model()
+    driver = UbloxDriver(TlmUbloxUart(model, sys_clk_hz=SYS_CLK_HZ))
+    asyncio.run(driver.configure())
+    assert (driver.baud, model.baud, model.nav_pvt_enabled) == (115200, 115200, True)
+    model.load_fix(receiver_solution(FIX, 200_000))
+    asyncio.run(driver.receive(200_000))
+    # 100 bytes at 115200 baud from a 16 MHz clock's divider (139): 99 whole bytes, then
+    # the last one's 9.5 bits and the receiver's three input registers.
+    line_us = math.ceil((99 * 10 * 139 + 9 * 139 + 69 + 3) / 16)
+    assert line_us == pytest.approx(100 * 10 / 115200 * 1e6, rel=0.01)
+    assert driver.poll(200_000 + line_us - 1) == ()
+    (got,) = driver.poll(200_000 + line_us)
+    assert (got.time_us, got.sent_us) == (200_000 + line_us, 200_000)
+    assert got.fix.latitude_deg == pytest.approx(FIX.latitude_deg, abs=1e-7)
+
+
+@pytest.mark.parametrize(
+    ("fault", "fix_type", "satellites", "eph"),
+    [
+        (GpsFault.LOSS_OF_FIX, 0, 0, FIX.eph),
+        (GpsFault.JAMMED, 2, 3, 20 * FIX.eph),
+    ],
+)
+def test_receiver_faults_reach_px4s_decoder(fault, fix_type, satellites, eph):
+    got = decode_nav_pvt(receiver_solution(FIX, 0, fault).payload())
+    assert (got.fix_type, got.satellites_used) == (fix_type, satellites)
+    assert got.eph == pytest.approx(eph)
+    assert got.vel_ned_valid is (fault is not GpsFault.LOSS_OF_FIX)
+
+
+def test_a_bad_checksum_loses_that_epoch_only():
+    model = UbloxM8Model()
+    driver = UbloxDriver(TlmUbloxUart(model, sys_clk_hz=SYS_CLK_HZ))
+    asyncio.run(driver.configure())
+    for now_us, flip in ((0, BAD_CHECKSUM_FLIP), (200_000, 0)):
+        model.fault_flip = flip
+        model.load_fix(receiver_solution(FIX, now_us))
+        asyncio.run(driver.receive(now_us))
+    (got,) = driver.poll(10**6)
+    assert got.sent_us == 200_000
+    assert driver.decoder.checksum_errors == 1
+
+
+def test_the_handshake_fails_in_one_line_when_the_receiver_stays_silent():
+    model = UbloxM8Model()
+    model.fault_mute = True
+    driver = UbloxDriver(TlmUbloxUart(model, sys_clk_hz=SYS_CLK_HZ))
+    with pytest.raises(UbloxHandshakeError, match="no ACK-NAK for message 0x06 0x8A at 9600"):
+        asyncio.run(driver.configure())

@@ -45,7 +45,10 @@ def takeoff(altitude_m):
 @pytest.mark.cosim
 def test_hover_holds_altitude_with_rtl_sensors(tmp_path, free_instance):
     """Take off to 3 m on the RTL chips (IMU at 250 Hz, Gazebo's rate, to keep CI short)
-    and hold: the true altitude stays within ±0.5 m of 3 m for the last 3 s."""
+    and hold: the true altitude stays within ±0.5 m of 3 m for the last 3 s. Every GPS fix
+    went through the u-blox core's UART and PX4's decoder: rig.ulg logs it when the
+    autopilot got it, 8.7 ms of line after the receiver sent it, so at the third 4 ms
+    frame on, each a 3D fix."""
     result, rig_log, _ = fly(
         tmp_path, free_instance, "rtl_hover", takeoff(3.0), 9.0, sensor_layer="rtl",
         rates={"imu_hz": 250},
@@ -54,6 +57,10 @@ def test_hover_holds_altitude_with_rtl_sensors(tmp_path, free_instance):
     altitude = -truth_at(rig_log, np.arange(6.0, 9.0, 0.05))["z"]
     assert np.abs(altitude - 3.0).max() < HOVER_BOUND_M
     assert rig_log.msg_info_dict["ver_hw"] == "RIG_RTL"
+    gps = rig_log.get_dataset("sensor_gps").data
+    assert len(gps["timestamp"]) >= 85  # 10 Hz for 9 s, less the receiver's latency
+    assert set(gps["timestamp"] - gps["timestamp_sample"]) == {12_000}
+    assert set(gps["fix_type"]) == {3}
 
 
 def test_level_step_settles(tmp_path, free_instance):

@@ -5,7 +5,9 @@ harness, compiled into the rig's process (``rig.chips.native``); the same Verilo
 runs under cocotb in its own process (``rig.chips.rtl``). The same frames through the
 three layers (TLM, cocotb RTL, compiled RTL) must give the same decoded values, bus
 errors and captured PWM, frame by frame, at the default 1 µs capture tick and at a
-coarser one. The RTL is read at the frame time, whatever the pulses do; nothing steers it.
+coarser one, and the same GPS fixes at the same times (through the u-blox core's UART and
+PX4's decoder, with receiver and line faults). The RTL is read at the frame time,
+whatever the pulses do; nothing steers it.
 """
 
 import numpy as np
@@ -14,6 +16,8 @@ import pytest
 from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
+from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix
+from fpga_hdl.chips.ublox.link import BAD_CHECKSUM_FLIP, GpsFault, receiver_solution
 from rig.chips.channel import (
     decode_frame,
     decode_readout,
@@ -37,6 +41,20 @@ BOUNDARY_FRAMES = range(340, 400)
 #: Widths of those periods: a period starting 1.5 ms before a frame time ends 3..0 µs
 #: before it; the others in between change every width back to 1200 µs.
 BOUNDARY_WIDTHS_US, BETWEEN_WIDTH_US = (1497, 1498, 1499, 1500), 1200
+#: A GPS epoch every this many frames (20 Hz at 1 kHz: more epochs than a receiver's
+#: 5 Hz in a short test), and the receiver faults of some of them.
+GPS_EVERY = 50
+GPS_FAULTS = {100: GpsFault.LOSS_OF_FIX, 150: GpsFault.JAMMED, 200: GpsFault.BAD_CHECKSUM}
+
+
+def _gps_fix(rng):
+    return GpsFix(
+        fix_type=3, satellites_used=int(rng.integers(6, 20)),
+        latitude_deg=47.3977 + rng.normal(0, 1e-4), longitude_deg=8.5456 + rng.normal(0, 1e-4),
+        altitude_msl_m=488.0 + rng.normal(0, 2), altitude_ellipsoid_m=535.0, eph=0.9, epv=1.6,
+        vel_n_m_s=rng.normal(0, 2), vel_e_m_s=rng.normal(0, 2), vel_d_m_s=rng.normal(0, 1),
+        vel_m_s=1.5, cog_rad=0.5, s_variance_m_s=0.3, c_variance_rad=0.2, vel_ned_valid=True,
+    )  # fmt: skip
 
 
 def _frames(rng, count, *, frame_us=1000, faults=None):
@@ -47,14 +65,22 @@ def _frames(rng, count, *, frame_us=1000, faults=None):
     for k in range(1, count + 1):
         now_us = k * frame_us
         dropped = {2} if k in DROPOUT_FRAMES else set()
+        gps_fault = GPS_FAULTS.get(k)
+        frame_faults = (faults or {}).get(k, {})
+        if gps_fault is GpsFault.BAD_CHECKSUM:
+            frame_faults = {**frame_faults, "ublox": ChipFault(flip=BAD_CHECKSUM_FLIP)}
+        gps = None
+        if k % GPS_EVERY == 0:
+            gps = receiver_solution(_gps_fix(rng), now_us, gps_fault)
         yield ChipFrame(
             now_us=now_us,
             imu=Mpu6000Sample.from_si(rng.normal(0, 20, 3), rng.normal(0, 3, 3), 30.0),
             mag=sample_from_field_gauss(rng.normal(0, 0.4, 3)) if k % 10 == 0 else None,
             baro_d1_d2=d1_d2 if k % 20 == 0 else None,
             read_mag=k % 10 == 0,
-            faults=(faults or {}).get(k, {}),
+            faults=frame_faults,
             pulses=tuple(outputs.pulses(now_us + 1, dropped)),
+            gps=gps,
         )
         if frame_us == 1000 and k in BOUNDARY_FRAMES:
             # The periods take the last command before their start: one starting at
@@ -82,6 +108,7 @@ def test_readout_codec_round_trip():
         accel_mps2=(0.1, -0.2, -9.81), gyro_radps=(0.01, 0.02, -0.03), imu_temperature_degc=31.5,
         mag_gauss=(0.2, 0.01, 0.43), baro_pa_degc=None, pwm_widths_us=(1500.0, 0.0, 1000.0, 2000.0),
         pwm_timed_out=(False, True, False, False), bus_errors=(("ms5611", "MS5611 not ready ü"),),
+        gps=(ReceivedFix(208_697, 200_000, _gps_fix(np.random.default_rng(1))),),
     )  # fmt: skip
     assert decode_readout(encode_readout(readout)[1:]) == readout
 
@@ -116,9 +143,10 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     tlm, healthy = _started(TlmSensorLayer()), _started(TlmSensorLayer())
     faults = {k: {"mpu6000": ChipFault(flip=0x40)} for k in range(50, 55)}
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
-    corrupted, widths, timed_out, pwm, boundary = set(), set(), [], [], 0
+    corrupted, widths, timed_out, pwm, boundary, fixes = set(), set(), [], [], 0, []
     for frame in _frames(np.random.default_rng(11), 400, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
+        fixes += [(frame.now_us, received) for received in reference.gps]
         assert rtl == reference, f"frame at {frame.now_us} µs: RTL {rtl} != TLM {reference}"
         native = native_layer.frame(frame)
         assert native == reference, f"frame at {frame.now_us} µs: compiled RTL {native} != TLM"
@@ -147,6 +175,17 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     assert boundary >= 10  # the latency boundary was read often
     assert timed_out.index(True, 20) + 1 == 248
     assert not any(timed_out[295:])
+    # Each epoch's NAV-PVT (100 bytes at 115200 baud: 8.7 ms on the line) is delivered at
+    # the first frame after its last byte; loss of fix and jamming reach PX4's decoder, and
+    # the epoch with the bad checksum never arrives.
+    assert [received.sent_us // 1000 for _, received in fixes] == [50, 100, 150, 250, 300, 350]
+    for delivered_us, received in fixes:
+        assert received.time_us - received.sent_us == 8696
+        assert delivered_us == received.sent_us + 9000
+    kinds = {r.sent_us // 1000: (r.fix.fix_type, r.fix.satellites_used) for _, r in fixes}
+    assert kinds[100] == (0, 0)
+    assert kinds[150] == (2, 3)  # jammed: a 2D fix from 3 satellites
+    assert kinds[50][0] == kinds[250][0] == 3
 
 
 @pytest.mark.cosim

@@ -222,6 +222,44 @@ def test_sensor_faults_and_gps_loss(tmp_path, free_instance):
     assert math.isclose(len(data(log, "sensor_gps")["timestamp"]), len(gps_times))
 
 
+def test_gps_receiver_faults_reach_the_autopilot_through_the_ublox_uart(tmp_path, free_instance):
+    """Every fix reaches HIL_GPS through the u-blox twin and PX4's decoder: 8.7 ms after the
+    receiver output it (a 100-byte NAV-PVT at 115200 baud), so at the second-next 1 ms
+    frame. Loss of fix arrives as fix type 0, jamming as a 2D fix from 3 satellites, and
+    the epochs sent with a bad checksum never arrive."""
+    faults = [
+        {"kind": "gps_receiver", "fault": "loss_of_fix", "start_s": 0.3, "end_s": 0.5},
+        {"kind": "gps_receiver", "fault": "jammed", "start_s": 0.5, "end_s": 0.7},
+        {"kind": "gps_receiver", "fault": "bad_checksum", "start_s": 0.7, "end_s": 0.9},
+    ]
+    _, log, received = fly(
+        tmp_path, free_instance, "--behaviour", "px4", duration_s=1.2, faults=faults
+    )
+    gps = [m for m in received if m["mavpackettype"] == "HIL_GPS"]
+    logged = data(log, "sensor_gps")
+    assert [m["time_usec"] for m in gps] == logged["timestamp"].tolist()
+    assert set(logged["timestamp"] - logged["timestamp_sample"]) == {9000}
+    by_sent = dict(zip(logged["timestamp_sample"].tolist(), gps, strict=True))
+    assert len(by_sent) >= 8
+    for sent_us, message in by_sent.items():
+        state = (message["fix_type"], message["satellites_visible"])
+        if sent_us < 300_000 or sent_us >= 900_000:
+            assert state[0] == 3
+            assert state[1] >= 6
+        elif sent_us < 500_000:
+            assert state == (0, 0)
+        elif sent_us < 700_000:
+            assert state == (2, 3)
+            assert message["eph"] == 20 * gps[0]["eph"]
+        else:
+            raise AssertionError(f"the fix sent at {sent_us} µs had a bad checksum")
+    assert any(300_000 <= t < 500_000 for t in by_sent)
+    assert any(500_000 <= t < 700_000 for t in by_sent)
+    assert any(t >= 900_000 for t in by_sent)
+    events = [m.message for m in log.logged_messages]
+    assert "fault gps_receiver (fault=bad_checksum) started" in events
+
+
 def test_px4_mode_waits_for_the_connection_and_steps_until_the_ack(
     tmp_path, free_instance, monkeypatch
 ):

@@ -8,6 +8,8 @@ Written from PX4-GPSDrivers ``src/ubx.cpp``:
 - :func:`px4_configuration` lists what ``configure`` sends a receiver that NAKs
   CFG-VALSET and reports hardware "00080000" (u-blox 8) in MON-VER, with auto baud and
   the default settings: the pre-protocol-27 path (``configureDevicePreV27``).
+- :class:`UbloxDriver` runs that handshake over a UART, checking each answer as
+  ``configure`` does, then hands out each NAV-PVT once its last byte has arrived.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import math
 import struct
 from dataclasses import dataclass
 
+from fpga_hdl.buses.transactions import BusError, UartPort
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.ubx import NavPvt
 
@@ -23,6 +26,9 @@ __all__ = [
     "PX4_BAUD_RATES",
     "ConfigStep",
     "GpsFix",
+    "ReceivedFix",
+    "UbloxDriver",
+    "UbloxHandshakeError",
     "UbxDecoder",
     "UbxFrame",
     "decode_nav_pvt",
@@ -236,3 +242,80 @@ def px4_configuration(receiver_baud: int = 9600) -> list[ConfigStep]:
     ]
     steps += [ConfigStep(PX4_M8_BAUD, frame, "ack") for frame in frames]
     return steps
+
+
+class UbloxHandshakeError(BusError):
+    """The receiver did not answer PX4's configuration as a u-blox 8 must."""
+
+
+@dataclass(frozen=True)
+class ReceivedFix:
+    """A fix as PX4's driver has it: its NAV-PVT left the receiver at ``sent_us`` and its
+    last byte was in the autopilot's UART at ``time_us``."""
+
+    time_us: int
+    sent_us: int
+    fix: GpsFix
+
+
+class UbloxDriver:
+    """PX4's u-blox driver on a UART: the configuration handshake, then NAV-PVT in.
+
+    :meth:`configure` sends :func:`px4_configuration` step by step at each step's rate and
+    checks the answer PX4 waits for (ACK-ACK or ACK-NAK naming the message, MON-VER of a
+    u-blox 8); a missing or wrong answer is a :class:`UbloxHandshakeError`. After each
+    navigation epoch :meth:`receive` collects the receiver's bytes; :meth:`poll` hands out
+    the fixes whose last byte has arrived by then, oldest first.
+    """
+
+    def __init__(self, uart: UartPort, *, receiver_baud: int = 9600) -> None:
+        self.uart = uart
+        self.baud = receiver_baud
+        self.decoder = UbxDecoder()
+        self._in_flight: list[ReceivedFix] = []
+
+    async def configure(self) -> None:
+        for step in px4_configuration(self.baud):
+            transfer = await self.uart.exchange(step.frame, baud=step.baud)
+            _check_answer(step, self.decoder.feed(transfer.data))
+            if step.then_baud is not None:
+                self.baud = step.then_baud
+
+    async def receive(self, now_us: int) -> None:
+        """Read what the receiver sends for the epoch it was given at ``now_us``."""
+        transfer = await self.uart.exchange(b"", baud=self.baud)
+        for frame in self.decoder.feed(transfer.data):
+            if (frame.cls, frame.msg_id) == (ubx.CLASS_NAV, ubx.ID_NAV_PVT):
+                fix = decode_nav_pvt(frame.payload)
+                self._in_flight.append(ReceivedFix(now_us + transfer.line_us, now_us, fix))
+
+    def poll(self, now_us: int) -> tuple[ReceivedFix, ...]:
+        """The fixes whose last byte has arrived by ``now_us``, oldest first."""
+        if not self._in_flight or self._in_flight[0].time_us > now_us:
+            return ()
+        arrived = tuple(f for f in self._in_flight if f.time_us <= now_us)
+        self._in_flight = [f for f in self._in_flight if f.time_us > now_us]
+        return arrived
+
+
+def _check_answer(step: ConfigStep, frames: list[UbxFrame]) -> None:
+    """Raise unless ``frames`` hold the answer ``step`` waits for (PX4 ``waitForAck``)."""
+    if step.expect == "ack-or-nothing":
+        return
+    asked = (step.frame[2], step.frame[3])
+    found = [(f.cls, f.msg_id, f.payload) for f in frames]
+    if step.expect == "mon-ver":
+        for cls, msg_id, payload in found:
+            if (cls, msg_id) == (ubx.CLASS_MON, ubx.ID_MON_VER):
+                hardware = payload[30:40].rstrip(b"\0").decode("ascii", "replace")
+                if hardware == ubx.MON_VER_HW:
+                    return
+                raise UbloxHandshakeError(f"MON-VER reports hardware {hardware!r}, not a u-blox 8")
+        raise UbloxHandshakeError("no MON-VER answer to PX4's poll")
+    wanted = ubx.ID_ACK_ACK if step.expect == "ack" else ubx.ID_ACK_NAK
+    if (ubx.CLASS_ACK, wanted, bytes(asked)) not in found:
+        name = "ACK-ACK" if step.expect == "ack" else "ACK-NAK"
+        raise UbloxHandshakeError(
+            f"no {name} for message 0x{asked[0]:02X} 0x{asked[1]:02X} at {step.baud} baud "
+            f"(received {len(frames)} frame(s))"
+        )
