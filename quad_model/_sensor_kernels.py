@@ -1,10 +1,11 @@
 """The compiled per-sample physics behind :mod:`quad_model.sensors` (IMU and magnetometer).
 
 Why compiled: one IMU sample sums 48 rotor-phase tones (2 triads × 3 axes × 4 rotors × 2
-harmonics) and moves a few 3-vectors. numpy spent ~40 µs of dispatch on those tiny arrays;
-one numba call does the arithmetic in well under a microsecond (``cache=True`` keeps the
-machine code between runs). The model keeps the parameters and draws the normal variates;
-the kernel only does arithmetic, so the random stream is decided in one place.
+harmonics), looks 48 rotor levels up in a short table and moves a few 3-vectors. numpy
+spent ~40 µs of dispatch on those tiny arrays; one numba call does the arithmetic in well
+under a microsecond (``cache=True`` keeps the machine code between runs). The model keeps
+the parameters and draws the normal variates; the kernel only does arithmetic, so the
+random stream is decided in one place.
 
 Why flat arrays: as in :mod:`quad_model.dynamics`, numba dispatches a few float64 arrays
 far faster than a record of named ones; the layout below names every slot once.
@@ -22,6 +23,10 @@ from quad_model import frames as _frames
 ACCEL = 0
 GYRO = 1
 TRIADS = 2
+
+#: Rows of the per-operating-point level table ``levels[triad, kind, axis, point]``.
+TONE = 0
+BROADBAND = 1
 
 # Columns of the per-triad parameter array ``triad`` (one row per triad, units of the triad).
 T_NOISE_STD = 0  # white noise σ per sample (density·√rate)
@@ -61,12 +66,60 @@ def mag_sample(
 
 
 @njit(cache=True)
+def _level(speed: float, speeds: NDArray[np.float64], levels: NDArray[np.float64]) -> float:
+    """The level at rotor speed ``speed`` (VibrationParams): linear between the points,
+    from 0 at rest to the first, ∝ ω² beyond the last."""
+    last = speeds.shape[0] - 1
+    if speed >= speeds[last]:
+        ratio = speed / speeds[last]
+        return levels[last] * ratio * ratio
+    below_speed, below_level = 0.0, 0.0
+    for i in range(last + 1):
+        if speed < speeds[i]:
+            fraction = (speed - below_speed) / (speeds[i] - below_speed)
+            return below_level + (levels[i] - below_level) * fraction
+        below_speed, below_level = speeds[i], levels[i]
+    return levels[last]
+
+
+@njit(cache=True)
+def _rotor_weights(
+    rotor_speed_radps: NDArray[np.float64],
+    reference_rotor_speed_radps: float,
+    level_speed_radps: NDArray[np.float64],
+    levels: NDArray[np.float64],
+    tone_weight: NDArray[np.float64],
+    broadband_scale: NDArray[np.float64],
+) -> None:
+    """Each rotor's tone weight ``tone_weight[t, a, r]`` and the broadband noise's scale
+    ``broadband_scale[t, a]``: the RMS over the rotors of their broadband levels (independent
+    sources add in power). Without operating points both follow (ω/ω_ref)²."""
+    rotors = rotor_speed_radps.shape[0]
+    for t in range(TRIADS):
+        for a in range(3):
+            power = 0.0
+            for r in range(rotors):
+                speed = abs(rotor_speed_radps[r])
+                if level_speed_radps.shape[0] == 0:
+                    ratio = speed / reference_rotor_speed_radps
+                    tone = broadband = ratio * ratio
+                else:
+                    tone = _level(speed, level_speed_radps, levels[t, TONE, a])
+                    broadband = _level(speed, level_speed_radps, levels[t, BROADBAND, a])
+                tone_weight[t, a, r] = tone
+                power += broadband * broadband / rotors
+            broadband_scale[t, a] = math.sqrt(power)
+
+
+@njit(cache=True)
 def imu_sample(
     specific_force_frd_mps2: NDArray[np.float64],
     angular_rate_frd_radps: NDArray[np.float64],
     rotor_speed_radps: NDArray[np.float64],
     rotor_angle_rad: NDArray[np.float64],
     reference_rotor_speed_radps: float,
+    level_speed_radps: NDArray[np.float64],
+    levels: NDArray[np.float64],
     sqrt_dt_s: float,
     delta_temperature_k: float,
     triad: NDArray[np.float64],
@@ -77,6 +130,9 @@ def imu_sample(
 ) -> None:
     """One accel (``out[ACCEL]``) and gyro (``out[GYRO]``) reading; updates ``bias``.
 
+    ``level_speed_radps`` and ``levels`` are the vibration's operating points (both empty:
+    the (ω/ω_ref)² law), see :func:`_rotor_weights`.
+
     ``sqrt_dt_s`` is 0 when time did not advance (no bias walk, ``SAMPLE_DRAWS`` normals),
     else ``normals`` holds ``WALK_DRAWS`` more in front. A tone of amplitude A at shaft
     harmonic h+1 with phase φ is A·sin((h+1)θ + φ) = A·cos φ·sin((h+1)θ) + A·sin φ·cos((h+1)θ);
@@ -84,22 +140,23 @@ def imu_sample(
     sample needs one sine and cosine per rotor harmonic instead of one sine per tone.
     """
     harmonics, rotors = tone_quadrature.shape[1], tone_quadrature.shape[2]
-    ratio_sq = np.empty(rotors)
-    mean_ratio_4 = 0.0
-    for r in range(rotors):
-        ratio = rotor_speed_radps[r] / reference_rotor_speed_radps
-        ratio_sq[r] = ratio * ratio
-        mean_ratio_4 += ratio_sq[r] * ratio_sq[r] / rotors
-    # Broadband frame noise scales like the tones: its RMS follows the mean (ω/ω_ref)⁴.
-    broadband_scale = math.sqrt(mean_ratio_4)
-    # Each rotor harmonic's sine and cosine, weighted by its rotor's (ω/ω_ref)².
+    tone_weight = np.empty((TRIADS, 3, rotors))
+    broadband_scale = np.empty((TRIADS, 3))
+    _rotor_weights(
+        rotor_speed_radps,
+        reference_rotor_speed_radps,
+        level_speed_radps,
+        levels,
+        tone_weight,
+        broadband_scale,
+    )
     sin_h = np.empty((harmonics, rotors))
     cos_h = np.empty((harmonics, rotors))
     for h in range(harmonics):
         for r in range(rotors):
             angle = (h + 1) * rotor_angle_rad[r]
-            sin_h[h, r] = ratio_sq[r] * math.sin(angle)
-            cos_h[h, r] = ratio_sq[r] * math.cos(angle)
+            sin_h[h, r] = math.sin(angle)
+            cos_h[h, r] = math.cos(angle)
     walked = sqrt_dt_s > 0.0
     drawn = WALK_DRAWS if walked else 0
     vibrating = np.empty(3)
@@ -110,13 +167,14 @@ def imu_sample(
             walk_std = row[T_BIAS_WALK] * sqrt_dt_s
             for a in range(3):
                 bias[t, a] += walk_std * normals[_WALK_AT[t] + a]
-        broadband = row[T_BROADBAND_STD] * broadband_scale
         for a in range(3):
             tones = 0.0
             for h in range(harmonics):
                 for r in range(rotors):
-                    in_phase = tone_quadrature[t, h, r, a, 0]
-                    tones += in_phase * sin_h[h, r] + tone_quadrature[t, h, r, a, 1] * cos_h[h, r]
+                    in_phase = tone_quadrature[t, h, r, a, 0] * sin_h[h, r]
+                    quadrature = tone_quadrature[t, h, r, a, 1] * cos_h[h, r]
+                    tones += (in_phase + quadrature) * tone_weight[t, a, r]
+            broadband = row[T_BROADBAND_STD] * broadband_scale[t, a]
             noise = normals[drawn + _BROADBAND_AT[t] + a]
             vibrating[a] = truth[a] + (tones + broadband * noise) * row[T_AXIS_GAIN + a]
         for i in range(3):

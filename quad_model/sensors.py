@@ -25,7 +25,7 @@ from quad_model import _sensor_kernels as _kernels
 from quad_model.environment import Environment
 from quad_model.frames import ned_to_geodetic
 from quad_model.model import VehicleTruth
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, Vehicle
 
 DEFAULT_IMU_RATE_HZ = 1000.0
 DEFAULT_MAG_RATE_HZ = 100.0
@@ -124,8 +124,9 @@ class ImuModel:
     misalignment, temperature, and vibration driven by rotor speed.
 
     Vibration: each rotor adds tones at multiples of its shaft rate (1× imbalance, blade
-    passing, ...) with amplitude ∝ (ω/ω_ref)², phase-locked to the rotor angle, plus
-    broadband frame noise with the same speed scaling; nothing vibrates when rotors stop,
+    passing, ...) with amplitude ∝ (ω/ω_ref)² (or the level measured at the vehicle's
+    operating points, :class:`~quad_model.vehicle.VibrationParams`), phase-locked to the
+    rotor angle, plus broadband frame noise scaled alike; nothing vibrates when rotors stop,
     which reproduces the paper's motors-off/motors-on sensor test.
 
     The model owns ``rng``. It draws, in this order, the unit's fixed errors (gyro then accel
@@ -145,6 +146,13 @@ class ImuModel:
         imu = self._imu = vehicle.imu
         vib = vehicle.vibration
         self._reference_rotor_speed_radps = vib.reference_rotor_speed_radps
+        # The operating points as the kernel's table levels[triad, tone|broadband, axis, point].
+        self._level_speed_radps = np.array(vib.level_rotor_speed_radps, dtype=float)
+        levels = np.array([getattr(vib, name) for name in LEVEL_TABLES], dtype=float)
+        points = self._level_speed_radps.size
+        self._levels = np.ascontiguousarray(
+            levels.reshape(_kernels.TRIADS, 2, points, 3).transpose(0, 1, 3, 2)
+        )
         self._environment = environment
         self.gyro_noise_std_radps = imu.gyro_noise_density_radps_per_sqrthz * math.sqrt(rate_hz)
         self.accel_noise_std_mps2 = imu.accel_noise_density_mps2_per_sqrthz * math.sqrt(rate_hz)
@@ -209,6 +217,8 @@ class ImuModel:
             truth.rotor_speed_radps,
             truth.rotor_angle_rad,
             self._reference_rotor_speed_radps,
+            self._level_speed_radps,
+            self._levels,
             sqrt_dt,
             temperature - self._imu.reference_temperature_degc,
             self._triad,

@@ -6,6 +6,7 @@ file. Rotors are listed in PX4's order (quad X: 0 front-right CCW, 1 rear-left C
 2 front-left CW, 3 rear-right CW).
 """
 
+import itertools
 import math
 from pathlib import Path
 from typing import Annotated
@@ -34,6 +35,16 @@ ROTOR_COUNT = 4
 
 #: Magnitudes (noise levels, coefficients, drag areas) are >= 0 per axis.
 NonNegative3 = tuple[NonNegative, NonNegative, NonNegative]
+
+
+#: The vibration's per-operating-point level tables, in the IMU kernel's order
+#: (triad accel then gyro; tones then broadband).
+LEVEL_TABLES = (
+    "accel_tone_level",
+    "accel_broadband_level",
+    "gyro_tone_level",
+    "gyro_broadband_level",
+)
 
 
 class VehicleFileError(ValueError):
@@ -139,10 +150,18 @@ class ImuParams:
 
 @table
 class VibrationParams:
-    """IMU vibration from the rotors, given at a reference rotor speed; scales with ω².
+    """IMU vibration from the rotors, given at a reference rotor speed; scales with ω², or
+    with the levels measured at operating points.
 
     Each rotor adds tones at multiples of its shaft frequency (imbalance at 1×, blade
     passing at ``blade_count``×, ...) plus broadband frame noise.
+
+    Operating points (``level_rotor_speed_radps``, ascending; empty: the ω² law): a real
+    frame's vibration does not follow ω² (the X500's hover/idle σ ratio is 7, ω² gives 2.4),
+    so each point gives, per triad and body axis, the level of the tones and of the
+    broadband noise relative to the reference amplitudes × axis gains. A rotor between two
+    points gets the linear interpolation, below the first point a level falling linearly to
+    0 at rest, above the last the last level × (ω/ω_last)².
     """
 
     reference_rotor_speed_radps: Positive
@@ -154,6 +173,20 @@ class VibrationParams:
     #: Relative vibration level of the body x, y, z axes.
     accel_axis_gain: NonNegative3
     gyro_axis_gain: NonNegative3
+    level_rotor_speed_radps: tuple[Positive, ...] = ()
+    accel_tone_level: tuple[NonNegative3, ...] = ()
+    accel_broadband_level: tuple[NonNegative3, ...] = ()
+    gyro_tone_level: tuple[NonNegative3, ...] = ()
+    gyro_broadband_level: tuple[NonNegative3, ...] = ()
+
+    def __post_init__(self) -> None:
+        speeds = self.level_rotor_speed_radps
+        if any(b <= a for a, b in itertools.pairwise(speeds)):
+            raise FieldError("level_rotor_speed_radps", speeds, "must be strictly ascending")
+        for name in LEVEL_TABLES:
+            if len(getattr(self, name)) != len(speeds):
+                reason = f"needs one [x, y, z] per rotor speed ({len(speeds)})"
+                raise FieldError(name, getattr(self, name), reason)
 
 
 @table

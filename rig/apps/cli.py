@@ -122,6 +122,12 @@ def main(argv: list[str] | None = None) -> int:
                           help="boot seconds of the rate-loop fit (default: airborne)")  # fmt: skip
     identify.add_argument("--toml", action="store_true",
                           help="print [body]/[propulsion] lines for the vehicle file")  # fmt: skip
+    identify.add_argument("--vibration", action="store_true",
+                          help="fit the IMU noise and the vibration per operating point instead "
+                               "and print [imu]/[vibration] lines")  # fmt: skip
+    identify.add_argument("--imu-hz", type=float, default=800.0,
+                          help="the replay's IMU rate the vibration is fitted at (default 800, "
+                               "PX4's lockstep at the X500's IMU_GYRO_RATEMAX)")  # fmt: skip
     schema = commands.add_parser(
         "schema", help="write the JSON Schema of each configuration file (for TOML editors)"
     )
@@ -356,6 +362,13 @@ def _identify(args: argparse.Namespace) -> int:
 
     try:
         vehicle = load_vehicle(args.vehicle or identify.vehicle_name_for_log(args.log))
+        if args.vibration:
+            from rig.apps import vibration  # on demand
+
+            measured = vibration.read_log_vibration(args.log)
+            fitted, _ = vibration.fit_vibration(vehicle, measured, args.imu_hz)
+            print(vibration.vibration_toml(fitted, measured, args.imu_hz), end="")
+            return 0
         window = tuple(args.window) if args.window else None
         result = identify.identify_vehicle(args.log, vehicle, window)
     except (RigError, VehicleFileError) as error:

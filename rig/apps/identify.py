@@ -146,6 +146,10 @@ class HoverIdentification:
     rotor_speed_radps: float
     speed_offset_radps: Estimate
     speed_slope_radps: float
+    #: Where the thrust of the hover's mean motor commands balances (body x, y, m from the
+    #: rotors' centre): a centre of mass off the middle makes the autopilot trim the motors
+    #: apart, and the rotors then turn at different speeds (their IMU tones beat).
+    centre_of_mass_frd_m: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -458,7 +462,30 @@ def _identify_hover(
             window,
         ),
         speed_slope_radps=slope,
+        centre_of_mass_frd_m=_thrust_centre(
+            vehicle, commands.mean(axis=1), pwm_range, voltage, slope, full - slope
+        ),
     )
+
+
+def _thrust_centre(
+    vehicle: Vehicle,
+    command: NDArray,
+    pwm_range: tuple[float, float],
+    voltage_v: float,
+    slope: float,
+    offset: float,
+) -> tuple[float, float]:
+    """The body (x, y) about which the rotors' thrusts at ``command`` balance: in a steady
+    hover the centre of mass (the rotors' yaw torques aside). Thrust ∝ ω², ω on the
+    identified speed curve (quad_model.dynamics)."""
+    prop = vehicle.propulsion
+    throttle = pwm_to_throttle(pwm_range[0] + (pwm_range[1] - pwm_range[0]) * command)
+    speed = (slope * throttle + offset) * voltage_v / prop.speed_curve_voltage_v
+    share = speed**2 / np.sum(speed**2)
+    hubs = np.array(prop.position_frd_m)[:, :2]
+    centre = share @ hubs - hubs.mean(axis=0)
+    return float(centre[0]), float(centre[1])
 
 
 # ------------------------------------------------------------------ torque per unit
@@ -753,12 +780,18 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
             tags.append(f"I_{'xyz'[index] * 2} kept ({axis.reason.split(';')[0]})")
     window = hover.speed_offset_radps.window_s
     offset = hover.speed_offset_radps
+    hubs = np.array(prop.position_frd_m)
+    centre = np.array([*hover.centre_of_mass_frd_m, 0.0])
+    positions = hubs - np.append(hubs[:, :2].mean(axis=0), 0.0) - centre
     lines = [
         "[body]",
         f"# {source}: " + "; ".join(tags),
         f"inertia_kgm2 = {[[round(float(v), 5) for v in row] for row in inertia]}",
         "",
         "[propulsion]",
+        f"# {source}: the hover motors balance about x {centre[0] * 1e3:+.1f} mm, "
+        f"y {centre[1] * 1e3:+.1f} mm from the rotors' centre (the centre of mass)",
+        f"position_frd_m = {[[round(float(v), 4) for v in row] for row in positions]}",
         f"speed_slope_radps = {hover.speed_slope_radps:.1f}   # [identified] {source}, "
         f"ω(1) = {prop.speed_slope_radps + prop.speed_offset_radps:.0f} rad/s kept",
         f"speed_offset_radps = {offset.value:.1f}   # [identified] {source}, hover "

@@ -56,17 +56,35 @@ class ReferenceImu:
         self.gyro_phase = rng.uniform(0, 2 * np.pi, (harmonics_g, 4, 3))
         self.last_time_us = None
 
-    def vibration(self, truth, amplitudes, phases, broadband_std, gain):
-        """Σ over harmonics and rotors of A·(ω/ω_ref)²·sin(hθ + φ), plus broadband noise."""
-        ratio_sq = (truth.rotor_speed_radps / self.vib.reference_rotor_speed_radps) ** 2
+    def levels(self, speeds, tone_table, broadband_table):
+        """Tone level per (rotor, axis) and broadband level per axis: (ω/ω_ref)², or the
+        operating points' tables interpolated through (0, 0), ∝ ω² past the last point."""
+        points = np.array(self.vib.level_rotor_speed_radps)
+        if points.size == 0:
+            ratio_sq = (speeds / self.vib.reference_rotor_speed_radps) ** 2
+            tone = np.repeat(ratio_sq[:, None], 3, axis=1)
+            return tone, np.sqrt(np.mean(tone**2, axis=0))
+
+        def level(table):
+            table = np.array(table)
+            xs, last = np.concatenate(([0.0], points)), (speeds / points[-1]) ** 2
+            inside = [np.interp(speeds, xs, np.concatenate(([0.0], table[:, a]))) for a in range(3)]
+            beyond = last[:, None] * table[-1]
+            return np.where((speeds >= points[-1])[:, None], beyond, np.array(inside).T)
+
+        return level(tone_table), np.sqrt(np.mean(level(broadband_table) ** 2, axis=0))
+
+    def vibration(self, truth, amplitudes, phases, broadband_std, gain, tables):
+        """Σ over harmonics and rotors of A·level·sin(hθ + φ), plus broadband noise."""
+        tone_level, broadband_level = self.levels(np.abs(truth.rotor_speed_radps), *tables)
         tones = np.zeros(3)
         for h, amplitude in enumerate(amplitudes, start=1):
             for r in range(4):
                 for a in range(3):
                     angle = h * truth.rotor_angle_rad[r] + phases[h - 1, r, a]
-                    tones[a] += amplitude * ratio_sq[r] * math.sin(angle)
-        rms_ratio_sq = math.sqrt(np.mean(ratio_sq**2))
-        return (tones + broadband_std * rms_ratio_sq * self.rng.standard_normal(3)) * gain
+                    tones[a] += amplitude * tone_level[r, a] * math.sin(angle)
+        noise = broadband_std * broadband_level * self.rng.standard_normal(3)
+        return (tones + noise) * gain
 
     @staticmethod
     def sensed(true, scale, misalignment):
@@ -93,6 +111,7 @@ class ReferenceImu:
             self.accel_phase,
             vib.accel_broadband_std_mps2,
             vib.accel_axis_gain,
+            (vib.accel_tone_level, vib.accel_broadband_level),
         )
         gyro_vibration = self.vibration(
             truth,
@@ -100,6 +119,7 @@ class ReferenceImu:
             self.gyro_phase,
             vib.gyro_broadband_std_radps,
             vib.gyro_axis_gain,
+            (vib.gyro_tone_level, vib.gyro_broadband_level),
         )
         accel_true = truth.specific_force_frd_mps2 + accel_vibration
         accel = (

@@ -1,6 +1,7 @@
 """The two X500 V2 vehicle files against the real X500 log and against their own derivations:
-the identified set's vibration reproduces the log's IMU σ in PX4's 200 Hz integrated stream,
-and the low-precision set's analytic numbers follow from the formulas its comments state."""
+the low-precision set's generic vibration falls well below the log's IMU σ in PX4's 200 Hz
+integrated stream, and its analytic numbers follow from the formulas its comments state (the
+identified set's vibration per operating point: tests/rig/test_vibration.py)."""
 
 import io
 import math
@@ -76,17 +77,6 @@ def _integrated_imu_sigma(vehicle, voltage_v, throttle=None, seconds=6.0):
 @pytest.fixture
 def real(x500_log):
     return _log_windows(x500_log)
-
-
-def test_x500_vibration_matches_the_logs_integrated_imu_stream(real):
-    """Hover accel σ (5 Hz high-pass) and idle gyro σ of the model's 200 Hz stream within 15 %
-    of the log's: the four rotors' tones beat slowly, so σ over 3, 6 or 10 s of stand data
-    moves by up to ±10 % (the y gyro most); 6 s is used."""
-    vehicle = load_vehicle("x500_v2")
-    hover_accel, _ = _integrated_imu_sigma(vehicle, real["hover"])
-    _, idle_gyro = _integrated_imu_sigma(vehicle, real["idle"], real["idle_throttle"])
-    np.testing.assert_allclose(hover_accel, real["hover_accel"], rtol=0.15)
-    np.testing.assert_allclose(idle_gyro, real["idle_gyro"], rtol=0.15)
 
 
 def test_low_precision_generic_vibration_is_well_below_the_real_x500(real):

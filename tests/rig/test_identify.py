@@ -226,6 +226,9 @@ def test_x500_vehicle_file_holds_what_rig_identify_prints(real_identification):
     assert printed["body"]["inertia_kgm2"] == [list(row) for row in vehicle.body.inertia_kgm2]
     for key in ("speed_slope_radps", "speed_offset_radps"):
         assert getattr(vehicle.propulsion, key) == printed["propulsion"][key], key
+    assert printed["propulsion"]["position_frd_m"] == [
+        list(row) for row in vehicle.propulsion.position_frd_m
+    ]
     assert "motor_time_constant_s" not in printed["propulsion"]
     assert not result.axis("roll").reliable
     assert not result.axis("pitch").reliable
@@ -234,6 +237,21 @@ def test_x500_vehicle_file_holds_what_rig_identify_prints(real_identification):
     )
     throttle = _hover_throttle_at(vehicle, result.hover.battery_voltage_v)
     assert throttle == pytest.approx(result.hover.throttle.value, abs=0.005)
+
+
+def test_the_hover_motors_balance_about_the_centre_of_mass(real_identification):
+    """Closed form: thrust shares f_i of the four hubs (±a, ±a) balance about
+    a·(f0 − f1 + f2 − f3, f0 − f1 − f2 + f3); the X500's right pair (motors 0 and 3) runs
+    about 0.57 against 0.48, so the centre of mass sits about 1 cm right of the middle."""
+    result, vehicle = real_identification
+    hover, prop = result.hover, vehicle.propulsion
+    throttle = 0.1 + 0.8 * np.array(hover.motor_command)  # PWM 1100-1900 µs, as above
+    speed = prop.speed_slope_radps * throttle + prop.speed_offset_radps
+    f = speed**2 / np.sum(speed**2)
+    arm = 0.174  # [gz] the hubs' half spacing
+    expected = arm * np.array([f[0] - f[1] + f[2] - f[3], f[0] - f[1] - f[2] + f[3]])
+    np.testing.assert_allclose(hover.centre_of_mass_frd_m, expected, atol=1e-4)
+    assert 0.008 < hover.centre_of_mass_frd_m[1] < 0.013
 
 
 def test_low_precision_set_is_off_the_identified_hover(real_identification):

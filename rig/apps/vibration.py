@@ -1,0 +1,431 @@
+"""IMU vibration per operating point (``rig identify LOG --vibration``): what the rotors do to
+the IMU at idle, in hover, climbing and descending, measured in the log and fitted into the
+vehicle's ``[vibration]`` operating points (:class:`quad_model.vehicle.VibrationParams`).
+
+Why through the stream PX4 logs: a default-profile log has no raw IMU (``sensor_gyro`` and
+``sensor_accel`` at 1 Hz), only ``sensor_combined``, PX4's means over 1/IMU_INTEG_RATE (5 ms
+at 200 Hz). A rotor line above its Nyquist frequency folds into that stream, attenuated by
+the averaging, so its frequency cannot be read off it; the model is therefore compared and
+fitted through the same pipeline. The IMU sits on the thrust stand at the log's motor
+commands and battery voltage, is sampled at the replay's IMU rate, averaged to the log's
+IMU_INTEG_RATE and high-passed at 5 Hz (the flight's own motion out), exactly like the log.
+The power of that stream in each band is linear in the squared tone and broadband levels, so
+a non-negative least-squares fit per triad and axis gives the levels at each fitted point.
+
+The noise floor at rest (motors stopped) is the IMU's white noise as the log sees it; its
+density is scaled until the model's stream at rest has the log's σ.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import optimize, signal
+from scipy.ndimage import uniform_filter1d
+
+from credibility.errors import CredibilityError
+from credibility.logs import read_ulog
+from credibility.signals import highpass
+from quad_model.frames import pwm_to_throttle
+from quad_model.model import Mount, QuadModel
+from quad_model.sensors import ImuModel
+from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, Vehicle, VibrationParams
+from rig.apps.identify import IdentificationError, hover_windows
+from rig.apps.replay import motor_pwm_range
+from rig.scenarios.scenario import model_rate_for
+
+#: Above this the high-pass keeps vibration and drops the flight's own motion (as the
+#: credibility plans' σ tests).
+HIGHPASS_HZ = 5.0
+#: A motor command at or below this is idle (PX4's armed idle is command 0).
+IDLE_COMMAND_MAX = 0.02
+#: Climb and descent: airborne with |vz| averaged over 1 s at least this.
+VERTICAL_SPEED_MPS = 1.0
+#: A window starts this long after its state began: the props spin up, or coast down
+#: after a disarm (the ESCs do not brake).
+SETTLE_S = 0.1
+#: Shortest usable window: the PSD's 0.5 s segments need a few averages.
+MIN_WINDOW_S = {"stopped": 0.5, "idle": 1.5, "hover": 3.0, "climb": 2.0, "descent": 2.0}
+#: Welch segment: 2 Hz resolution, enough for two bands.
+WELCH_SEGMENT_S = 0.5
+#: Seconds of thrust-stand data per model spectrum: four rotors at nearly one speed beat
+#: over seconds (at idle about 0.3 Hz), and σ settles only over several beats.
+MODEL_SECONDS = 20.0
+#: The points whose levels are fitted; the others check the interpolation.
+FITTED_POINTS = ("idle", "hover")
+_TOPICS = (
+    "sensor_combined",
+    "actuator_motors",
+    "actuator_armed",
+    "battery_status",
+    "vehicle_land_detected",
+    "vehicle_local_position",
+)
+_TRIAD_FIELDS = ("accelerometer_m_s2", "gyro_rad")  # kernel order: accel, gyro
+
+
+@dataclass(frozen=True)
+class StreamSpectrum:
+    """One window of a 5 Hz high-passed IMU mean stream: PSD, band RMS and σ per triad
+    (accel, gyro) and body axis."""
+
+    frequency_hz: NDArray[np.float64]
+    psd: NDArray[np.float64]  # (triad, axis, frequency)
+    bands_hz: tuple[tuple[float, float], ...]
+    band_rms: NDArray[np.float64]  # (triad, axis, band)
+    sigma: NDArray[np.float64]  # (triad, axis)
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """One operating point of the log: its window, the motors and what the IMU saw."""
+
+    name: str
+    #: Hover pools every steady hover window of the log; each other point is its longest span.
+    windows_s: tuple[tuple[float, float], ...]
+    motor_command: tuple[float, ...]  # mean actuator_motors per motor
+    throttle: tuple[float, ...]  # the model's ESC throttle (PWM 1000-2000 µs → 0..1)
+    voltage_v: float
+    spectrum: StreamSpectrum
+
+
+@dataclass(frozen=True)
+class LogVibration:
+    """What one log says about its vehicle's vibration."""
+
+    log: Path
+    stream_rate_hz: float  # IMU_INTEG_RATE: sensor_combined's averaging rate
+    points: tuple[OperatingPoint, ...]
+
+    def point(self, name: str) -> OperatingPoint:
+        for point in self.points:
+            if point.name == name:
+                return point
+        found = ", ".join(p.name for p in self.points) or "none"
+        raise IdentificationError(f"{self.log}: no {name} window found (found: {found})")
+
+
+def bands_for(stream_rate_hz: float) -> tuple[tuple[float, float], ...]:
+    """The two bands of a stream: high-pass to half Nyquist, half Nyquist to Nyquist (a rotor
+    line folded from above Nyquist lands in the upper one or the lower one by its speed)."""
+    nyquist = stream_rate_hz / 2.0
+    return ((HIGHPASS_HZ, nyquist / 2.0), (nyquist / 2.0, nyquist))
+
+
+def stream_spectrum(
+    samples: NDArray[np.float64], rate_hz: float, bands: Sequence[tuple[float, float]]
+) -> StreamSpectrum:
+    """The spectrum of ``samples`` (time × 6: accel xyz, gyro xyz) logged at ``rate_hz``."""
+    filtered = np.column_stack([highpass(x, 1.0 / rate_hz, HIGHPASS_HZ) for x in samples.T])
+    segment = min(filtered.shape[0], round(WELCH_SEGMENT_S * rate_hz))
+    frequency, psd = signal.welch(filtered, fs=rate_hz, nperseg=segment, axis=0)
+    psd = psd.T.reshape(2, 3, -1)
+    band_rms = np.empty((2, 3, len(bands)))
+    for index, (low, high) in enumerate(bands):
+        inside = (frequency >= low) & (frequency < high)
+        band_rms[..., index] = np.sqrt(np.trapezoid(psd[..., inside], frequency[inside], axis=-1))
+    sigma = filtered.std(axis=0, ddof=1).reshape(2, 3)
+    return StreamSpectrum(frequency, psd, tuple(bands), band_rms, sigma)
+
+
+# ------------------------------------------------------------------ the log
+def read_log_vibration(log_path: str | Path) -> LogVibration:
+    """The operating points of a log (stopped, idle, hover, climb, descent: those it has)."""
+    path = Path(log_path)
+    if not path.is_file():
+        raise IdentificationError(f"{path}: log file not found")
+    try:
+        ulog, _ = read_ulog(path, _TOPICS)
+    except CredibilityError as error:
+        raise IdentificationError(str(error)) from None
+    topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+    for name in ("sensor_combined", "actuator_motors", "actuator_armed"):
+        if name not in topics:
+            raise IdentificationError(f"{path}: no topic {name!r} (vibration per operating point)")
+    params = dict(ulog.initial_parameters)
+    stream_rate_hz = float(params.get("IMU_INTEG_RATE", 200.0))
+    imu = topics["sensor_combined"]
+    imu_time = imu["timestamp"] * 1e-6
+    samples = np.column_stack(
+        [imu[f"{field}[{axis}]"] for field in _TRIAD_FIELDS for axis in range(3)]
+    ).astype(float)
+    windows = _windows(path, topics, (float(imu_time[0]), float(imu_time[-1])))
+    pwm_range = motor_pwm_range(params, path)
+    bands = bands_for(stream_rate_hz)
+    motors = topics["actuator_motors"]
+    motor_time = motors["timestamp"] * 1e-6
+    points = []
+    for name, spans in windows.items():
+        weights = np.array([end - start for start, end in spans])
+        weights /= weights.sum()
+        spectra, commands, volts = [], [], []
+        for start, end in spans:
+            inside = (imu_time >= start) & (imu_time < end)
+            rate_hz = 1.0 / float(np.median(np.diff(imu_time[inside])))
+            spectra.append(stream_spectrum(samples[inside], rate_hz, bands))
+            in_motors = (motor_time >= start) & (motor_time < end)
+            commands.append([motors[f"control[{m}]"][in_motors].mean() for m in range(ROTOR_COUNT)])
+            volts.append(_mean_voltage(topics, path, start, end))
+        command = weights @ np.array(commands, dtype=float)
+        pwm = pwm_range[0] + (pwm_range[1] - pwm_range[0]) * command
+        throttle = pwm_to_throttle(pwm) if name != "stopped" else np.zeros(ROTOR_COUNT)
+        points.append(
+            OperatingPoint(
+                name=name,
+                windows_s=tuple(spans),
+                motor_command=tuple(float(c) for c in command),
+                throttle=tuple(float(t) for t in throttle),
+                voltage_v=float(weights @ np.array(volts)),
+                spectrum=_pooled(spectra, weights),
+            )
+        )
+    return LogVibration(path, stream_rate_hz, tuple(points))
+
+
+def _pooled(spectra: Sequence[StreamSpectrum], weights: NDArray[np.float64]) -> StreamSpectrum:
+    """Several windows' spectra as one: powers (PSD, band power, σ²) averaged by duration."""
+    first = spectra[0]
+    if len(spectra) == 1:
+        return first
+    grid = first.frequency_hz
+    pairs = list(zip(weights, spectra, strict=True))
+    psd = np.zeros_like(first.psd)
+    for weight, spectrum in pairs:
+        for index in np.ndindex(psd.shape[:-1]):
+            psd[index] += weight * np.interp(grid, spectrum.frequency_hz, spectrum.psd[index])
+    band_power = sum(w * s.band_rms**2 for w, s in pairs)
+    variance = sum(w * s.sigma**2 for w, s in pairs)
+    return StreamSpectrum(grid, psd, first.bands_hz, np.sqrt(band_power), np.sqrt(variance))
+
+
+def _mean_voltage(topics, path: Path, start: float, end: float) -> float:
+    battery = topics.get("battery_status")
+    if battery is None:
+        raise IdentificationError(f"{path}: no topic 'battery_status' (the motors' speed curve)")
+    time_s = battery["timestamp"] * 1e-6
+    inside = (time_s >= start - 1.0) & (time_s < end + 1.0)
+    return float(battery["voltage_v"][inside].mean())
+
+
+def _windows(
+    path: Path, topics, imu_span: tuple[float, float]
+) -> dict[str, list[tuple[float, float]]]:
+    """Each operating point's spans inside the IMU stream, SETTLE_S after it began: every
+    steady hover window, the longest span of each other point."""
+    armed = topics["actuator_armed"]
+    motors = topics["actuator_motors"]
+    grid = motors["timestamp"] * 1e-6
+    is_armed = _held(armed["timestamp"] * 1e-6, armed["armed"], grid) > 0.5
+    command = np.max([motors[f"control[{m}]"] for m in range(ROTOR_COUNT)], axis=0)
+    masks = {"stopped": ~is_armed, "idle": is_armed & (command <= IDLE_COMMAND_MAX)}
+    land = topics.get("vehicle_land_detected")
+    position = topics.get("vehicle_local_position")
+    if land is not None:
+        landed = _held(land["timestamp"] * 1e-6, land["landed"], grid) > 0.5
+        masks["idle"] &= landed
+        if position is not None:
+            time_s = position["timestamp"] * 1e-6
+            step = float(np.median(np.diff(time_s)))
+            vz = np.interp(grid, time_s, uniform_filter1d(position["vz"], max(1, round(1 / step))))
+            masks["climb"] = is_armed & ~landed & (vz <= -VERTICAL_SPEED_MPS)
+            masks["descent"] = is_armed & ~landed & (vz >= VERTICAL_SPEED_MPS)
+    windows = {}
+    for name, mask in masks.items():
+        span = _longest(grid, mask, imu_span)
+        if span is not None:
+            windows[name] = [span]
+    if position is not None and land is not None:
+        windows["hover"] = [_clip(w, imu_span) for w in hover_windows(path)]
+    settled = {}
+    for name, spans in windows.items():
+        spans = [(start + SETTLE_S, end) for start, end in filter(None, spans)]
+        spans = [(start, end) for start, end in spans if end - start >= MIN_WINDOW_S[name]]
+        if spans:
+            settled[name] = spans
+    windows = settled
+    order = ("stopped", "idle", "hover", "climb", "descent")
+    return {name: windows[name] for name in order if name in windows}
+
+
+def _held(time_s: NDArray, values: NDArray, grid: NDArray) -> NDArray:
+    """A logged state at each grid time: the last value logged at or before it."""
+    index = np.clip(np.searchsorted(time_s, grid, "right") - 1, 0, None)
+    return np.asarray(values, dtype=float)[index]
+
+
+def _clip(span: tuple[float, float], limits: tuple[float, float]) -> tuple[float, float] | None:
+    start, end = max(span[0], limits[0]), min(span[1], limits[1])
+    return (start, end) if end > start else None
+
+
+def _longest(grid: NDArray, mask: NDArray, limits: tuple[float, float]):
+    best = None
+    start = None
+    for t, ok in zip(grid, np.append(mask[:-1], False), strict=True):
+        if ok and start is None:
+            start = t
+        elif not ok and start is not None:
+            span = _clip((float(start), float(t)), limits)
+            if span is not None and (best is None or span[1] - span[0] > best[1] - best[0]):
+                best = span
+            start = None
+    return best
+
+
+# ------------------------------------------------------------------ the model
+def model_spectrum(
+    vehicle: Vehicle,
+    point: OperatingPoint,
+    imu_rate_hz: float,
+    stream_rate_hz: float,
+    seed: int = 0,
+    seconds: float = MODEL_SECONDS,
+) -> StreamSpectrum:
+    """The model's stream at ``point``: the IMU on the thrust stand at the point's throttles,
+    fed from a bench supply at its voltage, sampled at ``imu_rate_hz`` and integrated over
+    1/``stream_rate_hz`` as PX4's vehicle_imu does: trapezoids between consecutive samples
+    (PX4's Integrator), so each mean weighs the interval's first and last sample by half."""
+    per_mean = imu_rate_hz / stream_rate_hz
+    if abs(per_mean - round(per_mean)) > 1e-9 or per_mean < 1:
+        raise IdentificationError(
+            f"IMU rate {imu_rate_hz:g} Hz is not a multiple of the stream's {stream_rate_hz:g} Hz"
+        )
+    battery = replace(
+        vehicle.battery,
+        cell_full_v=point.voltage_v / vehicle.battery.cell_count,
+        internal_resistance_ohm=0.0,
+    )
+    bench = replace(vehicle, battery=battery)
+    rng = np.random.default_rng(seed)
+    model = QuadModel(
+        bench, rng, mount=Mount.THRUST_STAND, physics_rate_hz=model_rate_for(round(imu_rate_hz))
+    )
+    imu = ImuModel(bench, model.environment, np.random.default_rng(seed + 1), imu_rate_hz)
+    throttle = np.array(point.throttle)
+    model.advance(throttle, 0.5)  # the rotors at speed
+    count = round(seconds * stream_rate_hz) * round(per_mean) + 1
+    samples = np.empty((count, 6))
+    for k in range(count):
+        model.advance(throttle, 1.0 / imu_rate_hz)
+        reading = imu.sample(model.truth)
+        samples[k, :3], samples[k, 3:] = reading.accel_mps2, reading.gyro_radps
+    trapezoids = (samples[1:] + samples[:-1]) / 2.0
+    means = trapezoids.reshape(-1, round(per_mean), 6).mean(axis=1)
+    return stream_spectrum(means, stream_rate_hz, point.spectrum.bands_hz)
+
+
+def fit_vibration(
+    vehicle: Vehicle,
+    measured: LogVibration,
+    imu_rate_hz: float,
+    fitted: Sequence[str] = FITTED_POINTS,
+) -> tuple[Vehicle, tuple[float, float]]:
+    """``vehicle`` with its IMU noise densities from the log at rest (when it has a stopped
+    window) and its vibration levels fitted at the ``fitted`` points; also the fitted
+    (gyro, accel) densities. Each point's band powers are those of three stand runs (tones
+    alone, broadband alone, the white noise alone) weighted by the squared levels."""
+    stream_hz = measured.stream_rate_hz
+    imu = vehicle.imu
+    if any(p.name == "stopped" for p in measured.points):
+        # The densities that give the log's σ at rest through the same pipeline (the rotors
+        # stopped: white noise alone), one per triad: the RMS over the axes.
+        stopped = measured.point("stopped")
+        model = model_spectrum(vehicle, stopped, imu_rate_hz, stream_hz).sigma
+        accel, gyro = (
+            float(np.sqrt(np.mean(stopped.spectrum.sigma[t] ** 2) / np.mean(model[t] ** 2)))
+            for t in (0, 1)
+        )
+        imu = replace(
+            imu,
+            gyro_noise_density_radps_per_sqrthz=imu.gyro_noise_density_radps_per_sqrthz * gyro,
+            accel_noise_density_mps2_per_sqrthz=imu.accel_noise_density_mps2_per_sqrthz * accel,
+        )
+        vehicle = replace(vehicle, imu=imu)
+    densities = (imu.gyro_noise_density_radps_per_sqrthz, imu.accel_noise_density_mps2_per_sqrthz)
+    points = sorted((measured.point(name) for name in fitted), key=_mean_speed(vehicle))
+    speeds = tuple(_mean_speed(vehicle)(p) for p in points)
+    ones = tuple((1.0, 1.0, 1.0) for _ in points)
+    zeros = tuple((0.0, 0.0, 0.0) for _ in points)
+    quiet = replace(
+        vehicle.imu,
+        gyro_noise_density_radps_per_sqrthz=0.0,
+        accel_noise_density_mps2_per_sqrthz=0.0,
+    )
+
+    def variant(tone, broadband, imu) -> Vehicle:
+        tables = dict(zip(LEVEL_TABLES, (tone, broadband, tone, broadband), strict=True))
+        vib = replace(vehicle.vibration, level_rotor_speed_radps=speeds, **tables)
+        return replace(vehicle, vibration=vib, imu=imu)
+
+    runs = {
+        "tone": variant(ones, zeros, quiet),
+        "broadband": variant(zeros, ones, quiet),
+        "white": variant(zeros, zeros, vehicle.imu),
+    }
+    levels = np.zeros((2, 2, 3, len(points)))  # triad, tone|broadband, axis, point
+    for index, point in enumerate(points):
+        power = {
+            name: model_spectrum(run, point, imu_rate_hz, stream_hz).band_rms ** 2
+            for name, run in runs.items()
+        }
+        wanted = point.spectrum.band_rms**2 - power["white"]
+        for triad in range(2):
+            for axis in range(3):
+                basis = np.column_stack(
+                    [power["tone"][triad, axis], power["broadband"][triad, axis]]
+                )
+                squared, _ = optimize.nnls(basis, np.maximum(wanted[triad, axis], 0.0))
+                levels[triad, :, axis, index] = np.sqrt(squared)
+    tables = {
+        name: tuple(tuple(float(v) for v in levels[t, k, :, p]) for p in range(len(points)))
+        for name, (t, k) in zip(LEVEL_TABLES, ((0, 0), (0, 1), (1, 0), (1, 1)), strict=True)
+    }
+    vib = replace(vehicle.vibration, level_rotor_speed_radps=speeds, **tables)
+    return replace(vehicle, vibration=vib), densities
+
+
+def _mean_speed(vehicle: Vehicle):
+    """The model's mean steady rotor speed at a point's throttles and voltage (the sort key
+    and table position of a fitted point)."""
+
+    def speed(point: OperatingPoint) -> float:
+        battery = replace(
+            vehicle.battery,
+            cell_full_v=point.voltage_v / vehicle.battery.cell_count,
+            internal_resistance_ohm=0.0,
+        )
+        model = QuadModel(
+            replace(vehicle, battery=battery), np.random.default_rng(0), mount=Mount.THRUST_STAND
+        )
+        model.advance(np.array(point.throttle), 0.5)
+        return float(np.mean(np.abs(model.truth.rotor_speed_radps)))
+
+    return speed
+
+
+def vibration_toml(vehicle: Vehicle, measured: LogVibration, imu_rate_hz: float) -> str:
+    """``[imu]`` densities and ``[vibration]`` operating-point lines for the vehicle file."""
+    vib: VibrationParams = vehicle.vibration
+    imu = vehicle.imu
+    source = f"rig identify {measured.log.name} --vibration"
+    windows = "; ".join(
+        f"{p.name} " + ", ".join(f"{a:.1f}-{b:.1f}" for a, b in p.windows_s) + " s"
+        for p in measured.points
+    )
+    lines = [
+        f"# {source} (windows: {windows}; model at IMU {imu_rate_hz:g} Hz averaged to "
+        f"{measured.stream_rate_hz:g} Hz)",
+        "[imu]",
+        f"gyro_noise_density_radps_per_sqrthz = {imu.gyro_noise_density_radps_per_sqrthz:.4g}",
+        f"accel_noise_density_mps2_per_sqrthz = {imu.accel_noise_density_mps2_per_sqrthz:.4g}",
+        "[vibration]",
+        "level_rotor_speed_radps = " + str([round(s, 1) for s in vib.level_rotor_speed_radps]),
+    ]
+    for name in LEVEL_TABLES:
+        rows = [[round(v, 3) for v in row] for row in getattr(vib, name)]
+        lines.append(f"{name} = {rows}")
+    return "\n".join(lines) + "\n"
