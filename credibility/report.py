@@ -31,6 +31,7 @@ from credibility.assess import (
 from credibility.caveats import Caveat
 from credibility.logs import SignalSpec
 from credibility.plan import Test
+from credibility.provenance import provenance_of
 
 PAPER_W_GAMMA = "paper: W_γ = (1 − e^{−γ²}) / (1 − e^{−1}) on min(γ²_real, γ²_sim)"
 CIFER_W_GAMMA = "Tischler & Remple: W_γ = [1.58 (1 − e^{−γ²})]², W_g = 1, W_p = 0.01745"
@@ -245,6 +246,7 @@ def to_dict(assessment: Assessment) -> dict[str, Any]:
                 "sha256": log.sha256,
                 "format": log.format,
                 "warnings": list(log.warnings),
+                "provenance": provenance_of(log.path, log.format).to_dict(),
             }
             for log in assessment.logs
         ],
@@ -569,6 +571,10 @@ def render_html(assessment: Assessment) -> str:
         plan_sha256=hashlib.sha256(plan.text.encode()).hexdigest(),
         log_rows=[
             [log.role, str(log.path), log.format, Code(log.sha256)] for log in assessment.logs
+        ],
+        origin_rows=[
+            [log.role, *provenance_of(log.path, log.format).describe().values()]
+            for log in assessment.logs
         ],
     )
 
