@@ -38,7 +38,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import tomli_w
@@ -47,10 +47,23 @@ from numpy.typing import NDArray
 from credibility.errors import CredibilityError
 from credibility.layouts import legacy_pwm_range
 from credibility.logs import read_ulog
+from credibility.provenance import firmware_name
 from hil_config import FieldError, read_toml
-from quad_model.environment import Environment, GeoPoint, MagneticField
+from quad_model.environment import (
+    DRY_AIR_GAS_CONSTANT,
+    PX4_DEFAULT_HOME,
+    Environment,
+    GeoPoint,
+    MagneticField,
+    Wind,
+    isa_pressure_pa,
+    isa_temperature_k,
+)
 from quad_model.model import ModelInputError, charge_used_for_voltage_c
 from quad_model.vehicle import VEHICLES_DIR, BatteryParams, VehicleFileError, vehicle_from_dict
+
+if TYPE_CHECKING:
+    from rig.apps.wind import WindEstimate
 from rig.autopilots.px4 import (
     RIG_PARAMETERS,
     STICK_PARAMETERS,
@@ -237,6 +250,14 @@ class Replay:
     mission_notes: tuple[str, ...] = ()
     sticks: SetpointTrack | None = None
     firmware: str = ""  # the log's PX4, as its header says
+    #: The wind flown: the log's hover tilt through the vehicle's drag (rig.apps.wind);
+    #: None, with the reason in ``wind_note``, when the log gives none.
+    wind: WindEstimate | None = None
+    wind_note: str = ""
+    #: The day's temperature offset from ISA that gives the log's air density at home
+    #: (vehicle_air_data.rho): thrust ∝ ρ, so the rotors turn as fast as the real ones.
+    temperature_offset_k: float = 0.0
+    air_density_kgpm3: float | None = None
 
     @property
     def px4(self) -> bool:
@@ -359,7 +380,22 @@ class Replay:
             )
         if self.initial_battery_voltage_v is None:
             notes.append(("warn", "replay: the battery starts full (no battery_status in the log)"))
-        notes.append(("info", "replay: wind is zero (the real wind is unknown)"))
+        if self.air_density_kgpm3 is None:
+            notes.append(("warn", "replay: ISA air (the log has no vehicle_air_data.rho)"))
+        else:
+            notes.append((
+                "info",
+                f"replay: air density {self.air_density_kgpm3:.3f} kg/m³ as logged (ISA "
+                f"{self.temperature_offset_k:+.1f} K at home)",
+            ))  # fmt: skip
+        if self.wind is None:
+            notes.append(("warn", f"replay: wind is zero ({self.wind_note})"))
+        else:
+            notes.append((
+                "info",
+                f"replay: wind {self.wind.describe()}, flown as a steady wind with Dryden "
+                f"turbulence of W20 = {self.wind.speed_mps:.1f} m/s",
+            ))  # fmt: skip
         return tuple(notes)
 
     def _px4_notes(self) -> list[tuple[str, str]]:
@@ -399,6 +435,11 @@ class Replay:
             environment = Environment(
                 home=self.home, magnetic_field=MagneticField.from_wmm(self.home, WMM_EPOCH_YEAR)
             )
+        if self.wind is not None:
+            # W20 (the Dryden intensity) is by definition the mean wind speed at 6 m
+            wind = Wind(steady_ned_mps=self.wind.steady_ned_mps, wind_at_6m_mps=self.wind.speed_mps)
+            environment = replace(environment, wind=wind)
+        environment = replace(environment, temperature_offset_k=self.temperature_offset_k)
         try:
             rates = Rates(imu_hz=self.options.imu_hz or Rates().imu_hz)
         except FieldError as error:  # an IMU rate the model cannot step
@@ -456,7 +497,9 @@ class Replay:
                 "lon_deg": self.home.lon_deg,
                 "alt_amsl_m": self.home.alt_amsl_m,
             },
-            "wind": "zero: the real wind is unknown",
+            "wind": self.wind.summary() if self.wind else f"zero: {self.wind_note}",
+            "air_density_kgpm3": self.air_density_kgpm3,
+            "temperature_offset_k": self.temperature_offset_k,
             "real_arm_s": self.real_arm_s,
             "arm_s": self.arm_s,
             "disarm_s": self.disarm_s,
@@ -580,9 +623,36 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         mission_notes=mission_notes,
         sticks=sticks,
         firmware=log.firmware,
+        **_wind(path, vehicle_document, vehicle),
+        **_air(log, home, start_s, end_s),
     )
     replay.scenario(Path(vehicle))  # a bad rate fails here, before a run folder exists
     return replay
+
+
+def _wind(path: Path, vehicle_document: dict[str, Any], vehicle: str) -> dict[str, Any]:
+    """``wind`` and ``wind_note`` of the replay: the log's hover tilt through the vehicle's
+    drag, or none, with the reason (no hover, no attitude)."""
+    from rig.apps.wind import WindEstimateError, estimate_wind  # wind → identify → replay
+
+    try:
+        return {"wind": estimate_wind(path, vehicle_from_dict(vehicle_document, vehicle))}
+    except WindEstimateError as error:
+        return {"wind": None, "wind_note": f"no estimate: {error}"}
+
+
+def _air(log: _FlightLog, home: GeoPoint | None, start_s: float, end_s: float) -> dict[str, Any]:
+    """The log's mean air density and the ISA temperature offset that gives it at home (the
+    model has ISA pressure; density is what thrust and drag feel)."""
+    density = log.air_density(start_s, end_s)
+    if density is None:
+        return {}
+    altitude = (home or PX4_DEFAULT_HOME).alt_amsl_m
+    temperature_k = isa_pressure_pa(altitude) / (DRY_AIR_GAS_CONSTANT * density)
+    return {
+        "air_density_kgpm3": density,
+        "temperature_offset_k": temperature_k - isa_temperature_k(altitude),
+    }
 
 
 def _checked(options: ReplayOptions) -> ReplayOptions:
@@ -697,7 +767,7 @@ class _FlightLog:
         if not self.topics:
             raise ReplayError(f"{path}: the ULog holds no logged data")
         self.parameters: dict[str, float | int] = dict(ulog.initial_parameters)
-        self.firmware = _firmware(ulog.msg_info_dict)
+        self.firmware = firmware_name(ulog.msg_info_dict)
         self.first_s = min(float(d.data["timestamp"][0]) for d in ulog.data_list) / 1e6
         self.last_s = max(float(d.data["timestamp"][-1]) for d in ulog.data_list) / 1e6
 
@@ -743,6 +813,16 @@ class _FlightLog:
                 f"{time_s:g} s (the start heading)"
             )
         return heading
+
+    def air_density(self, start_s: float, end_s: float) -> float | None:
+        """Mean vehicle_air_data.rho over the replay (None: not logged or not plausible)."""
+        data = self.topics.get("vehicle_air_data")
+        if data is None or "rho" not in data:
+            return None
+        time_s = data["timestamp"] / 1e6
+        rho = data["rho"][(time_s >= start_s) & (time_s <= end_s)]
+        rho = rho[np.isfinite(rho) & (rho > 0.5) & (rho < 1.5)]  # air from sea level to 5 km
+        return float(rho.mean()) if rho.size else None
 
     def home(self) -> GeoPoint | None:
         """The first valid home position (the flying site), None without one."""
@@ -962,19 +1042,6 @@ def _clipped(events: list[FlightEvent], start_s: float, end_s: float) -> tuple[F
 def _mode_name(nav_state: int | None) -> str:
     mode = PX4_MODES.get(nav_state) if nav_state is not None else None
     return mode[2] if mode is not None else f"nav_state {nav_state}"
-
-
-def _firmware(info: Mapping[str, Any]) -> str:
-    """The log's PX4 as its header names it: version, release type, git hash, board."""
-    release = int(info.get("ver_sw_release", 0) or 0)
-    kind = release & 0xFF
-    suffix = ("" if kind == 255 else "rc" if kind >= 192 else "beta" if kind >= 128
-              else "alpha" if kind >= 64 else "dev")  # fmt: skip
-    version = f"v{release >> 24 & 0xFF}.{release >> 16 & 0xFF}.{release >> 8 & 0xFF}{suffix}"
-    git = str(info.get("ver_sw", ""))[:8]
-    return (
-        f"{info.get('sys_name', 'PX4')} {version} (git {git or '?'}) on {info.get('ver_hw', '?')}"
-    )
 
 
 def _delayed(track: SetpointTrack, delay_s: float) -> SetpointTrack:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import pyulog
 
+from quad_model.environment import DRY_AIR_GAS_CONSTANT, isa_pressure_pa, isa_temperature_k
 from quad_model.vehicle import load_vehicle
 from rig.apps.cli import main
 from rig.apps.identify import IdentificationError, identify_vehicle
@@ -148,6 +149,27 @@ def test_bad_battery_and_pwm_configurations_fail_with_one_line(tmp_path):
     assert _error(mixed) == (
         f"{mixed}: the motor outputs have different PWM ranges [(1000.0, 1900.0), (1100.0, 1900.0)]"
     )
+
+
+def test_plan_flies_the_logs_air_and_wind(x500_path):
+    """The log's air density (vehicle_air_data.rho, 1.169 kg/m³ at 184 m: a warm day) becomes
+    the ISA temperature offset that gives it at home, and the hover-tilt wind (rig.apps.wind)
+    the steady wind with Dryden turbulence at W20 = its speed; replay.json says both."""
+    plan = plan_replay(x500_path)
+    assert plan.air_density_kgpm3 == pytest.approx(1.169, abs=0.002)
+    scenario = plan.scenario(Path("x500_v2"))
+    env = scenario.environment
+    assert env.temperature_offset_k == pytest.approx(plan.temperature_offset_k)
+    altitude = env.home.alt_amsl_m
+    temperature = isa_temperature_k(altitude) + env.temperature_offset_k
+    density = isa_pressure_pa(altitude) / (DRY_AIR_GAS_CONSTANT * temperature)
+    assert density == pytest.approx(plan.air_density_kgpm3, rel=1e-9)
+    assert env.wind.steady_ned_mps == plan.wind.steady_ned_mps
+    assert env.wind.wind_at_6m_mps == pytest.approx(plan.wind.speed_mps)
+    summary = plan.summary()
+    assert summary["temperature_offset_k"] == pytest.approx(8.4, abs=0.3)
+    assert summary["wind"]["bound_mps"] == plan.wind.bound_mps
+    assert any("air density 1.169 kg/m³ as logged" in text for _, text in plan.notes)
 
 
 def test_plan_window_switches_drives_and_back(x500_path):
@@ -320,7 +342,7 @@ def test_replay_runs_on_the_real_logs_clock_and_takes_off_with_it(takeoff, real_
         assert times_s.max() <= 420.0
     summary = json.loads((out / "replay.json").read_text())
     assert summary["parameters_applied"]["MC_ROLLRATE_P"] == pytest.approx(0.14)
-    assert summary["wind"] == "zero: the real wind is unknown"
+    assert summary["wind"]["speed_mps"] == pytest.approx(4.2, abs=0.3)  # rig.apps.wind
     assert "cell_count = 4" in (out / "vehicle.toml").read_text()
     # lift-off: the first climb faster than 0.3 m/s (the real z estimate drifts by 0.1 m on
     # the ground, its vz does not)
