@@ -23,9 +23,9 @@ from numpy.typing import NDArray
 
 from quad_model import _sensor_kernels as _kernels
 from quad_model.environment import Environment
-from quad_model.frames import ned_to_geodetic
+from quad_model.frames import body_to_ned, ned_to_geodetic
 from quad_model.model import VehicleTruth
-from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, Vehicle
+from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, RangefinderParams, Vehicle
 
 DEFAULT_IMU_RATE_HZ = 1000.0
 DEFAULT_MAG_RATE_HZ = 100.0
@@ -72,6 +72,13 @@ class GpsSample:
     epv_m: float
     fix_type: int
     satellites_visible: int
+
+
+@dataclass(frozen=True)
+class RangeSample:
+    time_us: int
+    #: Measured distance along the beam; None when nothing returns (out of range, tilted).
+    distance_m: float | None
 
 
 def _check_rate(rate_hz: float, name: str) -> float:
@@ -284,6 +291,40 @@ class MagModel:
         return MagSample(truth.time_us, field)
 
 
+class RangefinderModel:
+    """Distance along the beam to the flat ground (NED down = 0): tilt lengthens it by
+    1/cos, white noise is added, and past the range or tilt limit there is no return.
+
+    Nothing is quantized here: the chip reports whole centimetres
+    (``fpga_hdl.chips.lidarlite.driver.sample_from_range``). One normal draw per sample,
+    returned or not, so a no-return never shifts the later numbers.
+    """
+
+    def __init__(self, params: RangefinderParams, rng: np.random.Generator) -> None:
+        self._params = params
+        self._axis_frd = np.array(params.axis_frd)
+        self._position_frd = np.array(params.position_frd_m)
+        self._min_cos_tilt = math.cos(math.radians(params.max_tilt_deg))
+        self._normals = NormalBlocks(rng, block_size=256)
+
+    def true_range_m(self, truth: VehicleTruth) -> float | None:
+        """The noiseless range, or None when the beam gets no return."""
+        q = truth.attitude_quat
+        cos_tilt = float(body_to_ned(q, self._axis_frd)[2])
+        if cos_tilt < self._min_cos_tilt:
+            return None
+        height_m = -float(truth.position_ned_m[2] + body_to_ned(q, self._position_frd)[2])
+        distance = max(height_m, 0.0) / cos_tilt
+        return None if distance > self._params.max_range_m else distance
+
+    def sample(self, truth: VehicleTruth) -> RangeSample:
+        (noise,) = self._normals.take(1)
+        distance = self.true_range_m(truth)
+        if distance is not None:
+            distance = max(distance + self._params.noise_std_m * float(noise), 0.0)
+        return RangeSample(truth.time_us, distance)
+
+
 class GpsModel:
     """GNSS receiver: Gauss-Markov position error, velocity noise, latency, fix rate.
 
@@ -398,13 +439,16 @@ class SensorReadings:
     mag: MagSample | None
     baro: BaroSample | None
     gps: GpsSample | None
+    range: RangeSample | None = None
 
 
 class SensorSuite:
-    """All four sensors of a vehicle on their own schedules (the rig calls it each frame).
+    """All the sensors of a vehicle on their own schedules (the rig calls it each frame).
 
     A sensor is due when the frame time reaches its next slot on a fixed grid k/rate, so
-    rates that do not divide the frame rate keep their long-run average.
+    rates that do not divide the frame rate keep their long-run average. The rangefinder
+    samples only when a ``rangefinder_rate_hz`` is given (the vehicle must carry one); its
+    generator is the fifth spawned, so the other four draw the same numbers either way.
     """
 
     def __init__(
@@ -415,8 +459,9 @@ class SensorSuite:
         imu_rate_hz: float = DEFAULT_IMU_RATE_HZ,
         mag_rate_hz: float = DEFAULT_MAG_RATE_HZ,
         baro_rate_hz: float = DEFAULT_BARO_RATE_HZ,
+        rangefinder_rate_hz: float | None = None,
     ) -> None:
-        imu_rng, mag_rng, baro_rng, gps_rng = rng.spawn(4)
+        imu_rng, mag_rng, baro_rng, gps_rng, range_rng = rng.spawn(5)
         self.imu = ImuModel(vehicle, environment, imu_rng, imu_rate_hz)
         self.mag = MagModel(vehicle, environment, mag_rng)
         self.baro = BaroModel(vehicle, environment, baro_rng)
@@ -424,6 +469,12 @@ class SensorSuite:
         self._imu_due = _Due(self.imu.rate_hz)
         self._mag_due = _Due(_check_rate(mag_rate_hz, "mag_rate_hz"))
         self._baro_due = _Due(_check_rate(baro_rate_hz, "baro_rate_hz"))
+        self.rangefinder: RangefinderModel | None = None
+        if rangefinder_rate_hz is not None:
+            if vehicle.rangefinder is None:
+                raise SensorConfigError(f"vehicle {vehicle.name!r} has no [rangefinder] table")
+            self.rangefinder = RangefinderModel(vehicle.rangefinder, range_rng)
+            self._range_due = _Due(_check_rate(rangefinder_rate_hz, "rangefinder_rate_hz"))
 
     def sample(self, truth: VehicleTruth) -> SensorReadings:
         t = truth.time_us
@@ -432,6 +483,9 @@ class SensorSuite:
             self.mag.sample(truth) if self._mag_due(t) else None,
             self.baro.sample(truth) if self._baro_due(t) else None,
             self.gps.sample(truth),
+            None
+            if self.rangefinder is None or not self._range_due(t)
+            else self.rangefinder.sample(truth),
         )
 
 
@@ -445,6 +499,8 @@ __all__ = [
     "MagModel",
     "MagSample",
     "NormalBlocks",
+    "RangeSample",
+    "RangefinderModel",
     "SensorConfigError",
     "SensorReadings",
     "SensorSuite",

@@ -35,8 +35,6 @@ ROTOR_COUNT = 4
 
 #: Magnitudes (noise levels, coefficients, drag areas) are >= 0 per axis.
 NonNegative3 = tuple[NonNegative, NonNegative, NonNegative]
-
-
 #: The vibration's per-operating-point level tables, in the IMU kernel's order
 #: (triad accel then gyro; tones then broadband).
 LEVEL_TABLES = (
@@ -221,6 +219,33 @@ class GpsParams:
 
 
 @table
+class RangefinderParams:
+    """A rangefinder on the airframe: where it sits, where it looks, what it can range.
+
+    The range is measured along ``axis_frd`` from ``position_frd_m`` (both body FRD, from
+    the model's reference point, which touches the ground when landed) to the flat ground.
+    Beyond ``max_range_m``, or tilted more than ``max_tilt_deg`` from straight down, the
+    beam gets no return.
+    """
+
+    position_frd_m: Vector3
+    #: Beam direction (normalised on load); straight down is (0, 0, 1).
+    axis_frd: Vector3
+    #: Farthest return (the nearest is 0: closer readings go to the autopilot, which
+    #: judges them, as PX4 does with its own minimum).
+    max_range_m: Positive
+    #: One-sigma white noise on each measurement.
+    noise_std_m: NonNegative
+    max_tilt_deg: Annotated[Number, Field(gt=0, lt=90)]
+
+    def __post_init__(self) -> None:
+        norm = math.sqrt(sum(c * c for c in self.axis_frd))
+        if norm < 1e-6:
+            raise FieldError("axis_frd", self.axis_frd, "must be a direction (not zero)")
+        object.__setattr__(self, "axis_frd", tuple(c / norm for c in self.axis_frd))
+
+
+@table
 class Vehicle:
     """Everything the model needs to know about one vehicle."""
 
@@ -233,6 +258,8 @@ class Vehicle:
     baro: BaroParams
     mag: MagParams
     gps: GpsParams
+    #: None: the vehicle carries no rangefinder.
+    rangefinder: RangefinderParams | None = None
 
     @property
     def hover_rotor_speed_radps(self) -> float:
