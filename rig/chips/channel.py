@@ -23,12 +23,14 @@ Requests (rig → co-simulation):
   | field | type | meaning |
   |---|---|---|
   | now_us | u64 | simulated time |
-  | flags | u8 | bit 0 IMU sample, 1 mag sample, 2 baro sample, 3 read the mag, 4 GPS |
+  | flags | u8 | bit 0 IMU sample, 1 mag sample, 2 baro sample, 3 read the mag, 4 GPS, |
+  |  |  | 5 rangefinder sample |
   | imu | 7 × i32 | MPU-6000 finest-resolution words: accel x/y/z, temp, gyro x/y/z |
   | mag | 3 × i16 | IST8310 counts x, y, z |
   | baro | 2 × u32 | MS5611 D1, D2 |
-  | faults | 4 × (u8 mute, u8 flip) | mpu6000, ms5611, ist8310, ublox |
+  | faults | 5 × (u8 mute, u8 flip) | mpu6000, ms5611, ist8310, ublox, lidarlite |
   | gps | NAV-PVT fields | the receiver's solution, as ``ubx.NAV_PVT_LAYOUT``'s loaded fields |
+  | range | u16, u8, u8 | LIDAR-Lite distance (cm), signal strength, peak strength |
   | pulse count | u16 | then per pulse: u8 channel, u64 start_us, u32 width_us |
 
   The pulses are those starting after the previous frame's ``now_us`` and up to this
@@ -52,6 +54,7 @@ bytes and read from the RTL PWM capture core:
   | PWM channels | u8 | then per channel: f64 width_us, u8 timed_out |
   | error count | u8 | then per error: u8 chip index, u16 length, UTF-8 text |
   | GPS fix count | u8 | then per fix: u64 time_us, u64 sent_us, then ``GpsFix`` in order |
+  | range | u8, f64, i8 | a rangefinder reading collected (0/1), distance m, quality |
 """
 
 from __future__ import annotations
@@ -61,6 +64,8 @@ import struct
 from dataclasses import astuple
 
 from fpga_hdl.chips.ist8310.regs import Ist8310Sample
+from fpga_hdl.chips.lidarlite.driver import Range
+from fpga_hdl.chips.lidarlite.regs import LidarLiteSample
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix
 from fpga_hdl.chips.ublox.ubx import NAV_PVT_LAYOUT, NavPvt
@@ -72,13 +77,18 @@ START, FRAME, STOP, OK, ERROR = 1, 2, 3, 128, 129
 _LENGTH = struct.Struct("<I")
 _START = struct.Struct("<I")
 _NAV_PVT = struct.Struct("<" + "".join(fmt for _, fmt, loaded in NAV_PVT_LAYOUT if loaded))
-_FRAME_HEAD = struct.Struct(f"<QB7i3h2I8B{_NAV_PVT.format[1:]}H")
+_RANGE_SAMPLE = struct.Struct("<HBB")
+_FRAME_HEAD = struct.Struct(
+    f"<QB7i3h2I{2 * len(CHIPS)}B{_NAV_PVT.format[1:]}{_RANGE_SAMPLE.format[1:]}H"
+)
 #: ReceivedFix: time_us, sent_us, then GpsFix's fields (two counts, 13 floats, a flag).
 _GPS_FIX = struct.Struct("<QQBB13d?")
 _PULSE = struct.Struct("<BQI")
 _READOUT_HEAD = struct.Struct("<7dB3d2dB")
 _PWM_CHANNEL = struct.Struct("<dB")
 _ERROR_HEAD = struct.Struct("<BH")
+_RANGE = struct.Struct("<?db")
+_NO_RANGE = LidarLiteSample(0, 0, 0)
 
 
 def encode_start(pwm_period_us: int) -> bytes:
@@ -95,7 +105,7 @@ def encode_frame(frame: ChipFrame) -> bytes:
     imu = frame.imu
     mag = frame.mag
     flags = (imu is not None) | (mag is not None) << 1 | (frame.baro_d1_d2 is not None) << 2
-    flags |= frame.read_mag << 3 | (frame.gps is not None) << 4
+    flags |= frame.read_mag << 3 | (frame.gps is not None) << 4 | (frame.range is not None) << 5
     imu_words = tuple(imu.fields().values()) if imu is not None else (0,) * 7
     mag_counts = (mag.x_counts, mag.y_counts, mag.z_counts) if mag is not None else (0, 0, 0)
     faults = []
@@ -105,7 +115,7 @@ def encode_frame(frame: ChipFrame) -> bytes:
     gps = astuple(frame.gps or NavPvt())
     body = _FRAME_HEAD.pack(
         frame.now_us, flags, *imu_words, *mag_counts, *(frame.baro_d1_d2 or (0, 0)), *faults,
-        *gps, len(frame.pulses),
+        *gps, *astuple(frame.range or _NO_RANGE), len(frame.pulses),
     )  # fmt: skip
     body += b"".join(_PULSE.pack(p.channel, p.start_us, p.width_us) for p in frame.pulses)
     return bytes([FRAME]) + body
@@ -116,7 +126,8 @@ def decode_frame(body: bytes) -> ChipFrame:
     now_us, flags = values[0], values[1]
     imu, mag, baro = values[2:9], values[9:12], values[12:14]
     fault_end = 14 + 2 * len(CHIPS)
-    fault_bytes, gps, count = values[14:fault_end], values[fault_end:-1], values[-1]
+    fault_bytes, gps, count = values[14:fault_end], values[fault_end:-4], values[-1]
+    ranged = values[-4:-1]
     faults = {}
     for index, chip in enumerate(CHIPS):
         mute, flip = fault_bytes[2 * index], fault_bytes[2 * index + 1]
@@ -136,6 +147,7 @@ def decode_frame(body: bytes) -> ChipFrame:
         faults=faults,
         pulses=tuple(pulses),
         gps=NavPvt(*gps) if flags & 16 else None,
+        range=LidarLiteSample(*ranged) if flags & 32 else None,
     )
 
 
@@ -155,6 +167,8 @@ def encode_readout(readout: ChipReadout) -> bytes:
     body += bytes([len(readout.gps)])
     for received in readout.gps:
         body += _GPS_FIX.pack(received.time_us, received.sent_us, *astuple(received.fix))
+    ranged = readout.range
+    body += _RANGE.pack(ranged is not None, *astuple(ranged or Range(0.0, 0)))
     return bytes([OK]) + body
 
 
@@ -181,6 +195,7 @@ def decode_readout(body: bytes) -> ChipReadout:
         time_us, sent_us, *fix = _GPS_FIX.unpack_from(body, offset)
         gps.append(ReceivedFix(time_us, sent_us, GpsFix(*fix)))
         offset += _GPS_FIX.size
+    collected, distance_m, quality = _RANGE.unpack_from(body, offset)
     return ChipReadout(
         accel_mps2=values[0:3],
         gyro_radps=values[3:6],
@@ -191,6 +206,7 @@ def decode_readout(body: bytes) -> ChipReadout:
         pwm_timed_out=tuple(timed_out),
         bus_errors=tuple(errors),
         gps=tuple(gps),
+        range=Range(distance_m, quality) if collected else None,
     )
 
 

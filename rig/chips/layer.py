@@ -8,6 +8,11 @@ at the mag rate, the MS5611 convert/read cycle every 10 ms (D2 then D1, so a pre
 20 ms), and the PWM capture's widths. Quantization, full-scale saturation, conversion
 latency and bus faults therefore reach the autopilot as on the real rig.
 
+Rangefinder: the LIDAR-Lite v3 shares the IST8310's I2C bus. PX4's ll40ls driver runs on
+the frames that carry a rangefinder sample (the loop samples the physics at the driver's
+20 Hz): the sample is loaded, the acquisition started one cycle before is collected and
+the next one started, so each reading is the scene of 50 ms before, as on a vehicle.
+
 GPS: at start-up PX4's u-blox driver configures the receiver over its UART (every step
 ACKed, at the rates it switches through); each navigation epoch's solution is loaded
 into the receiver, which sends NAV-PVT over the UART at 115200 baud, and PX4's decoder
@@ -46,6 +51,9 @@ from fpga_hdl.buses.transactions import (
 from fpga_hdl.chips.ist8310 import regs as ist_regs
 from fpga_hdl.chips.ist8310.driver import Ist8310Driver
 from fpga_hdl.chips.ist8310.model import Ist8310Model
+from fpga_hdl.chips.lidarlite.driver import LidarLiteDriver, LidarLiteVersion, Range
+from fpga_hdl.chips.lidarlite.model import LidarLiteModel
+from fpga_hdl.chips.lidarlite.regs import LidarLiteSample
 from fpga_hdl.chips.mpu6000 import regs as mpu_regs
 from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver, decode
 from fpga_hdl.chips.mpu6000.model import Mpu6000Model
@@ -68,6 +76,7 @@ class Chip(StrEnum):
     MS5611 = "ms5611"
     IST8310 = "ist8310"
     UBLOX = "ublox"
+    LIDARLITE = "lidarlite"
 
 
 CHIPS = tuple(Chip)
@@ -106,6 +115,8 @@ class ChipFrame:
     si: SensorReadings | None = None
     #: The GPS receiver's solution of a navigation epoch output now (receiver faults in).
     gps: NavPvt | None = None
+    #: The rangefinder's scene for this frame's driver cycle (None: no cycle this frame).
+    range: LidarLiteSample | None = None
 
 
 @dataclass(frozen=True)
@@ -124,10 +135,13 @@ class ChipReadout:
     bus_errors: tuple[tuple[str, str], ...] = ()
     #: The GPS fixes PX4's driver decoded by this frame's time, oldest first.
     gps: tuple[ReceivedFix, ...] = ()
+    #: The rangefinder reading PX4's driver collected this frame, if it collected one.
+    range: Range | None = None
 
 
 #: SensorTop's host-port channel and fault names for the rig's chip names.
-HOST_CHIP = {Chip.MPU6000: "imu", Chip.MS5611: "baro", Chip.IST8310: "mag", Chip.UBLOX: "gps"}
+HOST_CHIP = {Chip.MPU6000: "imu", Chip.MS5611: "baro", Chip.IST8310: "mag", Chip.UBLOX: "gps",
+             Chip.LIDARLITE: "range"}  # fmt: skip
 
 
 def gps_fix(sample: GpsSample) -> GpsFix:
@@ -168,6 +182,8 @@ def host_port_inputs(
         samples["baro"] = {"d1": frame.baro_d1_d2[0], "d2": frame.baro_d1_d2[1]}
     if frame.gps is not None:
         samples["gps"] = frame.gps.fields()
+    if frame.range is not None:
+        samples["range"] = frame.range.fields()
     faults = {}
     for chip in CHIPS:
         fault = frame.faults.get(chip, NO_FAULT)
@@ -221,6 +237,8 @@ class SensorEngine:
         self.baro = Ms5611Driver(spi, self._boot_sleep, "baro")
         self.mag = Ist8310Driver(i2c)
         self.gps = UbloxDriver(uart)
+        self.range = LidarLiteDriver(i2c)
+        self._range_collect = False  # PX4 ``_collect_phase``: an acquisition is running
         self._next_baro_us = 0
         self._baro_phase_d1 = False  # False: a D2 (temperature) conversion is running
         self._d2 = 0
@@ -241,6 +259,9 @@ class SensorEngine:
             if not (await self.mag.reset_done() and await self.mag.configure()):
                 raise SensorLayerError("IST8310 configuration registers do not hold")
             await self.gps.configure()
+            if await self.range.probe() is not LidarLiteVersion.V1_V3:
+                raise SensorLayerError("LIDAR-Lite probe: not the v1/v3 PX4 expects at 0x62")
+            await self.range.reset()
         except BusError as error:
             raise SensorLayerError(f"sensor start-up failed: {error}") from None
 
@@ -258,6 +279,12 @@ class SensorEngine:
                 await self.mag.start_measurement()
             except BusError as error:
                 errors.append(("ist8310", str(error)))
+        ranged = None
+        if frame.range is not None:
+            try:
+                ranged = await self._range_cycle()
+            except BusError as error:
+                errors.append(("lidarlite", str(error)))
         baro = None
         if frame.now_us >= self._next_baro_us:
             self._next_baro_us = frame.now_us + CONVERSION_INTERVAL_US
@@ -276,7 +303,17 @@ class SensorEngine:
             pwm_timed_out=timed_out,
             bus_errors=tuple(errors),
             gps=self.gps.poll(frame.now_us),
+            range=ranged,
         )
+
+    async def _range_cycle(self) -> Range | None:
+        """PX4's ll40ls ``RunImpl``: collect the acquisition started one cycle ago (none on
+        the first cycle), then start the next. A failed transfer leaves the collect due,
+        as in PX4."""
+        result = await self.range.collect() if self._range_collect else None
+        await self.range.measure()
+        self._range_collect = True
+        return result
 
     async def _baro_cycle(self) -> tuple[float, float] | None:
         """PX4's MS5611 cycle: collect the running conversion, start the next one."""
@@ -309,14 +346,15 @@ class TlmChips:
         self.ms5611 = Ms5611Model()
         self.ist8310 = Ist8310Model()
         self.ublox = UbloxM8Model()
+        self.lidarlite = LidarLiteModel()
         self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
-        self.i2c = TlmI2cBus({self.ist8310.address: self.ist8310})
+        self.i2c = TlmI2cBus({chip.address: chip for chip in (self.ist8310, self.lidarlite)})
         self.uart = TlmUbloxUart(self.ublox, sys_clk_hz=HARNESS_SYS_CLK_HZ)
         self.pwm = PwmCapture(MOTOR_CHANNELS, tick_hz=pwm_tick_hz)
         self._faults: Mapping[str, ChipFault] | None = None  # the fault inputs set last
 
     async def load(self, frame: ChipFrame) -> None:
-        self.ms5611.now_us = self.ist8310.now_us = frame.now_us
+        self.ms5611.now_us = self.ist8310.now_us = self.lidarlite.now_us = frame.now_us
         if frame.imu is not None:
             self.mpu6000.load_sample(frame.imu)
         if frame.mag is not None:
@@ -325,6 +363,8 @@ class TlmChips:
             self.ms5611.load_sample(*frame.baro_d1_d2)
         if frame.gps is not None:
             self.ublox.load_fix(frame.gps)
+        if frame.range is not None:
+            self.lidarlite.load_sample(frame.range)
         if frame.faults is not self._faults:  # the injector hands the same map until it changes
             self._faults = frame.faults
             for name in CHIPS:
@@ -375,6 +415,7 @@ class BypassSensorLayer:
             if pulse.channel < MOTOR_CHANNELS:
                 self._widths_us[pulse.channel] = float(pulse.width_us)
         imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
+        ranged = readings.range
         now_us = frame.now_us
         return ChipReadout(
             accel_mps2=tuple(map(float, imu.accel_mps2)),
@@ -385,7 +426,9 @@ class BypassSensorLayer:
             pwm_widths_us=tuple(self._widths_us),
             pwm_timed_out=(False,) * MOTOR_CHANNELS,
             gps=() if gps is None else (ReceivedFix(now_us, now_us, gps_fix(gps)),),
-        )
+            range=None if ranged is None or ranged.distance_m is None
+            else Range(ranged.distance_m, 100),
+        )  # fmt: skip
 
     def close(self) -> None:
         """Nothing to release."""

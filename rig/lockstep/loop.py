@@ -47,6 +47,8 @@ from pathlib import Path
 import numpy as np
 
 from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
+from fpga_hdl.chips.lidarlite.driver import PX4_CYCLE_US, PX4_MAX_DISTANCE_M, sample_from_range
+from fpga_hdl.chips.lidarlite.regs import MIN_RANGE_M
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
 from fpga_hdl.chips.ublox.link import receiver_solution
@@ -70,7 +72,7 @@ from rig.lockstep.pacing import Pacer
 from rig.logs.rig_log import RigLog
 from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
-from rig.mavlink.sim_messages import hil_gps, hil_sensor, hil_state_quaternion
+from rig.mavlink.sim_messages import distance_sensor, hil_gps, hil_sensor, hil_state_quaternion
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
 from rig.processes import exit_description, restore_sigint, stop_process_group
 from rig.scenarios.faults import FaultInjector, describe
@@ -84,6 +86,12 @@ BYPASS = "bypass"
 AUTOPILOT_STOP_GRACE_S = 5.0
 #: Where runs land unless ``--out`` says otherwise (ignored by git).
 RUNS_DIR = Path("runs")
+#: The rangefinder physics is sampled once per cycle of PX4's LIDAR-Lite driver (20 Hz),
+#: just before it: the chip measures the scene at the cycle's acquire command.
+RANGEFINDER_RATE_HZ = 1e6 / PX4_CYCLE_US
+#: What PX4's driver publishes as the LIDAR-Lite v3's range (the layers' start-up checks
+#: that PX4's probe takes the chip for a v1/v3).
+RANGEFINDER_LIMITS_M = (MIN_RANGE_M, PX4_MAX_DISTANCE_M)
 #: Ground truth is logged at this rate (PX4 SITL logs its groundtruth topics at ~100 Hz).
 TRUTH_LOG_HZ = 250
 _MOUNTS = {
@@ -313,9 +321,12 @@ class _Loop:
             attitude_quat=yaw_quat(math.radians(start.yaw_deg)),
             battery_voltage_v=scenario.start.battery_voltage_v,
         )
+        if scenario.rangefinder and vehicle.rangefinder is None:
+            raise ScenarioError(f"{scenario.source}: key 'rangefinder': vehicle "
+                                f"{vehicle.name!r} has no [rangefinder] table")  # fmt: skip
         self.sensors = SensorSuite(
             vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
-            self.rates.baro_hz,
+            self.rates.baro_hz, RANGEFINDER_RATE_HZ if scenario.rangefinder else None,
         )  # fmt: skip
         self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event)
         self.layer = _make_sensor_layer(self.sensor_layer_name, self.rates)
@@ -440,6 +451,7 @@ class _Loop:
             si=readings,
             gps=None if readings.gps is None else receiver_solution(
                 gps_fix(readings.gps), self.run_us, self.faults.gps_fault()),
+            range=None if readings.range is None else sample_from_range(readings.range.distance_m),
         )  # fmt: skip
         out = self.layer.frame(chip_frame)
         self._delivered = out
@@ -463,6 +475,9 @@ class _Loop:
             self.log.baro(self.time_us, out.baro_pa_degc)
         for received in out.gps:
             self.log.gps(self.time_us, self.clock_start_us + received.sent_us, received.fix)
+        if out.range is not None:
+            self.log.rangefinder(self.time_us, out.range.distance_m, out.range.signal_quality,
+                                 RANGEFINDER_LIMITS_M)  # fmt: skip
 
     def _sensor_messages(
         self, readings: SensorReadings, out: ChipReadout
@@ -481,6 +496,14 @@ class _Loop:
                     lon_deg=fix.longitude_deg, alt_amsl_m=fix.altitude_msl_m,
                     vel_ned_mps=(fix.vel_n_m_s, fix.vel_e_m_s, fix.vel_d_m_s), eph_m=fix.eph,
                     epv_m=fix.epv, fix_type=fix.fix_type, satellites_visible=fix.satellites_used,
+                )
+            )  # fmt: skip
+        if out.range is not None:
+            messages.append(
+                distance_sensor(
+                    self.link.mav, self.time_us, distance_m=out.range.distance_m,
+                    signal_quality=out.range.signal_quality, min_m=RANGEFINDER_LIMITS_M[0],
+                    max_m=RANGEFINDER_LIMITS_M[1],
                 )
             )  # fmt: skip
         return messages

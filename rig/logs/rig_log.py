@@ -3,7 +3,8 @@
 Ground truth uses PX4 SITL's ``*_groundtruth`` topics (same formats as
 ``vehicle_attitude``, ``vehicle_local_position``, ``vehicle_angular_velocity``), the
 sensor data is logged as delivered to the autopilot (after the chips and faults:
-``sensor_combined``, ``sensor_mag``, ``sensor_baro``, ``sensor_gps``), the autopilot's
+``sensor_combined``, ``sensor_mag``, ``sensor_baro``, ``sensor_gps``, the rangefinder's
+``distance_sensor``), the autopilot's
 commands as ``actuator_motors`` (0..1) and the PWM the capture core measured as
 ``actuator_outputs`` (µs). Field names and types follow PX4's ``msg/*.msg`` (checked
 against a real PX4 v1.17 log's format section); only the fields the rig can fill are
@@ -58,6 +59,10 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
         ("float", "cog_rad"), ("uint8_t", "fix_type"), ("bool", "vel_ned_valid"),
         ("uint8_t", "satellites_used"),
     ],
+    "distance_sensor": [("uint32_t", "device_id"), ("float", "min_distance"),
+                        ("float", "max_distance"), ("float", "current_distance"),
+                        ("float", "variance"), ("int8_t", "signal_quality"), ("uint8_t", "type"),
+                        ("uint8_t", "orientation")],
     "actuator_motors": [("uint64_t", "timestamp_sample"), ("float[12]", "control"),
                         ("uint16_t", "reversible_flags")],
     "actuator_outputs": [("uint32_t", "noutputs"), ("float[16]", "output")],
@@ -69,6 +74,9 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
 }  # fmt: skip
 
 _ZERO_3 = np.zeros(3)
+#: ``distance_sensor`` constants (PX4 msg/DistanceSensor.msg): MAV_DISTANCE_SENSOR_LASER,
+#: ROTATION_DOWNWARD_FACING.
+_LASER, _DOWNWARD_FACING = 0, 25
 #: ``actuator_motors.control`` and ``actuator_outputs.output`` lengths (PX4 msg/*.msg).
 _CONTROLS, _OUTPUTS = 12, 16
 
@@ -91,7 +99,7 @@ class RigLog:
         self._home = (home_lat_deg, home_lon_deg, home_alt_m)
         self._previous_rates: np.ndarray | None = None
         self._previous_rates_us = 0
-        self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0}
+        self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0, "lidarlite": 0}
         self._rows: dict[str, Callable[..., None]] = {}
 
     def _row(self, topic: str) -> Callable[..., None]:
@@ -158,6 +166,14 @@ class RigLog:
             vel_d_m_s=fix.vel_d_m_s, cog_rad=fix.cog_rad, fix_type=fix.fix_type,
             vel_ned_valid=fix.vel_ned_valid, satellites_used=fix.satellites_used,
         )  # fmt: skip
+
+    def rangefinder(self, time_us: int, distance_m: float, signal_quality: int,
+                    limits_m: tuple[float, float]) -> None:  # fmt: skip
+        """A rangefinder reading as PX4's driver publishes it (laser, facing down)."""
+        self.writer.write("distance_sensor", time_us, device_id=0, min_distance=limits_m[0],
+                          max_distance=limits_m[1], current_distance=distance_m, variance=0.0,
+                          signal_quality=signal_quality, type=_LASER,
+                          orientation=_DOWNWARD_FACING)  # fmt: skip
 
     def motors(self, time_us: int, commanded_us: int, controls: Sequence[float]) -> None:
         unused = (math.nan,) * (_CONTROLS - len(controls))

@@ -457,6 +457,9 @@ class Scenario:
     start: StartPose = StartPose()
     sensor_layer: SensorLayer = SensorLayer.TLM
     rates: Rates = Rates()
+    #: Fly the vehicle's ``[rangefinder]`` (a LIDAR-Lite v3 on I2C, read at PX4's 20 Hz
+    #: driver rate) and send its readings as DISTANCE_SENSOR.
+    rangefinder: Annotated[bool, Field(strict=True)] = False
     #: Pulse widths (µs) for motor command 0 and 1 (PX4's PWM_*_MIN/MAXn).
     motor_pwm_range_us: tuple[Positive, Positive] = DEFAULT_MOTOR_PWM_RANGE_US
     commands: tuple[Command, ...] = ()

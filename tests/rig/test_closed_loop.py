@@ -133,3 +133,30 @@ def test_after_a_landing_hold_lets_it_arm_and_fly_again(tmp_path, free_instance)
     assert "hold: accepted" in messages
     heights = -truth_at(rig_log, [6.0, 16.5, 24.0])["z"]
     assert heights == pytest.approx([2.0, 0.0, 2.0], abs=HOVER_BOUND_M)
+
+
+def test_rangefinder_landing_crawls_the_last_metre_and_lands(tmp_path, free_instance):
+    """With the LIDAR-Lite (scenario ``rangefinder``), the autopilot's height above the
+    ground follows the truth, the landing slows from MPC_LAND_SPEED (0.7 m/s) to
+    MPC_LAND_CRWL (0.3 m/s) below MPC_LAND_ALT3 (1 m), and the land detector, which then
+    also wants the range under 1 m, still sees the landing and disarms."""
+    commands = [*takeoff(3.0), {"at_s": 9.0, "action": "land"}]
+    _, rig_log, autopilot_log = fly(
+        tmp_path, free_instance, "rangefinder_land", commands, 30.0, rangefinder=True,
+        rates={"imu_hz": 250},
+    )  # fmt: skip
+    truth = rig_log.get_dataset("vehicle_local_position_groundtruth").data
+    t, height, descent = truth["timestamp"] / 1e6, -truth["z"], truth["vz"]
+    landing = t > 9.0
+    for low, high, speed, tolerance in ((1.3, 2.0, 0.7, 0.1), (0.3, 0.8, 0.3, 0.05)):
+        band = landing & (height > low) & (height < high)
+        assert descent[band].mean() == pytest.approx(speed, abs=tolerance), (low, high)
+    position = autopilot_log.get_dataset("vehicle_local_position").data
+    flying = (position["timestamp"] / 1e6 > 4.5) & (position["timestamp"] / 1e6 < 9.0)  # hover
+    assert position["dist_bottom_valid"][flying].all()
+    hover_truth = np.interp(position["timestamp"][flying] / 1e6, t, height)
+    # 0.10 m: the sensor sits above the landing point; 0.1 m covers noise and 50 ms of age.
+    assert np.abs(position["dist_bottom"][flying] - (hover_truth + 0.10)).max() < 0.1
+    events = {m.message: m.timestamp / 1e6 for m in autopilot_log.logged_messages}
+    touchdown_s = t[landing & (height < 0.01)][0]
+    assert touchdown_s < events["Landing detected"] < events["Disarmed: landed (COM_DISARM_LAND)"]

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
+from fpga_hdl.chips.lidarlite.driver import Range, decode_range, sample_from_range
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
 from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix
@@ -45,6 +46,10 @@ BOUNDARY_WIDTHS_US, BETWEEN_WIDTH_US = (1497, 1498, 1499, 1500), 1200
 #: 5 Hz in a short test), and the receiver faults of some of them.
 GPS_EVERY = 50
 GPS_FAULTS = {100: GpsFault.LOSS_OF_FIX, 150: GpsFault.JAMMED, 200: GpsFault.BAD_CHECKSUM}
+#: A LIDAR-Lite driver cycle every this many frames (PX4's 50 ms at 1 kHz), offset from the
+#: GPS epochs; the LIDAR-Lite is muted over the cycles at frames 175 and 225.
+RANGE_EVERY, RANGE_OFFSET = 50, 25
+RANGE_MUTED = range(170, 230)
 
 
 def _gps_fix(rng):
@@ -69,6 +74,11 @@ def _frames(rng, count, *, frame_us=1000, faults=None):
         frame_faults = (faults or {}).get(k, {})
         if gps_fault is GpsFault.BAD_CHECKSUM:
             frame_faults = {**frame_faults, "ublox": ChipFault(flip=BAD_CHECKSUM_FLIP)}
+        if k in RANGE_MUTED:
+            frame_faults = {**frame_faults, "lidarlite": ChipFault(mute=True)}
+        ranged = None
+        if k % RANGE_EVERY == RANGE_OFFSET:
+            ranged = sample_from_range(float(rng.uniform(0.1, 30.0)) if k != 325 else None)
         gps = None
         if k % GPS_EVERY == 0:
             gps = receiver_solution(_gps_fix(rng), now_us, gps_fault)
@@ -81,6 +91,7 @@ def _frames(rng, count, *, frame_us=1000, faults=None):
             faults=frame_faults,
             pulses=tuple(outputs.pulses(now_us + 1, dropped)),
             gps=gps,
+            range=ranged,
         )
         if frame_us == 1000 and k in BOUNDARY_FRAMES:
             # The periods take the last command before their start: one starting at
@@ -109,6 +120,7 @@ def test_readout_codec_round_trip():
         mag_gauss=(0.2, 0.01, 0.43), baro_pa_degc=None, pwm_widths_us=(1500.0, 0.0, 1000.0, 2000.0),
         pwm_timed_out=(False, True, False, False), bus_errors=(("ms5611", "MS5611 not ready ü"),),
         gps=(ReceivedFix(208_697, 200_000, _gps_fix(np.random.default_rng(1))),),
+        range=Range(12.34, 100),
     )  # fmt: skip
     assert decode_readout(encode_readout(readout)[1:]) == readout
 
@@ -144,9 +156,15 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     faults = {k: {"mpu6000": ChipFault(flip=0x40)} for k in range(50, 55)}
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
     corrupted, widths, timed_out, pwm, boundary, fixes = set(), set(), [], [], 0, []
+    loaded, collected = {}, {}
     for frame in _frames(np.random.default_rng(11), 400, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
         fixes += [(frame.now_us, received) for received in reference.gps]
+        if frame.range is not None:
+            k = frame.now_us // 1000
+            loaded[k] = frame.range
+            nacked = [chip for chip, _ in reference.bus_errors if chip == "lidarlite"]
+            collected[k] = "nack" if nacked else reference.range
         assert rtl == reference, f"frame at {frame.now_us} µs: RTL {rtl} != TLM {reference}"
         native = native_layer.frame(frame)
         assert native == reference, f"frame at {frame.now_us} µs: compiled RTL {native} != TLM"
@@ -182,6 +200,13 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     for delivered_us, received in fixes:
         assert received.time_us - received.sent_us == 8696
         assert delivered_us == received.sent_us + 9000
+    # Each LIDAR-Lite cycle collects the acquisition the previous one started (none at the
+    # first); muted, the collect is NACKed and stays due, and the first cycle after it
+    # collects the acquisition started before the mute; a no return reads 1 cm, quality 0.
+    cm = {k: decode_range(loaded[k].distance_cm.to_bytes(2, "big"), 128, 234)
+          for k in (25, 75, 125, 275)}  # fmt: skip
+    assert collected == {25: None, 75: cm[25], 125: cm[75], 175: "nack", 225: "nack",
+                         275: cm[125], 325: cm[275], 375: Range(0.01, 0)}  # fmt: skip
     kinds = {r.sent_us // 1000: (r.fix.fix_type, r.fix.satellites_used) for _, r in fixes}
     assert kinds[100] == (0, 0)
     assert kinds[150] == (2, 3)  # jammed: a 2D fix from 3 satellites

@@ -327,3 +327,49 @@ def test_a_bad_param_for_px4_is_one_line(text):
     with pytest.raises(RigError, match=r"^--param .*: expected NAME=VALUE with a finite number$"):
         parse_assignments((text,))
     assert parse_assignments(("MPC_XY_P=1.5", "SDLOG_MODE=0")) == {"MPC_XY_P": 1.5, "SDLOG_MODE": 0}
+
+
+def test_px4_takes_the_lidarlite_as_its_distance_sensor_and_lands_on_it(
+    tmp_path, free_instance, px4_dir
+):
+    """The scenario's LIDAR-Lite reaches PX4 as DISTANCE_SENSOR: PX4 publishes
+    ``distance_sensor`` at the driver's 20 Hz as its own ll40ls driver would (downward,
+    5 cm..25 m, quality 100), reading the truth's height plus the sensor's 0.10 m; EKF2
+    turns it into ``dist_bottom`` and, hovering low and slow, fuses it as height
+    (``cs_rng_hgt``); the landing crawls the last metre at MPC_LAND_CRWL (0.3 m/s) and
+    PX4 lands and disarms."""
+    result = fly_px4(tmp_path, free_instance, px4_dir, "rangefinder", 40.0,
+                     _takeoff_hover_land(10.0, 26.0), rangefinder=True,
+                     rates={"imu_hz": 250})  # fmt: skip
+    rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
+    truth_t, truth = _topic(rig_log, "vehicle_local_position_groundtruth")
+    t, ranges = _topic(px4_log, "distance_sensor")
+    assert np.median(np.diff(t)) == pytest.approx(0.05, abs=0.005)
+    assert set(ranges["orientation"]) == {25}  # ROTATION_DOWNWARD_FACING
+    assert ranges["min_distance"] == pytest.approx(0.05)  # PX4: cm / 100.0f
+    assert ranges["max_distance"] == pytest.approx(25.0)
+    hover = _inside(t, (16.0, 25.0))
+    assert set(ranges["signal_quality"][hover]) == {100}
+    # On the ground the sensor is 0.10 m up: noise takes some readings under PX4's 5 cm,
+    # which its driver marks unusable (quality 0), and only those.
+    unusable = ranges["signal_quality"] == 0
+    assert set(ranges["signal_quality"]) == {0, 100}
+    assert (ranges["current_distance"][unusable] < 0.05).all()
+    height = -np.interp(t, truth_t, truth["z"])
+    assert height[hover].min() > 1.0
+    # 0.1 m: the datasheet's 2.5 cm at 4σ, 1 cm resolution, and the 50 ms of the cycle.
+    assert np.abs(ranges["current_distance"][hover] - (height[hover] + 0.10)).max() < 0.1
+    est_t, est = _topic(px4_log, "vehicle_local_position")
+    hovering = _inside(est_t, (16.0, 25.0))
+    assert est["dist_bottom_valid"][hovering].all()
+    truth_below = -np.interp(est_t[hovering], truth_t, truth["z"]) + 0.10
+    assert np.abs(est["dist_bottom"][hovering] - truth_below).max() < 0.1
+    flags_t, flags = _topic(px4_log, "estimator_status_flags")
+    assert flags["cs_rng_hgt"][_inside(flags_t, (16.0, 25.0))].all()
+    landing = truth_t > 26.0
+    last_half_metre = landing & (-truth["z"] < 0.5) & (-truth["z"] > 0.1)
+    assert truth["vz"][last_half_metre].mean() == pytest.approx(0.3, abs=0.07)
+    messages = [m.message for m in px4_log.logged_messages]
+    assert any("Landing detected" in m for m in messages)
+    _, armed = _topic(px4_log, "actuator_armed")
+    assert not armed["armed"][-1]
