@@ -41,6 +41,14 @@ def _write(tmp_path, text):
     return path
 
 
+#: Vibration operating points appended to the F450's [vibration] table (before [baro]).
+_LEVELS = (
+    "level_rotor_speed_radps = {speeds}\naccel_tone_level = {tone}\n"
+    "accel_broadband_level = [[1, 1, 1], [1, 1, 1]]\ngyro_tone_level = [[1, 1, 1], [1, 1, 1]]\n"
+    "gyro_broadband_level = [[1, 1, 1], [1, 1, 1]]\n\n[baro]\n"
+)
+
+
 def _edited(tmp_path, old, new):
     text = (VEHICLES_DIR / "f450_high_precision.toml").read_text(encoding="utf-8")
     assert old in text
@@ -90,6 +98,17 @@ def _edited(tmp_path, old, new):
             "[0.0, 0.0, -0.0366]]: must be symmetric positive definite",
         ),
         ("[gps]\n", "[gnss]\n", "key 'gps' is missing"),
+        (
+            "[baro]\n",
+            _LEVELS.format(speeds="[600.0, 500.0]", tone="[[1, 1, 1], [1, 1, 1]]"),
+            "key 'vibration.level_rotor_speed_radps' = [600.0, 500.0]: must be strictly ascending",
+        ),
+        (
+            "[baro]\n",
+            _LEVELS.format(speeds="[500.0, 600.0]", tone="[[1, 1, 1]]"),
+            "key 'vibration.accel_tone_level' = [[1.0, 1.0, 1.0]]: needs one [x, y, z] per "
+            "rotor speed (2)",
+        ),
     ],
 )
 def test_bad_vehicle_file_names_the_key(tmp_path, old, new, message):
