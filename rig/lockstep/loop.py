@@ -285,6 +285,9 @@ class _Loop:
             vehicle = load_vehicle(scenario.vehicle)
         except VehicleFileError as error:
             raise ScenarioError(f"{scenario.source}: key 'vehicle': {error}") from None
+        if scenario.rangefinder and vehicle.rangefinder is None:
+            raise ScenarioError(f"{scenario.source}: key 'rangefinder': vehicle "
+                                f"{vehicle.name!r} has no [rangefinder] table")  # fmt: skip
         environment = scenario.environment
         home = environment.home
         self.log = RigLog(
@@ -321,9 +324,6 @@ class _Loop:
             attitude_quat=yaw_quat(math.radians(start.yaw_deg)),
             battery_voltage_v=scenario.start.battery_voltage_v,
         )
-        if scenario.rangefinder and vehicle.rangefinder is None:
-            raise ScenarioError(f"{scenario.source}: key 'rangefinder': vehicle "
-                                f"{vehicle.name!r} has no [rangefinder] table")  # fmt: skip
         self.sensors = SensorSuite(
             vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
             self.rates.baro_hz, RANGEFINDER_RATE_HZ if scenario.rangefinder else None,

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import pyulog
 
-from rig.errors import AutopilotStalled
+from rig.errors import AutopilotStalled, ScenarioError
 from rig.lockstep.loop import AUTOPILOT_STOP_GRACE_S, RunOptions, run_scenario
 from rig.mavlink.px4_api import HilSensorFields, Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
@@ -135,6 +135,16 @@ def test_rangefinder_reaches_the_autopilot_as_distance_sensor_one_cycle_late(
     assert np.abs(distances - (height + 0.10)).max() < 4 * 0.025 + 0.005
     logged = data(log, "distance_sensor")
     assert logged["current_distance"] == pytest.approx(distances, abs=1e-6)
+
+
+def test_a_rangefinder_on_a_vehicle_without_one_is_one_line_naming_the_key(tmp_path):
+    document = {"name": "t", "vehicle": "f450_low_precision", "duration_s": 1.0, "seed": 1,
+                "rangefinder": True}  # fmt: skip
+    with pytest.raises(ScenarioError) as error:
+        run_scenario(scenario_from_dict(document), RunOptions(out_dir=tmp_path / "run"))
+    assert str(error.value) == (
+        "<dict>: key 'rangefinder': vehicle 'F450 low precision' has no [rangefinder] table"
+    )
 
 
 def test_pwm_carries_the_commanded_throttle_and_the_vehicle_climbs(tmp_path, free_instance):
