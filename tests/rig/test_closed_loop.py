@@ -48,10 +48,11 @@ def test_hover_holds_altitude_with_rtl_sensors(tmp_path, free_instance):
     and hold: the true altitude stays within ±0.5 m of 3 m for the last 3 s. Every GPS fix
     went through the u-blox core's UART and PX4's decoder: rig.ulg logs it when the
     autopilot got it, 8.7 ms of line after the receiver sent it, so at the third 4 ms
-    frame on, each a 3D fix."""
+    frame on, each a 3D fix. The LIDAR-Lite on the RTL's I2C bus reads the hover's height
+    (plus its 0.10 m mount) every 50 ms, each reading one cycle old."""
     result, rig_log, _ = fly(
         tmp_path, free_instance, "rtl_hover", takeoff(3.0), 9.0, sensor_layer="rtl",
-        rates={"imu_hz": 250},
+        rates={"imu_hz": 250}, rangefinder=True,
     )  # fmt: skip
     assert result.frames == 9 * 250
     altitude = -truth_at(rig_log, np.arange(6.0, 9.0, 0.05))["z"]
@@ -61,6 +62,14 @@ def test_hover_holds_altitude_with_rtl_sensors(tmp_path, free_instance):
     assert len(gps["timestamp"]) >= 85  # 10 Hz for 9 s, less the receiver's latency
     assert set(gps["timestamp"] - gps["timestamp_sample"]) == {12_000}
     assert set(gps["fix_type"]) == {3}
+    ranges = rig_log.get_dataset("distance_sensor").data
+    t = ranges["timestamp"] / 1e6
+    # 20 Hz: the cycle at the first frame only starts an acquisition, the ones on the
+    # 50 ms grid up to 9 s (at the first 4 ms frame at or after each) collect.
+    assert len(t) == 9 * 20
+    hover = (t > 6.05) & (t <= 9.0)
+    height = -truth_at(rig_log, t[hover] - 0.05)["z"]
+    assert np.abs(ranges["current_distance"][hover] - (height + 0.10)).max() < 0.1
 
 
 def test_level_step_settles(tmp_path, free_instance):
