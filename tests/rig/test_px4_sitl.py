@@ -329,17 +329,18 @@ def test_a_bad_param_for_px4_is_one_line(text):
     assert parse_assignments(("MPC_XY_P=1.5", "SDLOG_MODE=0")) == {"MPC_XY_P": 1.5, "SDLOG_MODE": 0}
 
 
+@pytest.mark.parametrize("layer", ["tlm", pytest.param("rtl", marks=pytest.mark.cosim)])
 def test_px4_takes_the_lidarlite_as_its_distance_sensor_and_lands_on_it(
-    tmp_path, free_instance, px4_dir
+    tmp_path, free_instance, px4_dir, layer
 ):
     """The scenario's LIDAR-Lite reaches PX4 as DISTANCE_SENSOR: PX4 publishes
     ``distance_sensor`` at the driver's 20 Hz as its own ll40ls driver would (downward,
     5 cm..25 m, quality 100), reading the truth's height plus the sensor's 0.10 m; EKF2
     turns it into ``dist_bottom`` and, hovering low and slow, fuses it as height
     (``cs_rng_hgt``); the landing crawls the last metre at MPC_LAND_CRWL (0.3 m/s) and
-    PX4 lands and disarms."""
+    PX4 lands and disarms. On the TLM chips and on the compiled RTL."""
     result = fly_px4(tmp_path, free_instance, px4_dir, "rangefinder", 40.0,
-                     _takeoff_hover_land(10.0, 26.0), rangefinder=True,
+                     _takeoff_hover_land(10.0, 26.0), rangefinder=True, sensor_layer=layer,
                      rates={"imu_hz": 250})  # fmt: skip
     rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
     truth_t, truth = _topic(rig_log, "vehicle_local_position_groundtruth")
