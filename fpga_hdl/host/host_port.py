@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from amaranth.hdl import Module, Shape, Signal
+from amaranth.hdl import Module, Shape, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -67,6 +67,27 @@ class CoherentLatch(wiring.Component):
         with m.If(self.offered_stb):  # a strobe in the copy cycle re-arms: latest wins
             m.d.sync += self.pending.eq(1)
         return m
+
+
+def chip_sample_latch(
+    m: Module,
+    chip: wiring.Component,
+    layout: data.Layout,
+    *,
+    busy: Value,
+    offered_stb: Value | None = None,
+) -> CoherentLatch:
+    """A chip core's double buffer (submodule ``latch``), wired as every core has it: the
+    core's ``sample``/``sample_stb`` offered (``offered_stb`` instead of the strobe when the
+    core gates it), ``busy`` while its bus is in a transaction, ``sample_pending`` out."""
+    m.submodules.latch = latch = CoherentLatch(layout)
+    m.d.comb += [
+        latch.offered.eq(chip.sample),
+        latch.offered_stb.eq(chip.sample_stb if offered_stb is None else offered_stb),
+        latch.busy.eq(busy),
+        chip.sample_pending.eq(latch.pending),
+    ]
+    return latch
 
 
 @dataclass(frozen=True)

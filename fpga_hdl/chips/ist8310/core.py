@@ -8,7 +8,7 @@ from fpga_hdl.buses.i2c_target import I2cTarget, TargetSampling
 from fpga_hdl.buses.signatures import BUS_FAULT, I2C
 from fpga_hdl.chips.ist8310 import regs
 from fpga_hdl.chips.ist8310.regs import Register
-from fpga_hdl.host.host_port import CoherentLatch
+from fpga_hdl.host.host_port import chip_sample_latch
 
 __all__ = ["Ist8310Core"]
 
@@ -76,13 +76,7 @@ class Ist8310Core(wiring.Component):
         wiring.connect(m, wiring.flipped(self.fault), target.fault)
 
         # Double buffer: the visible sample changes only between transactions.
-        m.submodules.latch = latch = CoherentLatch(regs.SAMPLE_LAYOUT)
-        m.d.comb += [
-            latch.offered.eq(self.sample),
-            latch.offered_stb.eq(self.sample_stb),
-            latch.busy.eq(target.busy),
-            self.sample_pending.eq(latch.pending),
-        ]
+        latch = chip_sample_latch(m, self, regs.SAMPLE_LAYOUT, busy=target.busy)
         visible = latch.visible
 
         stored = {reg: Signal(8, name=reg.name.lower()) for reg in regs.STORED_REGISTERS}

@@ -8,7 +8,7 @@ from fpga_hdl.buses.i2c_target import I2cTarget, TargetSampling
 from fpga_hdl.buses.signatures import BUS_FAULT, I2C
 from fpga_hdl.chips.lidarlite import regs
 from fpga_hdl.chips.lidarlite.regs import Register
-from fpga_hdl.host.host_port import CoherentLatch
+from fpga_hdl.host.host_port import chip_sample_latch
 
 __all__ = ["LidarLiteCore"]
 
@@ -72,13 +72,7 @@ class LidarLiteCore(wiring.Component):
         wiring.connect(m, wiring.flipped(self.i2c), target.i2c)
         wiring.connect(m, wiring.flipped(self.fault), target.fault)
 
-        m.submodules.latch = latch = CoherentLatch(regs.SAMPLE_LAYOUT)
-        m.d.comb += [
-            latch.offered.eq(self.sample),
-            latch.offered_stb.eq(self.sample_stb),
-            latch.busy.eq(target.busy),
-            self.sample_pending.eq(latch.pending),
-        ]
+        latch = chip_sample_latch(m, self, regs.SAMPLE_LAYOUT, busy=target.busy)
 
         stored = {
             reg: Signal(8, init=init, name=reg.name.lower())

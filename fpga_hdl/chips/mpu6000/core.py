@@ -22,7 +22,7 @@ from amaranth.lib.wiring import In, Out
 from fpga_hdl.buses.signatures import BUS_FAULT, SPI
 from fpga_hdl.buses.spi_target import add_spi_engine, check_sys_clk_for_spi
 from fpga_hdl.chips.mpu6000 import regs
-from fpga_hdl.host.host_port import CoherentLatch
+from fpga_hdl.host.host_port import chip_sample_latch
 
 
 def _saturate_int16(value):
@@ -79,13 +79,9 @@ class Mpu6000(wiring.Component):
         m.submodules.sleep_sync = FFSynchronizer(
             config[regs.Reg.PWR_MGMT_1][6], sleeping, o_domain="sync", init=1
         )
-        m.submodules.latch = latch = CoherentLatch(regs.SAMPLE_LAYOUT)
-        m.d.comb += [
-            latch.offered.eq(self.sample),
-            latch.offered_stb.eq(self.sample_stb & ~sleeping),
-            latch.busy.eq(engine.busy),
-            self.sample_pending.eq(latch.pending),
-        ]
+        latch = chip_sample_latch(
+            m, self, regs.SAMPLE_LAYOUT, busy=engine.busy, offered_stb=self.sample_stb & ~sleeping
+        )
 
         address = Signal(7)
         writing = Signal()

@@ -19,7 +19,7 @@ from amaranth.lib.wiring import In, Out
 from fpga_hdl.buses.signatures import BUS_FAULT, SPI
 from fpga_hdl.buses.spi_target import add_spi_engine, check_sys_clk_for_spi
 from fpga_hdl.chips.ms5611 import regs
-from fpga_hdl.host.host_port import CoherentLatch
+from fpga_hdl.host.host_port import chip_sample_latch
 
 
 class Ms5611(wiring.Component):
@@ -70,13 +70,7 @@ class Ms5611(wiring.Component):
     def elaborate(self, platform) -> Module:
         m = Module()
         engine = add_spi_engine(m, self)
-        m.submodules.latch = latch = CoherentLatch(regs.SAMPLE_LAYOUT)
-        m.d.comb += [
-            latch.offered.eq(self.sample),
-            latch.offered_stb.eq(self.sample_stb),
-            latch.busy.eq(engine.busy),
-            self.sample_pending.eq(latch.pending),
-        ]
+        latch = chip_sample_latch(m, self, regs.SAMPLE_LAYOUT, busy=engine.busy)
         time_us = Signal(32)  # ``now_us`` as the bus sees it: frozen during a transfer
         with m.If(~engine.busy):
             m.d.sync += time_us.eq(self.now_us)

@@ -10,7 +10,7 @@ from fpga_hdl.buses.signatures import BUS_FAULT
 from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx, divider_for
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.ubx import Source
-from fpga_hdl.host.host_port import CoherentLatch
+from fpga_hdl.host.host_port import chip_sample_latch
 
 __all__ = ["BAUD_RATES", "RESET_BAUD", "UbloxM8Core"]
 
@@ -112,14 +112,8 @@ class UbloxM8Core(wiring.Component):
             self.tx.eq(uart_tx.tx | self.fault.mute),
         ]
 
-        m.submodules.latch = latch = CoherentLatch(ubx.SAMPLE_LAYOUT)
         sending = Signal()
-        m.d.comb += [
-            latch.offered.eq(self.sample),
-            latch.offered_stb.eq(self.sample_stb),
-            latch.busy.eq(sending),
-            self.sample_pending.eq(latch.pending),
-        ]
+        latch = chip_sample_latch(m, self, ubx.SAMPLE_LAYOUT, busy=sending)
 
         # --- input: PX4's UBX decoder, in gateware ---------------------------------------
         state = Signal(range(9))
