@@ -377,7 +377,7 @@ class _Loop:
             time_s = self.run_us / 1e6
             chip_frame, out = self._read_chips(readings)
             read = clock()
-            messages = self._sensor_messages(readings, out)
+            messages = self._sensor_messages(out)
             if link.state_interval_us and self.time_us >= state_next_us:
                 state_next_us = self.time_us + link.state_interval_us
                 messages.append(self._state_message(truth))
@@ -479,9 +479,8 @@ class _Loop:
             self.log.rangefinder(self.time_us, out.range.distance_m, out.range.signal_quality,
                                  RANGEFINDER_LIMITS_M)  # fmt: skip
 
-    def _sensor_messages(
-        self, readings: SensorReadings, out: ChipReadout
-    ) -> list[mavlink.MAVLink_message]:
+    def _sensor_messages(self, out: ChipReadout) -> list[mavlink.MAVLink_message]:
+        """What the drivers read this frame, as PX4's simulator messages."""
         messages = [
             hil_sensor(
                 self.link.mav, self.time_us, accel_mps2=out.accel_mps2, gyro_radps=out.gyro_radps,
