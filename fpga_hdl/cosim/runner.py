@@ -28,11 +28,13 @@ for it.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -142,44 +144,59 @@ def build_simulation(
         raise RuntimeError(f"cannot build for {simulator}: {reason}")
     simulator_environment(simulator)
     generated = generate_verilog(component, toplevel)
-    sources = [generated.path]
-    for name, text in sorted((extra_verilog or {}).items()):
-        digest = hashlib.sha256(text.encode()).hexdigest()[:16]
-        path = generated.path.parent / f"{name}-{digest}.v"
-        if not path.is_file():
-            path.write_text(text)
-        sources.append(path)
     build_args = []
     if simulator == "verilator":
         build_args = [*VERILATOR_ARGS, *(VERILATOR_TIMING_ARGS if extra_verilog else ())]
-        vlt = generated.path.with_suffix(".vlt")
-        if not vlt.is_file():
-            vlt.write_text(_public_ports_vlt(toplevel))
-        sources.append(vlt)
-    # The folder is keyed by everything that goes into the build.
-    key = hashlib.sha256("\n".join([*map(str, sources), *build_args]).encode()).hexdigest()[:16]
-    build_dir = BUILD_DIR / "cocotb" / simulator / f"{toplevel}-{key}"
-    if not (build_dir / _BUILD_DONE).is_file():
-        # The compiler's hundreds of lines go to a file, not between a benchmark's figures.
-        build_dir.mkdir(parents=True, exist_ok=True)
-        log_file = build_dir / "build.log"
-        try:
-            get_runner(simulator).build(
-                sources=sources,
-                hdl_toplevel=toplevel,
-                build_dir=build_dir,
-                build_args=build_args,
-                timescale=TIMESCALE,
-                always=True,
-                log_file=log_file,
-            )
-        except (SystemExit, subprocess.CalledProcessError) as error:
-            tail = log_file.read_text(errors="replace")[-4000:] if log_file.is_file() else ""
-            raise RuntimeError(
-                f"{simulator} build of {toplevel} failed; log {log_file}\n{tail}"
-            ) from error
-        (build_dir / _BUILD_DONE).write_text(f"{generated.path}\n")
+    # One build at a time per toplevel: parallel test workers and campaign cases that ask
+    # for the same build wait for the first one instead of compiling into the same folder.
+    lock_path = BUILD_DIR / "cocotb" / simulator / f"{toplevel}.lock"
+    lock_path.parent.mkdir(parents=True, exist_ok=True)
+    with lock_path.open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        sources = [generated.path]
+        for name, text in sorted((extra_verilog or {}).items()):
+            path = generated.path.parent / f"{name}-{_digest(text)}.v"
+            if not path.is_file():
+                path.write_text(text)
+            sources.append(path)
+        if simulator == "verilator":
+            vlt = generated.path.with_suffix(".vlt")
+            if not vlt.is_file():
+                vlt.write_text(_public_ports_vlt(toplevel))
+            sources.append(vlt)
+        # The folder is keyed by everything that goes into the build.
+        key = "\n".join([*map(str, sources), *build_args])
+        build_dir = BUILD_DIR / "cocotb" / simulator / f"{toplevel}-{_digest(key)}"
+        if not (build_dir / _BUILD_DONE).is_file():
+            _build(simulator, toplevel, sources, build_args, build_dir)
     return generated, build_dir
+
+
+def _digest(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _build(
+    simulator: str, toplevel: str, sources: list[Path], build_args: list[str], build_dir: Path
+) -> None:
+    # The compiler's hundreds of lines go to a file, not between a benchmark's figures.
+    build_dir.mkdir(parents=True, exist_ok=True)
+    log_file = build_dir / "build.log"
+    try:
+        get_runner(simulator).build(
+            sources=sources,
+            hdl_toplevel=toplevel,
+            build_dir=build_dir,
+            build_args=build_args,
+            timescale=TIMESCALE,
+            always=True,
+            log_file=log_file,
+        )
+    except (SystemExit, subprocess.CalledProcessError) as error:
+        tail = log_file.read_text(errors="replace")[-4000:] if log_file.is_file() else ""
+        message = f"{simulator} build of {toplevel} failed; log {log_file}\n{tail}"
+        raise RuntimeError(message) from error
+    (build_dir / _BUILD_DONE).write_text(f"{sources[0]}\n")
 
 
 def _public_ports_vlt(toplevel: str) -> str:
@@ -197,16 +214,19 @@ def run_cocotb(
     extra_env: Mapping[str, str] | None = None,
     testcase: str | None = None,
     extra_verilog: Mapping[str, str] | None = None,
-) -> Path:
+) -> None:
     """Run cocotb test module ``test_module`` (a file in ``module_dir``) on ``component``.
 
-    Returns the results XML path; raises :class:`CosimFailure` if any cocotb test failed.
+    Raises :class:`CosimFailure` if any cocotb test failed. Each run has a folder of its
+    own (parallel runs of one module do not share results), removed after a pass and kept
+    after a failure, whose message names its results and log.
     """
     _, build_dir = build_simulation(
         component, toplevel, simulator=simulator, extra_verilog=extra_verilog
     )
     runner = get_runner(simulator)
-    test_dir = build_dir / "runs" / test_module
+    (build_dir / "runs").mkdir(exist_ok=True)
+    test_dir = Path(tempfile.mkdtemp(prefix=f"{test_module}-", dir=build_dir / "runs"))
     results_xml = test_dir / "results.xml"
     log_file = test_dir / "sim.log"
     env = {
@@ -233,7 +253,7 @@ def run_cocotb(
         raise CosimFailure(_failure_message(test_module, simulator, results_xml, log_file)) from exc
     finally:
         sys.path.remove(str(module_dir))
-    return results_xml
+    shutil.rmtree(test_dir)
 
 
 def _failure_message(test_module: str, simulator: str, results_xml: Path, log: Path) -> str:
