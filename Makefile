@@ -18,8 +18,11 @@ $(STAMP): pyproject.toml
 hil-sim: $(STAMP)
 	$(BIN)/rig hil-sim --view $(if $(PX4_DIR),--autopilot px4 --px4 $(PX4_DIR))
 
+# The test files are shared out between TEST_WORKERS processes (pytest-xdist; a file's
+# tests stay together, so its module fixtures run once); TEST_WORKERS=0 runs them in one.
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

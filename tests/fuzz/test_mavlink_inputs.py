@@ -21,9 +21,10 @@ from rig.autopilots.reference.flight_controller import FlightController
 from rig.autopilots.reference.gcs import GroundStation, MavlinkLink
 from rig.errors import AutopilotProtocolError
 from rig.mavlink.ground_link import GroundLink
-from rig.mavlink.px4_api import LOCKSTEP_FLAG, Ports, free_instance, mavlink
+from rig.mavlink.px4_api import LOCKSTEP_FLAG, Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts, SimulatorLink
 from tests.fuzz.inputs import mavlink_datagrams, one_line
+from tests.instances import free_test_instance
 
 _PACKER = mavlink.MAVLink(None, 1, 1)
 
@@ -32,7 +33,7 @@ class _SimulatorPeer:
     """A simulator link with a connected autopilot socket, kept across examples."""
 
     def __init__(self) -> None:
-        ports = Ports(free_instance(80, 10))
+        ports = Ports(free_test_instance())
         self.link = SimulatorLink(ports, LinkTimeouts(connect_s=5, answer_s=2))
         self.autopilot = socket.create_connection(("127.0.0.1", ports.simulator_tcp))
         self.link.accept(answers_every_frame=True)
@@ -66,7 +67,7 @@ def test_garbage_before_an_answer_on_the_simulator_link(data: bytes) -> None:
 
 @functools.cache
 def _ground_link() -> tuple[GroundLink, socket.socket]:
-    ports = Ports(free_instance(80, 10))
+    ports = Ports(free_test_instance())
     link = GroundLink(ports, PX4_DEFAULT_HOME)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sender.connect(("127.0.0.1", ports.onboard_remote_udp))
@@ -84,7 +85,7 @@ def test_garbage_on_the_rigs_onboard_link(data: bytes) -> None:
 
 @functools.cache
 def _reference_autopilot() -> tuple[GroundStation, MavlinkLink, socket.socket]:
-    ports = Ports(free_instance(80, 10))
+    ports = Ports(free_test_instance())
     link = MavlinkLink("gcs", ports.gcs_local_udp, 0, 1)
     station = GroundStation(FlightController(), [link])
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

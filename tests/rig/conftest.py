@@ -9,8 +9,8 @@ import pytest
 
 from rig.errors import AutopilotNotConnected
 from rig.mavlink.px4_api import Ports
-from rig.mavlink.px4_api import free_instance as find_free_instance
 from rig.mavlink.simulator_link import LinkTimeouts, SimulatorLink
+from tests.instances import free_test_instance, worker_instances
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 #: Short bounds so a broken test fails in seconds, not minutes.
@@ -19,18 +19,20 @@ TEST_TIMEOUTS = LinkTimeouts(connect_s=10, answer_s=2)
 
 @pytest.fixture
 def listening_link() -> Iterator[Callable[..., SimulatorLink]]:
-    """Open a SimulatorLink on the first free instance in 60..99 (other suites use low ones)."""
+    """Open a SimulatorLink on the first free instance of this worker's 60..99 (other
+    suites use low ones)."""
     links: list[SimulatorLink] = []
 
     def open_link(timeouts: LinkTimeouts = TEST_TIMEOUTS, **kw):
-        for instance in range(60, 100):
+        instances = worker_instances(60, 40)
+        for instance in instances:
             try:
                 link = SimulatorLink(Ports(instance), timeouts, **kw)
             except AutopilotNotConnected:
                 continue
             links.append(link)
             return link
-        raise RuntimeError("no free simulator port in 4620..4659")
+        raise RuntimeError(f"no free simulator port for instances {instances}")
 
     yield open_link
     for link in links:
@@ -58,4 +60,4 @@ def start_double() -> Iterator[Callable[..., subprocess.Popen]]:
 @pytest.fixture
 def free_instance() -> Callable[[], int]:
     """Call it for a rig instance whose ports are free (other suites use low instances)."""
-    return lambda: find_free_instance(60, 40)  # 60..99; campaigns default to 20..59
+    return free_test_instance  # 60..99; campaigns default to 20..59

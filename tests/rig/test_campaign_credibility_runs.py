@@ -16,8 +16,11 @@ from rig.apps.campaign import (
     run_campaign,
 )
 from rig.apps.campaign_report import write_report
+from tests.instances import worker_instances
 
 pytestmark = pytest.mark.closed_loop
+#: This worker's instances (tests.instances): campaigns of two workers never share one.
+CAMPAIGN_INSTANCES = worker_instances(20, 40)
 
 SCENARIO = (
     'name = "short_hover"\nvehicle = "f450_high_precision"\nduration_s = 3.0\nseed = 1\n'
@@ -44,6 +47,8 @@ def campaign(tmp_path, seeds, credibility=None, criteria=None):
         "name": "scored",
         "scenario": str(tmp_path / "short_hover.toml"),
         "case_timeout_s": 60.0,
+        "first_instance": CAMPAIGN_INSTANCES.start,
+        "instances": len(CAMPAIGN_INSTANCES),
         "axes": {"seed": seeds},
         **({"credibility": credibility} if credibility else {}),
         **({"criteria": criteria} if criteria else {}),

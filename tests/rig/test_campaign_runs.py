@@ -16,8 +16,11 @@ from dask.distributed import LocalCluster
 
 from rig.apps.campaign import campaign_executor, campaign_from_dict, read_results, run_campaign
 from rig.apps.campaign_report import write_report
+from tests.instances import worker_instances
 
 pytestmark = pytest.mark.closed_loop
+#: This worker's instances (tests.instances): campaigns of two workers never share one.
+CAMPAIGN_INSTANCES = worker_instances(20, 40)
 
 CASE_TIMEOUT_S = 15.0
 KILLED, FROZEN = 3, 6  # case indices whose autopilot the test sabotages
@@ -37,8 +40,8 @@ def campaign(tmp_path: Path):
             "scenario": str(scenario),
             "case_timeout_s": CASE_TIMEOUT_S,
             "answer_timeout_s": 60.0,  # longer than the case timeout: a stall is a hang
-            "first_instance": 20,
-            "instances": 40,
+            "first_instance": CAMPAIGN_INSTANCES.start,
+            "instances": len(CAMPAIGN_INSTANCES),
             "axes": {
                 # m0_weak's two efficiencies make it two levels of the fault axis
                 "fault": ["none", "m0_lost", "m0_weak"],

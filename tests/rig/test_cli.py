@@ -11,6 +11,7 @@ import pyulog
 from rig.apps.cli import main
 from rig.mavlink.px4_api import free_instance as find_free_instance
 from rig.processes import restore_sigint
+from tests.instances import worker_instances
 
 
 def test_missing_scenario_is_one_line_on_stderr(capsys, tmp_path):
@@ -71,7 +72,7 @@ def test_two_rigs_fly_side_by_side_with_mavsdks_port_free(tmp_path, free_instanc
     import socket
 
     first = free_instance()
-    second = find_free_instance(first + 1, 99 - first)
+    second = find_free_instance(first + 1, worker_instances(60, 40).stop - first - 1)
     mavsdk = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
     for sock, instance in zip(mavsdk, (first, second), strict=True):
         sock.bind(("127.0.0.1", 14540 + instance))

@@ -16,6 +16,7 @@ from quad_model.frames import euler_from_quat, geodetic_to_ned
 from rig.errors import GroundLinkError
 from rig.mavlink.ground_link import PX4_MAIN_MODE_OFFBOARD, GroundLink, sweep_pitch_rad
 from rig.mavlink.px4_api import Ports, mavlink
+from tests.instances import worker_instances
 
 
 class ScriptedAutopilot(threading.Thread):
@@ -83,7 +84,7 @@ def pair():
     made = []
 
     def make(**peer_kw):
-        for instance in range(60, 100):
+        for instance in worker_instances(60, 40):
             ports = Ports(instance)
             try:
                 peer = ScriptedAutopilot(ports, **peer_kw)
@@ -142,7 +143,7 @@ def test_refusal_quotes_the_autopilot_reason(pair):
 
 
 def test_missing_ack_is_a_bounded_wait_with_a_clear_error():
-    for instance in range(60, 100):
+    for instance in worker_instances(60, 40):
         try:
             link = GroundLink(Ports(instance), PX4_DEFAULT_HOME, ack_timeout_s=0.2)
             break
@@ -177,7 +178,7 @@ def test_offboard_setpoint_travels_before_the_mode_switch(pair):
 
 
 def test_attitude_setpoint_carries_the_pitch_as_a_quaternion():
-    for instance in range(60, 100):
+    for instance in worker_instances(60, 40):
         try:
             link = GroundLink(Ports(instance), PX4_DEFAULT_HOME)
             break
@@ -275,7 +276,7 @@ def test_a_tolerated_refusal_is_the_result_not_an_error(pair):
 def test_velocity_rates_and_quaternion_setpoints_say_what_they_control():
     """PX4's type_mask semantics (MAVLink common.xml POSITION_TARGET_TYPEMASK,
     ATTITUDE_TARGET_TYPEMASK), checked after a round trip through pymavlink."""
-    for instance in range(60, 100):
+    for instance in worker_instances(60, 40):
         try:
             link = GroundLink(Ports(instance), PX4_DEFAULT_HOME)
             break

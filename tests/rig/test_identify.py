@@ -24,9 +24,9 @@ from rig.apps.identify import (
 from rig.autopilots.reference.flight_log import TOPICS as AUTOPILOT_TOPICS
 from rig.lockstep.loop import RunOptions, run_scenario
 from rig.logs.ulog_writer import ULogWriter
-from rig.mavlink.px4_api import free_instance
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
+from tests.instances import free_test_instance
 
 #: Real flight logs carried with the project (the x500_log fixture's folder; a module-scoped
 #: fixture cannot use the function-scoped one).
@@ -125,7 +125,7 @@ def synthetic_flight(tmp_path_factory):
     scenario = scenario_from_dict({"name": "identify", "vehicle": str(truth_path),
                                    "duration_s": 34.0, "seed": 5, "sensor_layer": "tlm",
                                    "commands": commands})  # fmt: skip
-    options = RunOptions(instance=free_instance(60, 40), out_dir=folder / "run",
+    options = RunOptions(instance=free_test_instance(), out_dir=folder / "run",
                          timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
     result = run_scenario(scenario, options)
     return folder, load_vehicle(truth_path), result.autopilot_log, result.rig_log

@@ -26,7 +26,8 @@ from mavsdk import System
 from mavsdk.mission import MissionItem, MissionPlan
 
 from rig.autopilots.px4 import PX4_DIR_ENV, find_px4
-from rig.mavlink.px4_api import Ports, free_instance
+from rig.mavlink.px4_api import Ports
+from tests.instances import free_test_instance
 from tests.rig.background_rig import RigInBackground
 
 pytestmark = pytest.mark.closed_loop
@@ -150,7 +151,7 @@ def test_takeoff_and_land_as_the_example_with_px4(tmp_path, px4_dir):
     and lands. A client or rig that hangs fails within its time bound. PX4 reports its global
     position and home about a second before its pre-arm checks pass, when it would refuse the
     example's arm, so this client also waits for ``is_armable``."""
-    instance = free_instance(1, 9)  # PX4 talks to MAVSDK on 14540+i only for i < 10
+    instance = free_test_instance(1, 9)  # PX4 talks to MAVSDK on 14540+i only for i < 10
     rig = RigInBackground(tmp_path, instance, duration_s=80.0, speed=2.0, autopilot="px4",
                           px4_dir=px4_dir)  # fmt: skip
     flight = _takeoff_and_land(instance, armable=True)

@@ -33,6 +33,7 @@ from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import SetMode, SetpointTrack, Track, UploadMission
 from rig.scenarios.script import HEARTBEAT_PERIOD_US, STICKS_PERIOD_US, CommandScript
+from tests.instances import free_test_instance
 
 LOGS = Path(__file__).resolve().parents[2] / "data/flight_logs"
 X500 = LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
@@ -315,12 +316,11 @@ def flown(tmp_path_factory):
     build = find_px4()
     if build is None:
         pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl)")
-    from rig.mavlink.px4_api import free_instance
 
     out = tmp_path_factory.mktemp("px4_replay")
     plan = plan_replay(X500, ReplayOptions(autopilot="px4", end_s=WINDOW_END_S, seed=3))
     timeouts = LinkTimeouts(connect_s=60, answer_s=30)
-    result = run_replay(plan, RunOptions(instance=free_instance(60, 40), out_dir=out,
+    result = run_replay(plan, RunOptions(instance=free_test_instance(), out_dir=out,
                                          timeouts=timeouts))  # fmt: skip
     return (out, pyulog.ULog(str(X500)), pyulog.ULog(str(result.autopilot_log)),
             pyulog.ULog(str(result.rig_log)))  # fmt: skip

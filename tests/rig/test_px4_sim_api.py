@@ -5,6 +5,7 @@ import socket
 import pytest
 
 from rig.mavlink.px4_api import HilSensorFields, Ports, free_instance, mavlink
+from tests.instances import free_test_instance
 
 
 def test_fields_updated_masks_are_px4s():
@@ -46,7 +47,7 @@ def test_dialect_is_mavlink2_with_hil_sensor_id_extension():
 
 
 def test_free_instance_skips_an_instance_whose_port_is_taken():
-    first = free_instance(70, 10)
+    first = free_test_instance()
     with socket.socket() as held:
         held.bind(("127.0.0.1", Ports(first).simulator_tcp))
         assert free_instance(first, 2) == first + 1

@@ -21,7 +21,7 @@ from rig.apps.replay import ReplayError, ReplayOptions, plan_replay, run_replay
 from rig.chips.pwm import PwmOutput
 from rig.lockstep.loop import RunOptions
 from rig.logs.ulog_writer import ULogWriter
-from rig.mavlink.px4_api import free_instance as find_free_instance
+from tests.instances import free_test_instance
 
 #: The X500 log's first timestamp (a stale config_overrides sample the logger wrote first).
 X500_FIRST_S = 407.404345
@@ -60,7 +60,7 @@ def _fly(x500_path: Path, out: Path, instance: int, **options) -> tuple[pyulog.U
 def takeoff(x500_path, tmp_path_factory):
     """407.4 → 420 s with the velocity drive: armed idle, the vz_sp step, the climb."""
     out = tmp_path_factory.mktemp("takeoff")
-    return out, *_fly(x500_path, out, find_free_instance(60, 40), end_s=420.0)
+    return out, *_fly(x500_path, out, free_test_instance(), end_s=420.0)
 
 
 # -- the plan ---------------------------------------------------------------------------------

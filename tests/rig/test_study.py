@@ -18,7 +18,7 @@ from credibility.assess import Assessment, TimeResult, assess
 from credibility.plan import load_plan
 from rig.apps.replay import ReplayOptions, plan_replay, run_replay
 from rig.lockstep.loop import RunOptions
-from rig.mavlink.px4_api import free_instance
+from tests.instances import free_test_instance
 
 REPO = Path(__file__).resolve().parents[2]
 STUDY_PLAN = REPO / "credibility/plans/x500_validation.toml"
@@ -35,7 +35,7 @@ def replays(tmp_path_factory) -> dict[str, Path]:
     for model, vehicle in MODELS.items():
         plan = plan_replay(X500_LOG, ReplayOptions(end_s=END_S, vehicle=vehicle, seed=8))
         out = tmp_path_factory.mktemp(f"replay_{model}")
-        result = run_replay(plan, RunOptions(instance=free_instance(60, 40), out_dir=out))
+        result = run_replay(plan, RunOptions(instance=free_test_instance(), out_dir=out))
         logs[model] = result.autopilot_log
     return logs
 

@@ -26,9 +26,9 @@ from websockets.sync.client import connect
 from rig.apps.cli import main
 from rig.apps.view import ViewServer, load_recording, mode_name
 from rig.lockstep.loop import Progress, RunOptions, RunResult, run_scenario
-from rig.mavlink.px4_api import free_instance
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
+from tests.instances import free_test_instance
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
@@ -105,7 +105,7 @@ def live_flight(browser, tmp_path_factory) -> LiveFlight:
 
         def fly() -> None:
             try:
-                outcome["result"] = _fly(free_instance(60, 40), folder / "run", report)
+                outcome["result"] = _fly(free_test_instance(), folder / "run", report)
             except BaseException as error:  # reported by the test, not lost in the thread
                 outcome["error"] = error
 
@@ -173,7 +173,7 @@ def test_live_page_gets_the_last_frame_and_says_the_run_ended(live_flight):
 @pytest.mark.closed_loop
 def test_the_view_leaves_the_log_unchanged(live_flight, tmp_path):
     """Same seed, same rig.ulg bytes, with or without the view (and at any speed)."""
-    plain = _fly(free_instance(60, 40), tmp_path / "plain", speed=math.inf)
+    plain = _fly(free_test_instance(), tmp_path / "plain", speed=math.inf)
     assert plain.rig_log.read_bytes() == live_flight.result.rig_log.read_bytes()
 
 
@@ -279,7 +279,7 @@ def test_a_taken_port_is_a_warning_and_the_run_goes_on(capsys, tmp_path):
     with socket.create_server(("127.0.0.1", 0)) as taken:
         port = taken.getsockname()[1]
         code = main(["run", str(scenario), "--view", "--view-port", str(port), "--instance",
-                     str(free_instance(60, 40)), "--out", str(tmp_path / "run")])  # fmt: skip
+                     str(free_test_instance()), "--out", str(tmp_path / "run")])  # fmt: skip
     assert code == 0
     err = capsys.readouterr().err
     warning = [line for line in err.splitlines() if "live view" in line]
