@@ -16,8 +16,8 @@ Why the bare chip and not a board: SensorTop's ports are the FPGA's pins, 108 si
 of them the host port. A board top (the ULX3S's header has 56 GPIOs) would need a bridge
 in front of the host port, a UART or SPI register file the rig does not have, and its
 figures would no longer be SensorTop's. The LFE5U-85F in CABGA381 bonds 205 user I/Os, so
-every port is a package pin; nextpnr chooses the pins. The three clocks come in on pins
-(``clk``, ``pwm_clk``, ``spi_sclk``), as SensorTop takes them.
+every port is a package pin; nextpnr chooses the pins. The four clocks come in on pins
+(``clk``, ``pwm_clk``, ``uart_clk``, ``spi_sclk``), as SensorTop takes them.
 
 nextpnr times each clock alone and leaves paths between clocks unconstrained. Two kinds
 of crossing have a real budget in this design (:func:`crossing_budgets`); the worst path
@@ -49,7 +49,13 @@ from fpga_hdl.build import BUILD_DIR
 from fpga_hdl.buses.spi_target import CS_SYNC_STAGES
 from fpga_hdl.chips.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.chips.ms5611 import regs as ms5611_regs
-from fpga_hdl.top import PWM_RESULT_SYNC_STAGES, SYS_CLK_HZ, SensorTop
+from fpga_hdl.top import (
+    PWM_RESULT_SYNC_STAGES,
+    SYS_CLK_HZ,
+    UART_CLK_HZ,
+    UART_SYNC_STAGES,
+    SensorTop,
+)
 
 SYNTH_DIR = BUILD_DIR / "synth"
 TOP_NAME = "sensor_top"
@@ -166,6 +172,12 @@ def clock_requirements(sys_clk_hz: float = SYS_CLK_HZ) -> tuple[ClockRequirement
             "the finest PWM tick SensorTop takes: sync / 4 (default 1 MHz)",
         ),
         ClockRequirement(
+            "uart",
+            "uart_clk",
+            UART_CLK_HZ / 1e6,
+            "UART_CLK_HZ: the GPS receiver's UART crystal, every baud rate's exact multiple",
+        ),
+        ClockRequirement(
             "spi",
             "spi_sclk",
             sclk_hz / 1e6,
@@ -186,9 +198,13 @@ def crossing_budgets(sys_clk_hz: float = SYS_CLK_HZ) -> tuple[CrossingBudget, ..
 
     ``pwm`` → ``sync``: the snapshot synchroniser copies its published value
     ``stages`` system edges after its first synchroniser flip-flop can see the new count.
+
+    ``sync`` → ``uart``: the same for the GPS receiver's fix (the host's offered register)
+    and fault word, copied ``stages`` UART edges after the count can be seen.
     """
     sclk_period_ns = 1e3 / max(r.mhz for r in clock_requirements(sys_clk_hz) if r.domain == "spi")
     sys_period_ns = 1e9 / sys_clk_hz
+    uart_period_ns = 1e9 / UART_CLK_HZ
     lag_ns = (CS_SYNC_STAGES + 1) * sys_period_ns
     why_spi = "a sample copied before busy rises"
     return (
@@ -199,6 +215,12 @@ def crossing_budgets(sys_clk_hz: float = SYS_CLK_HZ) -> tuple[CrossingBudget, ..
             "posedge clk",
             PWM_RESULT_SYNC_STAGES * sys_period_ns,
             f"PWM results copied {PWM_RESULT_SYNC_STAGES} sync edges after publication",
+        ),
+        CrossingBudget(
+            "posedge clk",
+            "posedge uart_clk",
+            UART_SYNC_STAGES * uart_period_ns,
+            f"GPS fix and fault word copied {UART_SYNC_STAGES} uart edges after publication",
         ),
     )
 

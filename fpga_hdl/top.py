@@ -11,7 +11,14 @@ Buses, as on a Pixhawk FMU (e.g. FMUv2/v3, where the MPU-6000 and MS5611 share S
   pulls SDA low (the wired-AND inside the FPGA); the testbench resolves it with its own
   driver;
 - one UART for the u-blox M8 GNSS receiver (``gps_tx`` receiver to autopilot, ``gps_rx``
-  the autopilot's configuration), as on a Pixhawk's GPS port.
+  the autopilot's configuration), as on a Pixhawk's GPS port. The receiver runs in its
+  own ``uart`` domain on a UART crystal (:data:`UART_CLK_HZ`), as real UARTs do: every
+  rate divides it exactly, and a simulation pays 32 cycles of the receiver alone per bit
+  at 115200 baud instead of ~100 cycles of the whole design. The host's fix and its
+  strobe cross into ``uart`` through a
+  :class:`~fpga_hdl.host.snapshot_cdc.SampleSynchronizer` (the host's offered register is
+  the only copy in ``sync``), the fault word through a ``SnapshotSynchronizer``; the pins
+  are asynchronous already (``UartRx`` synchronises RXD).
 
 - eight PWM inputs (``pwm``) into the PWM capture core, which runs in its own slow
   ``pwm`` domain at ``pwm_tick_hz`` (one tick per cycle, so a simulation pays the tick
@@ -31,7 +38,10 @@ At the 16 MHz default that is 3 µs plus at most 4 system cycles (250 ns).
 
 The host port (``fpga_hdl.host.host_port``) loads samples, time and faults; ``now_us`` goes
 to every chip with a conversion time. ``pending`` tells a simulation that gates the
-system clock that a chip still waits to take a sample at a transfer's end.
+system clock that a chip in ``sync`` still waits to take a sample at a transfer's end. The
+GPS receiver is not in it: it takes its fix on its own clock (the sample synchroniser's
+``copy_cycles`` after the commit's strobe) and holds it until the frame on its line ends,
+so a simulation runs the ``uart`` clock whenever it exchanges bytes with the receiver.
 """
 
 from amaranth.hdl import Cat, ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal, Signal
@@ -50,7 +60,7 @@ from fpga_hdl.chips.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture,
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.core import UbloxM8Core
 from fpga_hdl.host.host_port import HostPort, HostPortMap, host_port_map
-from fpga_hdl.host.snapshot_cdc import PUBLISH_TICKS, SnapshotSynchronizer
+from fpga_hdl.host.snapshot_cdc import PUBLISH_TICKS, SampleSynchronizer, SnapshotSynchronizer
 
 #: Default system clock: above the SPI chips' 8 MHz floor (see ``spi_target``) and fast
 #: enough for the I2C target's Fast-mode timing, as slow as possible because the system
@@ -65,6 +75,13 @@ SAMPLE_CHANNELS = {
     "range": lidarlite_regs.SAMPLE_LAYOUT,
 }
 FAULT_CHIPS = ("imu", "baro", "mag", "gps", "range")
+#: The GPS receiver's ``uart`` clock: a UART crystal, 2 × 1.8432 MHz. Every rate of
+#: ``ublox.core.BAUD_RATES`` divides it exactly (no baud error at all; the divider is 32
+#: at 115200 and 8, ``buses.uart``'s minimum, at 460800), where 1.8432 MHz itself would
+#: give 460800 a divider of 4.
+UART_CLK_HZ = 3.6864e6
+#: Synchroniser flip-flops of the GPS receiver's inputs into ``uart`` (fix, fault word).
+UART_SYNC_STAGES = 2
 #: PWM capture tick: 1 µs, the unit PX4 uses for PWM (``fpga_hdl.chips.pwm_capture``).
 PWM_TICK_HZ = 1e6
 #: No rising edge for this long and a channel is flagged (and reads zero): a usual ESC
@@ -112,6 +129,8 @@ class SensorTop(wiring.Component):
     pwm_tick_hz, pwm_timeout_s : float
         Frequency of the ``pwm`` domain (one capture tick per cycle) and the capture's
         signal-loss timeout.
+    uart_clk_hz : float
+        Frequency of the ``uart`` domain (the GPS receiver).
 
     Attributes
     ----------
@@ -140,6 +159,8 @@ class SensorTop(wiring.Component):
         PWM inputs from the autopilot, one per channel (asynchronous).
     pwm_clk, pwm_rst : In(1)
         Clock and reset of the ``pwm`` domain (the system clock is ``clk``/``rst``).
+    uart_clk, uart_rst : In(1)
+        Clock and reset of the ``uart`` domain.
     """
 
     write_addr: In(8)
@@ -165,6 +186,8 @@ class SensorTop(wiring.Component):
     pwm: In(CHANNELS)
     pwm_clk: In(1)
     pwm_rst: In(1)
+    uart_clk: In(1)
+    uart_rst: In(1)
 
     def __init__(
         self,
@@ -172,13 +195,15 @@ class SensorTop(wiring.Component):
         sys_clk_hz: float = SYS_CLK_HZ,
         pwm_tick_hz: float = PWM_TICK_HZ,
         pwm_timeout_s: float = PWM_TIMEOUT_S,
+        uart_clk_hz: float = UART_CLK_HZ,
     ) -> None:
         self.sys_clk_hz = sys_clk_hz
         self.pwm_tick_hz = pwm_tick_hz
+        self.uart_clk_hz = uart_clk_hz
         self.imu = Mpu6000(sys_clk_hz=sys_clk_hz)
         self.baro = Ms5611(sys_clk_hz=sys_clk_hz)
         self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
-        self.gps = UbloxM8Core(sys_clk_hz=sys_clk_hz)
+        self.gps = UbloxM8Core(sys_clk_hz=uart_clk_hz)
         self.range = LidarLiteCore(sys_clk_hz=sys_clk_hz)
         self.capture = PwmCapture(tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s)
         # The synchroniser copies a published result within its stages + 1 system
@@ -201,11 +226,13 @@ class SensorTop(wiring.Component):
         m.submodules.imu = imu
         m.submodules.baro = baro
         m.submodules.mag = mag
-        m.submodules.gps = gps
         m.submodules.range = rangefinder
         m.domains.pwm = ClockDomain(local=True)
         m.d.comb += [ClockSignal("pwm").eq(self.pwm_clk), ResetSignal("pwm").eq(self.pwm_rst)]
         m.submodules.capture = capture = DomainRenamer("pwm")(self.capture)
+        m.domains.uart = ClockDomain(local=True)
+        m.d.comb += [ClockSignal("uart").eq(self.uart_clk), ResetSignal("uart").eq(self.uart_rst)]
+        m.submodules.gps = DomainRenamer("uart")(gps)
         m.d.comb += [
             host.write_addr.eq(self.write_addr),
             host.write_data.eq(self.write_data),
@@ -214,7 +241,7 @@ class SensorTop(wiring.Component):
             host.read_addr.eq(self.read_addr),
             self.read_data.eq(host.read_data),
         ]
-        chips = (("imu", imu), ("baro", baro), ("mag", mag), ("gps", gps), ("range", rangefinder))
+        chips = (("imu", imu), ("baro", baro), ("mag", mag), ("range", rangefinder))
         for name, chip in chips:
             m.d.comb += [
                 chip.sample.eq(getattr(host, name)),
@@ -238,8 +265,38 @@ class SensorTop(wiring.Component):
             m.d.comb += [chip.i2c.scl.eq(self.i2c_scl), chip.i2c.sda_i.eq(self.i2c_sda_i)]
         m.d.comb += self.i2c_sda_oe.eq(mag.i2c.sda_oe | rangefinder.i2c.sda_oe)
         m.d.comb += [self.gps_tx.eq(gps.tx), gps.rx.eq(self.gps_rx)]
+        self._gps_inputs(m, gps)
         self._capture_results(m, capture)
         return m
+
+    def _gps_inputs(self, m: Module, gps: UbloxM8Core) -> None:
+        """The host's fix, its strobe and the GPS fault word, ``sync`` → ``uart``.
+
+        The fix: the host's offered register holds it until the next commit of a fix, an
+        epoch later, long after the copy (``copy_cycles`` uart edges). The fault word: it
+        changes only at a commit, one per rig frame, so it crosses whole into the slower
+        domain though a ``SnapshotSynchronizer`` may publish into it only that rarely.
+        """
+        host = self.host
+        m.submodules.gps_sample_cdc = sample = SampleSynchronizer(
+            ubx.SAMPLE_LAYOUT, i_domain="sync", o_domain="uart", stages=UART_SYNC_STAGES
+        )
+        m.submodules.gps_fault_cdc = fault = SnapshotSynchronizer(
+            data.StructLayout({"mute": 1, "flip": 8}),
+            i_domain="sync",
+            o_domain="uart",
+            stages=UART_SYNC_STAGES,
+        )
+        m.d.comb += [
+            sample.data_i.eq(host.gps),
+            sample.stb_i.eq(host.gps_stb),
+            gps.sample.eq(sample.data_o),
+            gps.sample_stb.eq(sample.stb_o),
+            fault.data_i.mute.eq(host.gps_fault_mute),
+            fault.data_i.flip.eq(host.gps_fault_flip),
+            gps.fault.mute.eq(fault.data_o.mute),
+            gps.fault.flip.eq(fault.data_o.flip),
+        ]
 
     def _capture_results(self, m: Module, capture: PwmCapture) -> None:
         """PWM pins → capture (``pwm``) → snapshot synchroniser → ``read_latch`` → host words."""

@@ -1,7 +1,9 @@
-"""UART 8N1 transmitter and receiver clocked by ``sync``, with a run-time baud divider.
+"""UART 8N1 transmitter and receiver with a run-time baud divider.
 
-A bit lasts ``divider`` system cycles, ``divider = round(sys_clk_hz / baud)``. The rate
-error that rounding leaves is what the far end must tolerate; :func:`baud_error` gives it and
+Clocked by their ``sync`` domain: in SensorTop that is the GPS receiver's ``uart`` domain,
+a UART crystal every supported rate divides exactly. A bit lasts ``divider`` cycles,
+``divider = round(clk_hz / baud)``. The rate error that rounding leaves (none on such a
+crystal) is what the far end must tolerate; :func:`baud_error` gives it and
 :data:`MAX_BAUD_ERROR` is the budget a divider must meet (see there).
 """
 
@@ -14,6 +16,9 @@ from amaranth.lib.wiring import In, Out
 #: half a bit, 5 %; an STM32 USART (PX4's flight controllers) is specified at 3.75 % total
 #: with 16x oversampling. 2 % on our side leaves the rest to the other clock.
 MAX_BAUD_ERROR = 0.02
+#: Fewest cycles per bit: :class:`UartRx` sees an edge :data:`RX_DELAY_CYCLES` late and
+#: samples half a divider after that, so the sample must stay well inside the bit.
+MIN_DIVIDER = 8
 #: Divider counter width: enough for 9600 baud at 100 MHz.
 DIVIDER_BITS = 14
 #: Cycles :class:`UartRx` adds to a byte's nine and a half bit times before its strobe:
@@ -22,26 +27,30 @@ DIVIDER_BITS = 14
 RX_DELAY_CYCLES = 3
 
 
-def divider_for(sys_clk_hz: float, baud: int) -> int:
-    """System cycles per bit for ``baud``; refused when the error exceeds the budget."""
-    if not sys_clk_hz > 0 or baud <= 0:
-        raise ValueError(f"need a positive clock and baud rate, not {sys_clk_hz!r}, {baud!r}")
-    divider = round(sys_clk_hz / baud)
+def divider_for(clk_hz: float, baud: int) -> int:
+    """Clock cycles per bit for ``baud``; refused when the error exceeds the budget."""
+    if not clk_hz > 0 or baud <= 0:
+        raise ValueError(f"need a positive clock and baud rate, not {clk_hz!r}, {baud!r}")
+    divider = round(clk_hz / baud)
     if divider >= 1 << DIVIDER_BITS:
         raise ValueError(
             f"{baud} baud needs a divider of {divider}; at most {(1 << DIVIDER_BITS) - 1}"
         )
-    error = baud_error(sys_clk_hz, baud)
-    if divider < 8 or abs(error) > MAX_BAUD_ERROR:
+    if divider < MIN_DIVIDER:
         raise ValueError(
-            f"{baud} baud at {sys_clk_hz:g} Hz is off by {error:+.2%} (divider {divider}); "
+            f"{baud} baud at {clk_hz:g} Hz needs a divider of {divider}; at least {MIN_DIVIDER}"
+        )
+    error = baud_error(clk_hz, baud)
+    if abs(error) > MAX_BAUD_ERROR:
+        raise ValueError(
+            f"{baud} baud at {clk_hz:g} Hz is off by {error:+.2%} (divider {divider}); "
             f"the budget is ±{MAX_BAUD_ERROR:.0%}"
         )
     return divider
 
 
 def line_cycles(byte_count: int, divider: int) -> int:
-    """System cycles from the first start bit's falling edge of ``byte_count`` bytes sent
+    """Clock cycles from the first start bit's falling edge of ``byte_count`` bytes sent
     back to back by :class:`UartTx` to :class:`UartRx`'s strobe of the last byte: ten bits
     per byte before it, then the last byte's nine bits and half (the stop bit is sampled
     mid-bit) and the receiver's synchroniser and edge detector (:data:`RX_DELAY_CYCLES`)."""
@@ -50,14 +59,14 @@ def line_cycles(byte_count: int, divider: int) -> int:
     return (byte_count - 1) * 10 * divider + 9 * divider + divider // 2 + RX_DELAY_CYCLES
 
 
-def cycles_to_us(cycles: int, sys_clk_hz: float) -> int:
-    """``cycles`` of ``sys_clk_hz`` in whole µs, rounded up (a byte is there after it)."""
-    return -(-cycles * 1_000_000 // round(sys_clk_hz))
+def cycles_to_us(cycles: int, clk_hz: float) -> int:
+    """``cycles`` of ``clk_hz`` in whole µs, rounded up (a byte is there after it)."""
+    return -(-cycles * 1_000_000 // round(clk_hz))
 
 
-def baud_error(sys_clk_hz: float, baud: int) -> float:
+def baud_error(clk_hz: float, baud: int) -> float:
     """Relative rate error of the transmitted bits: actual / nominal - 1."""
-    return sys_clk_hz / round(sys_clk_hz / baud) / baud - 1
+    return clk_hz / round(clk_hz / baud) / baud - 1
 
 
 class UartTx(wiring.Component):

@@ -18,14 +18,18 @@ Each peripheral takes a *request toggle* and answers with an *acknowledge*: Pyth
 ``<name>_request`` and awaits a change of ``<name>_acknowledge``, two wake-ups per
 transaction however many bits it moves.
 
-Clocks, without Python per cycle: two :data:`GATED_CLOCK_VERILOG` instances, a
+Clocks, without Python per cycle: three :data:`GATED_CLOCK_VERILOG` instances, a
 behavioural Verilog clock that *waits* on its enable (no polling, so a stopped clock
 costs nothing). The system clock (``sync``, :data:`HARNESS_SYS_CLK_HZ`) runs while
 a request is pending, a peripheral is busy, a chip still waits to take a sample, or
 ``rst`` is high. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while ``pwm_run`` is
 high: the capture must count every tick of every period, so in a closed loop it runs all
-the time. Verilator needs ``--timing`` for these delays (``fpga_hdl.cosim.runner`` adds
-it when a design brings behavioural Verilog).
+the time. The UART clock (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the
+autopilot's UART) runs while a UART exchange is requested or under way, or ``rst`` is
+high: a fix the host loaded crosses into the receiver in the exchange's first cycles,
+before its first start bit, so the line times are those of a free-running clock.
+Verilator needs ``--timing`` for these delays (``fpga_hdl.cosim.runner`` adds it when a
+design brings behavioural Verilog).
 
 The age of a result read (SensorTop's fixed latency, ``fpga_hdl.top``): the system
 clock starts half a period after a read request, and the reader latches at its
@@ -55,7 +59,7 @@ from fpga_hdl.buses.pwm_generator import PwmGenerator
 from fpga_hdl.buses.spi_controller import SpiController
 from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
-from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, SensorTop
+from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, UART_CLK_HZ, SensorTop
 
 __all__ = [
     "GATED_CLOCK_VERILOG",
@@ -97,9 +101,11 @@ endmodule
 """
 
 
-def _half_period_ps(clk_hz: float) -> int:
+def _half_period_ps(clk_hz: float, *, exact: bool = True) -> int:
+    """The gated clock's half period; ``exact=False`` rounds it to whole picoseconds, for
+    a clock whose edges only count (the UART's: 3.6864 MHz is 2.4 ppm slow then)."""
     half_ps = 0.5e12 / clk_hz
-    if abs(half_ps - round(half_ps)) > 1e-6:
+    if exact and abs(half_ps - round(half_ps)) > 1e-6:
         raise ValueError(f"{clk_hz:g} Hz has no whole-picosecond half period")
     return round(half_ps)
 
@@ -236,21 +242,21 @@ class HostReader(wiring.Component):
 class UartPeer(wiring.Component):
     """The autopilot's UART on the GPS port: sends a burst, then listens until the line rests.
 
-    A request sends ``tx[:tx_len]`` back to back at ``divider``, then keeps the system
-    clock running until the receiver's line has been idle for :data:`QUIET_BITS` bit
+    It runs in the receiver's ``uart`` domain, as the autopilot's UART would on the same
+    baud clock. A request sends ``tx[:tx_len]`` back to back at ``divider``, then keeps
+    the clock running until the receiver's line has been idle for :data:`QUIET_BITS` bit
     times with nothing left to send; the acknowledge then publishes what was received
     since the previous acknowledge (``rx[:rx_len]``, bytes past ``rx_depth`` counted in
-    ``rx_len`` but dropped) and ``line_cycles``: system cycles from the first start bit's
-    falling edge to the strobe of the last byte (``fpga_hdl.chips.ublox.link.line_cycles``
-    predicts it for the TLM twin). The receiver always listens, also between requests, so
-    bytes sent while the clock ran for another peripheral are kept.
+    ``rx_len`` but dropped) and ``line_cycles``: clock cycles from the first start bit's
+    falling edge to the strobe of the last byte (``fpga_hdl.buses.uart.line_cycles``
+    predicts it for the TLM twin). The receiver always listens, also between requests.
 
     Attributes
     ----------
     request : In(1), acknowledge : Out(1), busy : Out(1)
         Request toggle and its acknowledge.
     divider : In(DIVIDER_BITS)
-        System cycles per bit, both directions (the autopilot's UART rate).
+        Cycles per bit, both directions (the autopilot's UART rate).
     tx : In(ArrayLayout(8, tx_depth)), tx_len : In(range(tx_depth + 1))
         The bytes to send.
     rx : Out(ArrayLayout(8, rx_depth)), rx_len : Out(16), line_cycles : Out(32)
@@ -296,7 +302,7 @@ class UartPeer(wiring.Component):
         # The receiving side, always on: bytes and the line's timing since the last publish.
         received = Signal(data.ArrayLayout(8, self.rx_depth))
         count = Signal(16)
-        cycle = Signal(32)  # system cycles since the first start bit's edge
+        cycle = Signal(32)  # cycles since the first start bit's edge
         started, previous = Signal(), Signal(init=1)
         last_cycles = Signal(32)
         m.d.sync += previous.eq(self.line_rx)
@@ -368,16 +374,23 @@ class CosimHarness(wiring.Component):
     ``pwm_``, ``uart_`` (``spi_request``, ``i2c_nack_index``, ``host_words`` ...); the bus
     wires as monitor outputs (``spi_sclk``, ``spi_mosi``, ``spi_miso``, ``imu_cs_n``,
     ``baro_cs_n``, ``i2c_scl``, ``i2c_sda``, ``pwm``, ``gps_tx``, ``gps_rx``, ``clk``,
-    ``pwm_clk``); and the cycle
-    counters ``sync_cycles`` and ``pwm_cycles``, the simulation's cost.
+    ``pwm_clk``, ``uart_clk``); and the cycle counters ``sync_cycles``, ``pwm_cycles`` and
+    ``uart_cycles``, the simulation's cost.
     """
 
     def __init__(
-        self, *, sys_clk_hz: float = HARNESS_SYS_CLK_HZ, pwm_tick_hz: float = PWM_TICK_HZ
+        self,
+        *,
+        sys_clk_hz: float = HARNESS_SYS_CLK_HZ,
+        pwm_tick_hz: float = PWM_TICK_HZ,
+        uart_clk_hz: float = UART_CLK_HZ,
     ) -> None:
         self.sys_clk_hz = sys_clk_hz
         self.pwm_tick_hz = pwm_tick_hz
-        self.top = SensorTop(sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz)
+        self.uart_clk_hz = uart_clk_hz
+        self.top = SensorTop(
+            sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz, uart_clk_hz=uart_clk_hz
+        )
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz)
         self.pwm_generator = PwmGenerator()
@@ -389,12 +402,14 @@ class CosimHarness(wiring.Component):
             members |= {f"{prefix}_{n}": part.signature.members[n] for n in names}
         members |= {
             name: Out(1)
-            for name in ("clk", "pwm_clk", "spi_sclk", "spi_mosi", "spi_miso", "spi_miso_oe")
+            for name in ("clk", "pwm_clk", "uart_clk", "spi_sclk", "spi_mosi", "spi_miso")
         }
-        members |= {name: Out(1) for name in ("spi_contention", "imu_cs_n", "baro_cs_n")}
+        members |= {
+            name: Out(1) for name in ("spi_miso_oe", "spi_contention", "imu_cs_n", "baro_cs_n")
+        }
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
-        members |= {"sync_cycles": Out(32), "pwm_cycles": Out(32)}
+        members |= {"sync_cycles": Out(32), "pwm_cycles": Out(32), "uart_cycles": Out(32)}
         super().__init__(members)
 
     def _forwarded(self):
@@ -417,7 +432,7 @@ class CosimHarness(wiring.Component):
         m.submodules.pwm_generator = DomainRenamer("pwm_out")(self.pwm_generator)
         m.submodules.host_writer = writer
         m.submodules.host_reader = reader
-        m.submodules.uart = uart = self.uart
+        m.submodules.uart = uart = DomainRenamer("uart_peer")(self.uart)
         for prefix, part, names in self._forwarded():
             for name in names:
                 outer, inner = getattr(self, f"{prefix}_{name}"), getattr(part, name)
@@ -426,8 +441,9 @@ class CosimHarness(wiring.Component):
                 else:
                     m.d.comb += outer.eq(inner)
 
-        # Clocks. SensorTop's ``pwm`` domain is local to it; the generator's domain
-        # (``pwm_out``) runs on the same clock, as if the autopilot's timer ticked with it.
+        # Clocks. SensorTop's ``pwm`` and ``uart`` domains are local to it; the generator's
+        # domain (``pwm_out``) runs on the capture clock, as if the autopilot's timer ticked
+        # with it, and the UART peer's (``uart_peer``) on the receiver's UART clock.
         m.domains.sync = ClockDomain()
         m.domains.pwm_out = ClockDomain()
         sync_run = Signal()
@@ -442,8 +458,6 @@ class CosimHarness(wiring.Component):
             | (writer.request != writer.acknowledge)
             | reader.busy
             | (reader.request != reader.acknowledge)
-            | uart.busy
-            | (uart.request != uart.acknowledge)
         )
         pwm_clk = Signal()
         m.submodules.sync_clock = Instance(
@@ -458,6 +472,13 @@ class CosimHarness(wiring.Component):
             i_enable=self.pwm_run | self.rst,
             o_clk=pwm_clk,
         )
+        m.domains.uart_peer = ClockDomain()
+        m.submodules.uart_clock = Instance(
+            "cosim_gated_clock",
+            p_HALF_PERIOD_PS=_half_period_ps(self.uart_clk_hz, exact=False),
+            i_enable=self.rst | uart.busy | (uart.request != uart.acknowledge),
+            o_clk=self.uart_clk,
+        )
         m.d.comb += [
             ClockSignal("sync").eq(self.clk),
             ResetSignal("sync").eq(self.rst),
@@ -466,9 +487,14 @@ class CosimHarness(wiring.Component):
             top.pwm_clk.eq(pwm_clk),
             top.pwm_rst.eq(self.rst),
             self.pwm_clk.eq(pwm_clk),
+            ClockSignal("uart_peer").eq(self.uart_clk),
+            ResetSignal("uart_peer").eq(self.rst),
+            top.uart_clk.eq(self.uart_clk),
+            top.uart_rst.eq(self.rst),
         ]
         m.d.sync += self.sync_cycles.eq(self.sync_cycles + 1)
         m.d.pwm_out += self.pwm_cycles.eq(self.pwm_cycles + 1)
+        m.d.uart_peer += self.uart_cycles.eq(self.uart_cycles + 1)
 
         # Host port.
         m.d.comb += [

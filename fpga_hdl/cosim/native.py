@@ -7,22 +7,24 @@ as Verilator ``--timing`` coroutines and every transaction wakes Python twice th
 the VPI: 1.8 ms of wall time per 1 ms frame. Here the same generated Verilog of
 :class:`~fpga_hdl.cosim.harness.CosimHarness` is Verilated to C++ without ``--timing`` and
 linked with ``native_harness.cpp`` (a C ABI: reset, one SPI transfer, one I2C write/read,
-one host-port burst write or read, one GPS UART exchange, N capture-clock cycles) into a
+one host-port burst write or read, one GPS UART exchange on the UART clock, N
+capture-clock cycles) into a
 shared library under ``build/native/``, keyed by the hash of everything that goes into it.
 
 Python loads it with :mod:`ctypes` (standard library): the ABI is a dozen functions of
 integers and byte buffers, so a binding generator (pybind11, nanobind, cffi) would add a
 dependency and a compile step for nothing; each call costs about a microsecond.
 
-Clocks. The harness instantiates ``cosim_gated_clock`` for its system and capture clocks.
-This build replaces that module with :data:`NATIVE_CLOCK_VERILOG`: a register the C++ sets
-to 1 and which clears itself on its own rising edge, so one ``eval()`` is one whole cycle
-(nothing in the design uses a falling ``clk`` or ``pwm_clk`` edge). That halves the cost
+Clocks. The harness instantiates ``cosim_gated_clock`` for its system, capture and UART
+clocks. This build replaces that module with :data:`NATIVE_CLOCK_VERILOG`: a register the
+C++ sets to 1 and which clears itself on its own rising edge, so one ``eval()`` is one
+whole cycle (nothing in the design uses a falling clock edge). That halves the cost
 of a cycle against a rising and a falling ``eval()`` (measured on the harness: about 100
 instead of 270 ns per capture tick, 230 instead of 520 ns per system cycle). The system
-clock keeps the gated clock's rule, whole cycles while its ``enable`` is high, so each
-transaction sees the same edges as under cocotb, where the design sees no time but its
-clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
+clock keeps the gated clock's rule, whole cycles while its ``enable`` is high, and so
+does the UART clock, which only a UART exchange enables (nothing else runs meanwhile), so
+each transaction sees the same edges as under cocotb, where the design sees no time but
+its clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
 caller asks (:meth:`NativePwm.cycles`), at once or on the library's worker thread while
 the caller goes on (every other call waits for it first): its domain and the system
 domain meet only in the results' synchroniser, which a read lets catch up before it
@@ -56,7 +58,7 @@ from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, HARNESS_TOPLEVEL, SPI_DEVICES, CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason, simulator_environment, verilator_root
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
-from fpga_hdl.top import PWM_TICK_HZ, sensor_top_host_map
+from fpga_hdl.top import PWM_TICK_HZ, UART_CLK_HZ, sensor_top_host_map
 
 __all__ = [
     "NATIVE_CLOCK_VERILOG",
@@ -72,8 +74,9 @@ __all__ = [
 
 SOURCE = Path(__file__).with_name("native_harness.cpp")
 #: The harness's clock instances (``CosimHarness.elaborate``: ``m.submodules.sync_clock``,
-#: ``pwm_clock``); the C++ reaches their registers through Verilator's root members.
-_SYNC_CLOCK, _PWM_CLOCK = "sync_clock", "pwm_clock"
+#: ``pwm_clock``, ``uart_clock``); the C++ reaches their registers through Verilator's root
+#: members.
+_SYNC_CLOCK, _PWM_CLOCK, _UART_CLOCK = "sync_clock", "pwm_clock", "uart_clock"
 #: ``cosim_gated_clock`` for this build: the C++ writes 1, the rising edge clears it. The
 #: ports and parameter are the gated clock's; ``enable`` is read by the C++ only.
 NATIVE_CLOCK_VERILOG = """\
@@ -128,6 +131,8 @@ def build_native_harness(harness: CosimHarness, *, build_dir: Path = BUILD_DIR) 
         "SYNC_CLOCK": _root_member(_SYNC_CLOCK, "clk"),
         "SYNC_ENABLE": _root_member(_SYNC_CLOCK, "enable"),
         "PWM_CLOCK": _root_member(_PWM_CLOCK, "clk"),
+        "UART_CLOCK": _root_member(_UART_CLOCK, "clk"),
+        "UART_ENABLE": _root_member(_UART_CLOCK, "enable"),
     }
     cflags = " ".join([CXXFLAGS, *(f"-D{name}={value}" for name, value in defines.items())])
     args = [*VERILATOR_ARGS, "-CFLAGS", cflags, "--top-module", HARNESS_TOPLEVEL]
@@ -174,9 +179,8 @@ _SIGNATURES = {
     "nh_create": ([], ctypes.c_void_p),
     "nh_destroy": ([ctypes.c_void_p], None),
     "nh_error": ([ctypes.c_void_p], ctypes.c_char_p),
-    "nh_cycles": ([ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint64),
-                   ctypes.POINTER(ctypes.c_uint64)], ctypes.c_int),
-    "nh_reset": ([ctypes.c_void_p, ctypes.c_uint32, ctypes.c_uint32], ctypes.c_int),
+    "nh_cycles": ([ctypes.c_void_p, *[ctypes.POINTER(ctypes.c_uint64)] * 3], ctypes.c_int),
+    "nh_reset": ([ctypes.c_void_p, *[ctypes.c_uint32] * 3], ctypes.c_int),
     "nh_spi": ([ctypes.c_void_p, *[ctypes.c_uint32] * 4, ctypes.c_char_p, _u8p, ctypes.c_size_t],
                ctypes.c_int),
     "nh_i2c": ([ctypes.c_void_p, *[ctypes.c_uint32] * 4, ctypes.c_char_p, ctypes.c_size_t, _u8p,
@@ -365,10 +369,10 @@ class NativeUart:
     """:class:`~fpga_hdl.buses.transactions.UartPort` over the harness's GPS UART peer."""
 
     def __init__(self, model: _Model, tx_depth: int, rx_depth: int, *,
-                 sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:  # fmt: skip
+                 clk_hz: float = UART_CLK_HZ) -> None:  # fmt: skip
         self._model = model
         self.tx_depth = tx_depth
-        self.sys_clk_hz = sys_clk_hz
+        self.clk_hz = clk_hz
         self.exchanges = 0
         self._rx = (ctypes.c_uint8 * rx_depth)()
         self._rx_len = ctypes.c_uint32()
@@ -376,14 +380,14 @@ class NativeUart:
 
     @property
     def line_cycles(self) -> int:
-        """The last exchange's line time in system cycles (``UartTransfer.line_us`` rounds)."""
+        """The last exchange's line time in UART cycles (``UartTransfer.line_us`` rounds)."""
         return self._line_cycles.value
 
     async def exchange(self, tx: bytes, *, baud: int) -> UartTransfer:
         if len(tx) > self.tx_depth:
             raise ValueError(f"UART burst of {len(tx)} bytes exceeds {self.tx_depth}")
         self._model.call(
-            "nh_uart", uart_divider(self.sys_clk_hz, baud), tx, len(tx), len(tx), self._rx,
+            "nh_uart", uart_divider(self.clk_hz, baud), tx, len(tx), len(tx), self._rx,
             len(self._rx), ctypes.byref(self._rx_len), ctypes.byref(self._line_cycles),
         )  # fmt: skip
         self.exchanges += 1
@@ -394,7 +398,7 @@ class NativeUart:
                 f"{len(self._rx)}"
             )
         data = ctypes.string_at(self._rx, count)
-        return UartTransfer(data, cycles_to_us(self._line_cycles.value, self.sys_clk_hz))
+        return UartTransfer(data, cycles_to_us(self._line_cycles.value, self.clk_hz))
 
 
 class NativePwm:
@@ -445,17 +449,19 @@ class NativeHarness:
         self.uart = NativeUart(model, gateware.uart.tx_depth, gateware.uart.rx_depth)
 
     def reset(self) -> None:
-        """Reset both clock domains for three capture ticks, as the cocotb harness does;
+        """Reset every clock domain for three capture ticks, as the cocotb harness does;
         the generator stopped (period 0), no pulse."""
         self.pwm.write([0] * CHANNELS, period_ticks=0)
-        sys_per_tick = round(HARNESS_SYS_CLK_HZ / self.pwm_tick_hz)
-        self._model.call("nh_reset", 3 * sys_per_tick, 3)
+        ticks_s = 3 / self.pwm_tick_hz
+        self._model.call(
+            "nh_reset", round(ticks_s * HARNESS_SYS_CLK_HZ), 3, round(ticks_s * UART_CLK_HZ)
+        )
 
-    def cycles(self) -> tuple[int, int]:
-        """(system, capture) clock cycles so far: what the simulation has cost."""
-        sys_cycles, pwm_cycles = ctypes.c_uint64(), ctypes.c_uint64()
-        self._model.call("nh_cycles", ctypes.byref(sys_cycles), ctypes.byref(pwm_cycles))
-        return sys_cycles.value, pwm_cycles.value
+    def cycles(self) -> tuple[int, int, int]:
+        """(system, capture, UART) clock cycles so far: what the simulation has cost."""
+        counts = [ctypes.c_uint64() for _ in range(3)]
+        self._model.call("nh_cycles", *map(ctypes.byref, counts))
+        return counts[0].value, counts[1].value, counts[2].value
 
     def close(self) -> None:
         self._model.close()

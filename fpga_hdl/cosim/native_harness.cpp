@@ -10,10 +10,11 @@
 // (fpga_hdl.cosim.native): a register that this file sets to 1 and that clears itself
 // on its own rising edge, so one eval() is one whole clock cycle. The system clock
 // follows the gated clock's rule: whole cycles while its `enable` (the harness's
-// `sync_run`) is high, checked after every cycle. The capture clock runs only when
-// asked (nh_pwm_cycles, or nh_pwm_cycles_later on a worker thread); nothing in the system
-// domain depends on it but the results' synchroniser, which every read lets catch up
-// (HostReader).
+// `sync_run`) is high, checked after every cycle; so does the UART clock (the GPS
+// receiver's domain and the autopilot's UART), which only a UART exchange enables. The
+// capture clock runs only when asked (nh_pwm_cycles, or nh_pwm_cycles_later on a worker
+// thread); nothing in the system domain depends on it but the results' synchroniser,
+// which every read lets catch up (HostReader).
 //
 // Errors: every function returns 0 on success and -1 on failure, with the reason in
 // nh_error(). Ports are copied as little-endian bytes, whatever their Verilated type.
@@ -31,18 +32,20 @@
 #include "Vharness___024root.h"
 #include "verilated.h"
 
-// The root members of the two clocks' registers and the system clock's enable, given by
+// The root members of the three clocks' registers and the gated ones' enables, given by
 // fpga_hdl.cosim.native as -D flags (their names follow the harness's hierarchy).
-#if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(PWM_CLOCK)
-#error "build through fpga_hdl.cosim.native: SYNC_CLOCK, SYNC_ENABLE and PWM_CLOCK are needed"
+#if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(PWM_CLOCK) || \
+    !defined(UART_CLOCK) || !defined(UART_ENABLE)
+#error "build through fpga_hdl.cosim.native: the clock and enable -D flags are missing"
 #endif
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "ports are copied as little-endian");
 
 namespace {
 
-// More system cycles than any transaction takes (an I2C transfer at 100 kHz is ~20 k):
-// a peripheral that never acknowledges is reported, not waited for forever.
+// More cycles than any transaction takes (an I2C transfer at 100 kHz is ~20 k system
+// cycles, PX4's slowest GPS exchange at 9600 baud ~45 k UART cycles): a peripheral that
+// never acknowledges is reported, not waited for forever.
 constexpr uint64_t CYCLE_LIMIT = 10'000'000;
 
 struct Harness {
@@ -50,6 +53,7 @@ struct Harness {
     Vharness model;
     uint64_t sys_cycles = 0;
     uint64_t pwm_cycles = 0;
+    uint64_t uart_cycles = 0;
     std::string error;
     // Capture-clock cycles left to a worker thread (nh_pwm_cycles_later). Only one of the
     // two threads touches the model at a time: every call first waits until it is idle.
@@ -115,26 +119,42 @@ struct Harness {
         ++pwm_cycles;
     }
 
-    // The gated clock's rule: whole cycles while `enable` is high, checked after each.
-    bool run_sync(const char* what) {
+    void uart_cycle() {
+        model.rootp->UART_CLOCK = 1;
         model.eval();
-        for (uint64_t cycles = 0; model.rootp->SYNC_ENABLE; ++cycles) {
+        ++uart_cycles;
+    }
+
+    // The gated clock's rule: whole cycles while `enable` is high, checked after each.
+    template <typename Cycle>
+    bool run_gated(const CData& enable, Cycle cycle, const char* clock, const char* what) {
+        model.eval();
+        for (uint64_t cycles = 0; enable; ++cycles) {
             if (cycles == CYCLE_LIMIT) {
-                error = std::string(what) + ": the system clock still runs after " +
+                error = std::string(what) + ": the " + clock + " clock still runs after " +
                         std::to_string(CYCLE_LIMIT) + " cycles";
                 return false;
             }
-            sync_cycle();
+            cycle();
         }
         return true;
     }
 
-    // Flip a peripheral's request toggle and clock until it has acknowledged.
-    bool request(CData& request, const CData& acknowledge, const char* what) {
+    bool run_sync(const char* what) {
+        return run_gated(model.rootp->SYNC_ENABLE, [this] { sync_cycle(); }, "system", what);
+    }
+
+    bool run_uart(const char* what) {
+        return run_gated(model.rootp->UART_ENABLE, [this] { uart_cycle(); }, "UART", what);
+    }
+
+    // Flip a peripheral's request toggle and clock until it has acknowledged: the system
+    // clock, or with `uart` the UART clock.
+    bool request(CData& request, const CData& acknowledge, const char* what, bool uart = false) {
         request ^= 1;
-        if (!run_sync(what)) return false;
+        if (!(uart ? run_uart(what) : run_sync(what))) return false;
         if (acknowledge != request) {
-            error = std::string(what) + ": the system clock stopped before the acknowledge";
+            error = std::string(what) + ": the clock stopped before the acknowledge";
             return false;
         }
         return true;
@@ -215,17 +235,20 @@ EXPORT void nh_destroy(void* handle) {
 
 EXPORT const char* nh_error(void* handle) { return static_cast<Harness*>(handle)->error.c_str(); }
 
-EXPORT int nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles) {
+EXPORT int nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles,
+                     uint64_t* uart_cycles) {
     auto* h = static_cast<Harness*>(handle);
     h->wait_idle();
     *sys_cycles = h->sys_cycles;
     *pwm_cycles = h->pwm_cycles;
+    *uart_cycles = h->uart_cycles;
     return 0;
 }
 
-// Reset both domains: `rst` high for these cycles of each clock, then the system clock
-// runs until it stops by itself.
-EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles) {
+// Reset every domain: `rst` high for these cycles of each clock, then the system and
+// UART clocks run until they stop by themselves.
+EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles,
+                    uint32_t uart_cycles) {
     auto* h = static_cast<Harness*>(handle);
     h->wait_idle();
     Vharness& m = h->model;
@@ -233,8 +256,9 @@ EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles) {
     m.eval();
     for (uint32_t i = 0; i < sys_cycles; ++i) h->sync_cycle();
     for (uint32_t i = 0; i < pwm_cycles; ++i) h->pwm_cycle();
+    for (uint32_t i = 0; i < uart_cycles; ++i) h->uart_cycle();
     m.rst = 0;
-    return status(h->run_sync("reset"));
+    return status(h->run_sync("reset") && h->run_uart("reset"));
 }
 
 // One SPI transfer of `length` bytes; `tx` and `rx` hold `bytes` (the buffer's size).
@@ -293,9 +317,10 @@ EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
     return status(ok);
 }
 
-// The GPS UART: send `tx_len` bytes at `divider` cycles per bit, then listen until the
-// receiver's line rests; what arrived since the previous call is copied to `rx` (up to
-// `rx_bytes`), its count to `rx_len` and the line time of the last byte to `line_cycles`.
+// The GPS UART, on the UART clock alone: send `tx_len` bytes at `divider` cycles per bit,
+// then listen until the receiver's line rests; what arrived since the previous call is
+// copied to `rx` (up to `rx_bytes`), its count to `rx_len` and the line time of the last
+// byte (UART cycles) to `line_cycles`.
 EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_bytes,
                    uint32_t tx_len, uint8_t* rx, size_t rx_bytes, uint32_t* rx_len,
                    uint32_t* line_cycles) {
@@ -305,7 +330,7 @@ EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_
     m.uart_divider = divider;
     m.uart_tx_len = tx_len;
     bool ok = put(*h, m.uart_tx, tx, tx_bytes, "uart_tx") &&
-              h->request(m.uart_request, m.uart_acknowledge, "UART exchange") &&
+              h->request(m.uart_request, m.uart_acknowledge, "UART exchange", true) &&
               get(*h, m.uart_rx, rx, rx_bytes, "uart_rx");
     *rx_len = m.uart_rx_len;
     *line_cycles = m.uart_line_cycles;

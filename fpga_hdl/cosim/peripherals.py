@@ -31,7 +31,7 @@ from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, SPI_DEVICES
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
-from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ, sensor_top_host_map
+from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ, UART_CLK_HZ, sensor_top_host_map
 
 __all__ = [
     "Harness",
@@ -158,9 +158,9 @@ class HarnessI2cBus:
 class HarnessUart:
     """:class:`~fpga_hdl.buses.transactions.UartPort` over the harness's GPS UART peer."""
 
-    def __init__(self, dut, *, sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:
+    def __init__(self, dut, *, clk_hz: float = UART_CLK_HZ) -> None:
         self.dut = dut
-        self.sys_clk_hz = sys_clk_hz
+        self.clk_hz = clk_hz
         self.tx_depth = len(dut.uart_tx) // 8
         self.rx_depth = len(dut.uart_rx) // 8
         self._request = _Requester(dut, "uart", ("divider", "tx", "tx_len"))
@@ -172,7 +172,7 @@ class HarnessUart:
         if len(tx) > self.tx_depth:
             raise ValueError(f"UART burst of {len(tx)} bytes exceeds {self.tx_depth}")
         dut = self.dut
-        dut.uart_divider.value = uart_divider(self.sys_clk_hz, baud)
+        dut.uart_divider.value = uart_divider(self.clk_hz, baud)
         dut.uart_tx.value = int.from_bytes(tx, "little")
         dut.uart_tx_len.value = len(tx)
         await self._request()
@@ -183,7 +183,7 @@ class HarnessUart:
                 f"{self.rx_depth}"
             )
         data = int(dut.uart_rx.value).to_bytes(self.rx_depth, "little")[:count]
-        return UartTransfer(data, cycles_to_us(int(dut.uart_line_cycles.value), self.sys_clk_hz))
+        return UartTransfer(data, cycles_to_us(int(dut.uart_line_cycles.value), self.clk_hz))
 
 
 class HarnessHost:
@@ -277,7 +277,7 @@ class Harness:
         self.uart = HarnessUart(dut)
 
     async def reset(self) -> None:
-        """Reset both clock domains (both clocks run for it), then leave them stopped."""
+        """Reset every clock domain (every clock runs for it), then leave them stopped."""
         dut = self.dut
         for part in (self.host, self.spi, self.i2c, self.uart):
             part.reset()
@@ -285,13 +285,14 @@ class Harness:
         self.pwm.write([0] * CHANNELS, period_ticks=0)
         tick_ps = round(1e12 / self.pwm_tick_hz)
         dut.rst.value = 1
-        await Timer(3 * tick_ps, unit="ps")  # three ticks: both domains reset
+        await Timer(3 * tick_ps, unit="ps")  # three ticks: every domain reset
         dut.rst.value = 0
-        await Timer(tick_ps, unit="ps")  # let both clocks stop
+        await Timer(tick_ps, unit="ps")  # let the clocks stop
 
-    def cycles(self) -> tuple[int, int]:
-        """(system, PWM) clock cycles so far: what the simulation has cost."""
-        return int(self.dut.sync_cycles.value), int(self.dut.pwm_cycles.value)
+    def cycles(self) -> tuple[int, int, int]:
+        """(system, PWM, UART) clock cycles so far: what the simulation has cost."""
+        dut = self.dut
+        return int(dut.sync_cycles.value), int(dut.pwm_cycles.value), int(dut.uart_cycles.value)
 
     async def wait_until_s(self, time_s: float) -> None:
         """Let simulated time reach ``time_s`` (only the clocks that are enabled run)."""

@@ -17,7 +17,8 @@ class SensorTopPins:
     """Host port, SPI controller (``imu``, ``baro``) and I2C controller on a SensorTop DUT.
 
     Construction drives every input to its idle level (chip selects high, SCL and SDA
-    released, PWM inputs low with their domain unclocked, the GPS UART's RXD high);
+    released, PWM inputs low with their domain unclocked, the GPS UART's RXD high with the
+    receiver's ``uart`` domain unclocked);
     ``await pins.host.reset()`` then resets the design before the first transfer.
     """
 
@@ -47,6 +48,6 @@ class SensorTopPins:
             sys_clk_hz=SYS_CLK_HZ,
             timing=i2c_timing,
         )
-        for name in ("pwm", "pwm_clk", "pwm_rst"):
+        for name in ("pwm", "pwm_clk", "pwm_rst", "uart_clk", "uart_rst"):
             getattr(dut, name).value = 0
         dut.gps_rx.value = 1  # the GPS UART's RXD idles high (a low line is a break)

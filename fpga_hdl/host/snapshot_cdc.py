@@ -14,10 +14,16 @@ source's live registers, and a value's age is fixed:
   publication (:attr:`SnapshotSynchronizer.copy_cycles`: the synchroniser's flip-flops,
   then the copy).
 
-The source may publish at most once per source cycle, and ``held`` must then stay put
-while the destination copies it: the destination clock must run at least
-``stages + 2`` times as fast as the source's (the copy lands ``stages + 1`` destination
-edges after a publication, before the next one can).
+``held`` must stay put while the destination copies it: publications at least
+``stages + 1`` destination periods apart. A source that may publish every source cycle
+therefore needs a destination clock at least ``stages + 2`` times as fast as its own; a
+value that changes only now and then (a fault word set by the host) may cross into a
+slower domain.
+
+:class:`SampleSynchronizer` is the same crossing for a value whose *strobe* matters, not
+its change (a GPS epoch whose fix equals the last is still an epoch): the strobe steps
+the count, and the source's own register is copied, so the source pays no copy of its
+own (a 624-bit fix stays one register in the fast domain).
 
 A stopped destination clock (a gated simulation clock) loses nothing as long as the
 count does not come round to the value last copied: up to ``2**COUNT_BITS - 1``
@@ -32,7 +38,7 @@ from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["COUNT_BITS", "PUBLISH_TICKS", "SnapshotSynchronizer"]
+__all__ = ["COUNT_BITS", "PUBLISH_TICKS", "SampleSynchronizer", "SnapshotSynchronizer"]
 
 #: Bits of the Gray change counter: publications a stopped destination may miss without
 #: aliasing. With 3 bits, 8 PWM result changes between two host reads (one 4 ms rig
@@ -79,22 +85,75 @@ class SnapshotSynchronizer(wiring.Component):
     def elaborate(self, platform) -> Module:
         m = Module()
         held = Signal.like(self.data_i, name="held")
-        count = Signal(COUNT_BITS)
-        next_count = Signal(COUNT_BITS)  # wraps, so the Gray code wraps by one bit too
-        gray = Signal(COUNT_BITS)
-        m.d.comb += next_count.eq(count + 1)
-        with m.If(Value.cast(held) != Value.cast(self.data_i)):
-            m.d[self._i_domain] += [
-                held.eq(self.data_i),
-                count.eq(next_count),
-                gray.eq(_gray(next_count)),
-            ]
-
-        seen_gray = Signal(COUNT_BITS)
-        m.submodules.count_sync = FFSynchronizer(
-            gray, seen_gray, o_domain=self._o_domain, stages=self._stages
-        )
-        copied_gray = Signal(COUNT_BITS)
-        with m.If(seen_gray != copied_gray):
-            m.d[self._o_domain] += [self.data_o.eq(held), copied_gray.eq(seen_gray)]
+        publish = Value.cast(held) != Value.cast(self.data_i)
+        with m.If(publish):
+            m.d[self._i_domain] += held.eq(self.data_i)
+        moved = _counted_crossing(m, publish, self._i_domain, self._o_domain, self._stages)
+        with m.If(moved):
+            m.d[self._o_domain] += self.data_o.eq(held)
         return m
+
+
+class SampleSynchronizer(wiring.Component):
+    """``data_i`` with its strobe ``stb_i`` in ``i_domain`` → ``data_o`` with ``stb_o`` in
+    ``o_domain``: each strobe copies ``data_i`` once, strobes while the destination clock
+    stands still give one copy of the latest (latest wins).
+
+    ``data_i`` must hold still from its strobe until the copy, ``stages + 1`` destination
+    edges after the strobe's source edge: in the rig, a register the host rewrites only at
+    its next commit of the same channel.
+
+    Parameters
+    ----------
+    shape : shape-castable
+        Shape of the value.
+    i_domain, o_domain : str
+        Source and destination clock domains.
+    stages : int
+        Synchroniser flip-flops for the strobe count.
+
+    Attributes
+    ----------
+    data_i : In(shape), stb_i : In(1)
+        The value and its one-cycle strobe, in ``i_domain``.
+    data_o : Out(shape), stb_o : Out(1)
+        The copy and its one-cycle strobe (the cycle after the copy), in ``o_domain``.
+    copy_cycles : int
+        Destination edges after the strobe's source edge until ``data_o`` holds the
+        value: ``stages + 1``.
+    """
+
+    def __init__(self, shape, *, i_domain: str, o_domain: str, stages: int = 2) -> None:
+        self._i_domain, self._o_domain, self._stages = i_domain, o_domain, stages
+        self.copy_cycles = stages + 1
+        super().__init__(
+            {"data_i": In(shape), "stb_i": In(1), "data_o": Out(shape), "stb_o": Out(1)}
+        )
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        moved = _counted_crossing(m, self.stb_i, self._i_domain, self._o_domain, self._stages)
+        m.d[self._o_domain] += self.stb_o.eq(moved)
+        with m.If(moved):
+            m.d[self._o_domain] += self.data_o.eq(self.data_i)
+        return m
+
+
+def _counted_crossing(m: Module, publish: Value, i_domain: str, o_domain: str, stages: int):
+    """The change count of both synchronisers: steps (Gray coded) in an ``i_domain`` cycle
+    with ``publish``, crosses through an ``FFSynchronizer``; the ``o_domain`` signal
+    returned is 1 in the destination cycle that sees it move (and takes the copy)."""
+    count = Signal(COUNT_BITS)
+    next_count = Signal(COUNT_BITS)  # wraps, so the Gray code wraps by one bit too
+    gray = Signal(COUNT_BITS)
+    m.d.comb += next_count.eq(count + 1)
+    with m.If(publish):
+        m.d[i_domain] += [count.eq(next_count), gray.eq(_gray(next_count))]
+    seen_gray = Signal(COUNT_BITS)
+    m.submodules.count_sync = FFSynchronizer(gray, seen_gray, o_domain=o_domain, stages=stages)
+    copied_gray = Signal(COUNT_BITS)
+    moved = Signal()
+    m.d.comb += moved.eq(seen_gray != copied_gray)
+    with m.If(moved):
+        m.d[o_domain] += copied_gray.eq(seen_gray)
+    return moved

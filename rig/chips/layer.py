@@ -64,7 +64,7 @@ from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix, UbloxDriver
 from fpga_hdl.chips.ublox.link import TlmUbloxUart
 from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.chips.ublox.ubx import NavPvt
-from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
+from fpga_hdl.top import UART_CLK_HZ
 from quad_model.sensors import GpsSample, SensorReadings
 from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
 
@@ -337,8 +337,8 @@ class SensorEngine:
 class TlmChips:
     """The chips as fpga_hdl's Python register models, behind TLM buses.
 
-    The GPS UART's line time is the RTL harness's (its system clock sets the divider), so
-    fixes arrive at the same frames as through the RTL.
+    The GPS UART's line time is the RTL's (on SensorTop's UART clock), so fixes arrive at
+    the same frames as through the RTL.
     """
 
     def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
@@ -349,7 +349,7 @@ class TlmChips:
         self.lidarlite = LidarLiteModel()
         self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
         self.i2c = TlmI2cBus({chip.address: chip for chip in (self.ist8310, self.lidarlite)})
-        self.uart = TlmUbloxUart(self.ublox, sys_clk_hz=HARNESS_SYS_CLK_HZ)
+        self.uart = TlmUbloxUart(self.ublox, clk_hz=UART_CLK_HZ)
         self.pwm = PwmCapture(MOTOR_CHANNELS, tick_hz=pwm_tick_hz)
         self._faults: Mapping[str, ChipFault] | None = None  # the fault inputs set last
 

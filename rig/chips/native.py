@@ -37,7 +37,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from fpga_hdl.buses.transactions import UartTransfer
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
 from rig.chips.layer import ChipFrame, ChipReadout, SensorEngine, host_port_inputs, run_now
@@ -144,15 +143,6 @@ class NativeChips:
         widths_us = tuple(capture.width_ticks * self.tick_us for capture in captures)
         return widths_us, tuple(capture.timeout for capture in captures)
 
-    async def exchange(self, tx: bytes, *, baud: int) -> UartTransfer:
-        """The GPS UART (:class:`~fpga_hdl.buses.transactions.UartPort`). Its frames take
-        longer than a rig frame (8.7 ms for a NAV-PVT): on the board the line runs beside
-        the other buses, so its cycles do not count towards this frame's bus time."""
-        before = self.harness.cycles()[0]
-        transfer = await self.harness.uart.exchange(tx, baud=baud)
-        self._read_cycles += self.harness.cycles()[0] - before
-        return transfer
-
     def _check_bus_time(self, now_us: int) -> None:
         """The frame's transfers at the system clock must fit between two frame times."""
         cycles = self.harness.cycles()[0]
@@ -187,7 +177,11 @@ class NativeSensorLayer:
         except Exception as error:
             raise CosimError(f"the RTL co-simulation could not start: {error}") from error
         self.chips = NativeChips(self.harness, pwm_tick_hz=pwm_tick_hz, frame_us=frame_us)
-        self.engine = SensorEngine(self.harness.spi, self.harness.i2c, self.chips, self.chips)
+        # The GPS UART runs on its own clock (SensorTop's ``uart`` domain), so its frames,
+        # longer than a rig frame, cost none of the frame's system-clock bus time.
+        self.engine = SensorEngine(
+            self.harness.spi, self.harness.i2c, self.harness.uart, self.chips
+        )
 
     def start(self) -> None:
         """Reset, PX4's probe/configure sequences, then the PWM generator and capture clock."""

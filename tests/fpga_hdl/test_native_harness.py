@@ -18,8 +18,9 @@ from fpga_hdl.buses.uart import divider_for, line_cycles
 from fpga_hdl.chips.ublox.driver import px4_configuration
 from fpga_hdl.chips.ublox.link import TlmUbloxUart
 from fpga_hdl.chips.ublox.model import UbloxM8Model
-from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, CosimHarness
+from fpga_hdl.cosim.harness import CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason
+from fpga_hdl.top import UART_CLK_HZ
 from tests.fpga_hdl.transcript import run_script, tlm_transcript
 
 pytestmark = [
@@ -62,7 +63,7 @@ def test_compiled_harness_equals_tlm_byte_for_byte(harness):
     native = _run(run_script(harness.spi, harness.i2c, _HostChips(harness)))
     assert native == asyncio.run(tlm_transcript())
     assert any(rx.startswith("nack") for _, _, rx in native)  # the absent address
-    sys_cycles, _ = harness.cycles()
+    sys_cycles, _, _ = harness.cycles()
     assert sys_cycles > 10_000  # the transfers really ran on the system clock
 
 
@@ -71,7 +72,7 @@ def test_the_capture_clock_runs_only_when_asked(harness):
     before = harness.cycles()
     harness.pwm.cycles(1000)
     after = harness.cycles()
-    assert after == (before[0], before[1] + 1000)
+    assert after == (before[0], before[1] + 1000, before[2])
     captures = harness.host.pwm_capture()
     assert captures[0].width_ticks == 100
     assert captures[0].period_ticks == 400
@@ -80,14 +81,21 @@ def test_the_capture_clock_runs_only_when_asked(harness):
 
 def test_px4s_gps_handshake_is_answered_and_timed_as_the_twin_predicts(harness):
     """The u-blox core answers each step of PX4's configuration over the UART peer with the
-    twin's bytes, and the line time the peer measures is ``line_cycles`` to the cycle."""
+    twin's bytes, and the line time the peer measures is ``line_cycles`` to the cycle, on
+    the UART clock alone: the system clock does not run for an exchange."""
     model = UbloxM8Model()
-    twin = TlmUbloxUart(model, sys_clk_hz=HARNESS_SYS_CLK_HZ)
+    twin = TlmUbloxUart(model, clk_hz=UART_CLK_HZ)
     for step in px4_configuration():
+        before = harness.cycles()
         rtl = _run(harness.uart.exchange(step.frame, baud=step.baud))
+        after = harness.cycles()
         assert rtl == asyncio.run(twin.exchange(step.frame, baud=step.baud))
-        divider = divider_for(HARNESS_SYS_CLK_HZ, step.baud)
+        divider = divider_for(UART_CLK_HZ, step.baud)
         assert harness.uart.line_cycles == line_cycles(len(rtl.data), divider)
+        assert after[:2] == before[:2]
+        # The frame out, the answer back (the line in both directions), then the quiet time.
+        out_cycles = len(step.frame) * 10 * divider
+        assert after[2] - before[2] >= out_cycles + harness.uart.line_cycles
     assert model.baud == 115200
     silence = _run(harness.uart.exchange(b"", baud=115200))
     assert (silence.data, silence.line_us) == (b"", 0)

@@ -1,7 +1,8 @@
 # amaranth: UnusedElaboratable=no
 """amaranth.sim tests of the PWM results' path into ``sync``: the snapshot synchroniser
 alone (whole values, their age, a stopped destination clock), and SensorTop's result
-words as the harness's reader takes them (one result set per read, of a known age)."""
+words as the harness's reader takes them (one result set per read, of a known age); the
+sample synchroniser that carries the GPS fix and its strobe into the slower ``uart``."""
 
 import numpy as np
 import pytest
@@ -10,7 +11,12 @@ from amaranth.sim import Simulator
 
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.cosim.harness import HostReader
-from fpga_hdl.host.snapshot_cdc import COUNT_BITS, PUBLISH_TICKS, SnapshotSynchronizer
+from fpga_hdl.host.snapshot_cdc import (
+    COUNT_BITS,
+    PUBLISH_TICKS,
+    SampleSynchronizer,
+    SnapshotSynchronizer,
+)
 from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, SensorTop
 
 SYS_CLK_HZ = 10e6
@@ -117,6 +123,52 @@ def test_changes_while_the_destination_clock_is_stopped_arrive_when_it_runs(chan
     sim.run()
     latest = value(changes + 1)
     assert shown == [value(1)] * (cdc.copy_cycles - 1) + [latest] * 3
+
+
+def test_a_strobed_sample_crosses_once_per_strobe_into_a_slower_domain():
+    """The GPS fix's crossing: the source (16 MHz) strobes a value, the destination runs at
+    the UART clock's 3.6864 MHz. Each strobe gives exactly one ``stb_o`` with the value in
+    ``data_o`` (an equal value too: an epoch is the strobe), ``copy_cycles`` destination
+    edges after the strobe's source edge; three strobes while the destination stands still
+    give one, with the latest."""
+    m = Module()
+    m.domains.src = ClockDomain()
+    m.domains.dst = dst = ClockDomain()
+    m.submodules.cdc = cdc = SampleSynchronizer(24, i_domain="src", o_domain="dst")
+    sim = Simulator(m)
+    sim.add_clock(1 / 16e6, domain="src")
+    got = []  # (destination edges since the strobe, data_o) at each stb_o
+
+    async def bench(ctx):
+        async def dst_edges(count, since):
+            for k in range(1, count + 1):
+                ctx.set(dst.clk, 1)
+                await ctx.delay(0.5 / 3.6864e6)
+                ctx.set(dst.clk, 0)
+                await ctx.delay(0.5 / 3.6864e6)
+                if ctx.get(cdc.stb_o):
+                    got.append((k - since, ctx.get(cdc.data_o)))
+
+        async def strobe(value):
+            ctx.set(cdc.data_i, value)
+            ctx.set(cdc.stb_i, 1)
+            await ctx.tick("src")
+            ctx.set(cdc.stb_i, 0)
+
+        for value in (0x123456, 0x123456, 0xABCDEF):
+            await strobe(value)
+            await dst_edges(8, 0)
+        for value in (1, 2, 3):  # the destination clock stands still
+            await strobe(value)
+            await ctx.tick("src").repeat(5)
+        await dst_edges(8, 0)
+
+    sim.add_testbench(bench)
+    sim.run()
+    assert cdc.copy_cycles == 3
+    # stb_o is registered with the copy: high after edge copy_cycles, seen at the next one.
+    expected_edge = cdc.copy_cycles
+    assert got == [(expected_edge, v) for v in (0x123456, 0x123456, 0xABCDEF, 3)]
 
 
 def _read_words(reader: HostReader, words) -> tuple[tuple[int, ...], tuple[int, ...], int]:

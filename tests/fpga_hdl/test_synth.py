@@ -94,12 +94,15 @@ def report(fmax: dict[str, float], paths: list[tuple[str, str, float]]) -> dict:
 def test_a_slow_clock_and_a_late_crossing_are_named():
     clocks, budgets = clock_requirements(), crossing_budgets()
     sample_budget = next(b for b in budgets if b.target == "negedge spi_sclk").budget_ns
+    gps_budget = next(b for b in budgets if b.target == "posedge uart_clk").budget_ns
+    assert gps_budget == pytest.approx(2 / 3.6864e6 * 1e9)  # two UART periods: 542.5 ns
     made_up = report(
-        {"clk": 50.0, "pwm_clk": 50.0, "spi_sclk": 19.5},
+        {"clk": 50.0, "pwm_clk": 50.0, "uart_clk": 3.5, "spi_sclk": 19.5},
         [
             ("posedge spi_sclk", "negedge spi_sclk", 20.0),  # inside the spi clock's Fmax
             ("posedge clk", "negedge spi_sclk", sample_budget + 1),
             ("posedge pwm_clk", "posedge clk", 2.0),
+            ("posedge clk", "posedge uart_clk", gps_budget + 1),
             ("<async>", "posedge clk", 1e3),  # a pin: no budget, never a failure
         ],
     )
@@ -107,18 +110,21 @@ def test_a_slow_clock_and_a_late_crossing_are_named():
     assert [(x.source, x.target) for x in crossings] == [
         ("posedge clk", "negedge spi_sclk"),
         ("posedge pwm_clk", "posedge clk"),
+        ("posedge clk", "posedge uart_clk"),
         ("<async>", "posedge clk"),
     ]
     failures = timing_failures(clock_results(made_up, clocks), crossings)
-    assert len(failures) == 2
-    assert failures[0].startswith("spi_sclk (spi) reaches 19.5 MHz of 20 MHz")
-    assert failures[1].startswith("posedge clk → negedge spi_sclk takes")
+    assert len(failures) == 4
+    assert failures[0].startswith("uart_clk (uart) reaches 3.5 MHz of 3.6864 MHz")
+    assert failures[1].startswith("spi_sclk (spi) reaches 19.5 MHz of 20 MHz")
+    assert failures[2].startswith("posedge clk → negedge spi_sclk takes")
+    assert failures[3].startswith("posedge clk → posedge uart_clk takes")
 
 
 def test_a_clock_nextpnr_did_not_time_is_an_error():
     clocks = clock_requirements()
     with pytest.raises(SynthesisError, match="pwm_clk"):
-        clock_results(report({"clk": 50.0, "spi_sclk": 50.0}, []), clocks)
+        clock_results(report({"clk": 50.0, "uart_clk": 50.0, "spi_sclk": 50.0}, []), clocks)
 
 
 def test_xilinx_cells_count_as_device_resources():

@@ -9,7 +9,7 @@ import struct
 import pytest
 from amaranth.sim import Simulator
 
-from fpga_hdl.buses.uart import MAX_BAUD_ERROR, baud_error, divider_for
+from fpga_hdl.buses.uart import MIN_DIVIDER, baud_error, divider_for
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.core import BAUD_RATES, UbloxM8Core
 from fpga_hdl.chips.ublox.driver import (
@@ -30,7 +30,7 @@ from fpga_hdl.chips.ublox.link import (
 )
 from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.chips.ublox.ubx import NavPvt
-from fpga_hdl.top import SYS_CLK_HZ
+from fpga_hdl.top import SYS_CLK_HZ, UART_CLK_HZ
 
 FIX = GpsFix(
     fix_type=3,
@@ -185,10 +185,16 @@ def test_unsupported_rate_is_naked_and_kept():
 # --- baud dividers -------------------------------------------------------------------------
 
 
-def test_every_supported_rate_is_within_the_budget_at_sys_clk():
+def test_every_supported_rate_divides_the_uart_clock_exactly():
     for baud in BAUD_RATES:
-        assert abs(baud_error(SYS_CLK_HZ, baud)) <= MAX_BAUD_ERROR
+        assert baud_error(UART_CLK_HZ, baud) == 0
+        assert UART_CLK_HZ / baud == divider_for(UART_CLK_HZ, baud) >= MIN_DIVIDER
+    assert divider_for(UART_CLK_HZ, 115200) == 32
     assert set(BAUD_RATES) >= set(PX4_BAUD_RATES) - {921600}
+    with pytest.raises(
+        ValueError, match=r"^921600 baud at 3\.6864e\+06 Hz needs a divider of 4; at least 8$"
+    ):
+        divider_for(UART_CLK_HZ, 921600)
     with pytest.raises(
         ValueError, match=r"^921600 baud at 1\.6e\+07 Hz is off by \+2\.12% \(divider 17\)"
     ):
@@ -255,15 +261,18 @@ def test_rtl_equals_twin_for_an_ack_and_a_nav_pvt():
 
 def test_px4_driver_configures_the_twin_then_gets_each_fix_after_its_line_time():
     model = UbloxM8Model()
-    driver = UbloxDriver(TlmUbloxUart(model, sys_clk_hz=SYS_CLK_HZ))
+    driver = UbloxDriver(TlmUbloxUart(model, clk_hz=UART_CLK_HZ))
     asyncio.run(driver.configure())
     assert (driver.baud, model.baud, model.nav_pvt_enabled) == (115200, 115200, True)
     model.load_fix(receiver_solution(FIX, 200_000))
     asyncio.run(driver.receive(200_000))
-    # 100 bytes at 115200 baud from a 16 MHz clock's divider (139): 99 whole bytes, then
-    # the last one's 9.5 bits and the receiver's three input registers.
-    line_us = math.ceil((99 * 10 * 139 + 9 * 139 + 69 + 3) / 16)
-    assert line_us == pytest.approx(100 * 10 / 115200 * 1e6, rel=0.01)
+    # 100 bytes at 115200 baud on the 3.6864 MHz UART clock (divider 32): 99 whole bytes,
+    # then the last one's 9.5 bits and the receiver's three input registers.
+    # 31,987 cycles of 1/3.6864 µs: 8677.03 µs, a byte there after it (was 8684 µs on the
+    # 16 MHz system clock, whose divider 139 ran 0.07 % slow).
+    line_us = math.ceil((99 * 10 * 32 + 9 * 32 + 16 + 3) * 1_000_000 / 3_686_400)
+    assert line_us == 8678
+    assert line_us == pytest.approx(100 * 10 / 115200 * 1e6, rel=0.001)
     assert driver.poll(200_000 + line_us - 1) == ()
     (got,) = driver.poll(200_000 + line_us)
     assert (got.time_us, got.sent_us) == (200_000 + line_us, 200_000)
@@ -286,7 +295,7 @@ def test_receiver_faults_reach_px4s_decoder(fault, fix_type, satellites, eph):
 
 def test_a_bad_checksum_loses_that_epoch_only():
     model = UbloxM8Model()
-    driver = UbloxDriver(TlmUbloxUart(model, sys_clk_hz=SYS_CLK_HZ))
+    driver = UbloxDriver(TlmUbloxUart(model, clk_hz=UART_CLK_HZ))
     asyncio.run(driver.configure())
     for now_us, flip in ((0, BAD_CHECKSUM_FLIP), (200_000, 0)):
         model.fault_flip = flip
@@ -300,6 +309,6 @@ def test_a_bad_checksum_loses_that_epoch_only():
 def test_the_handshake_fails_in_one_line_when_the_receiver_stays_silent():
     model = UbloxM8Model()
     model.fault_mute = True
-    driver = UbloxDriver(TlmUbloxUart(model, sys_clk_hz=SYS_CLK_HZ))
+    driver = UbloxDriver(TlmUbloxUart(model, clk_hz=UART_CLK_HZ))
     with pytest.raises(UbloxHandshakeError, match="no ACK-NAK for message 0x06 0x8A at 9600"):
         asyncio.run(driver.configure())

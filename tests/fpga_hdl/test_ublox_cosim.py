@@ -7,7 +7,7 @@ import pytest
 
 from fpga_hdl.chips.ublox.core import UbloxM8Core
 from fpga_hdl.cosim.runner import SIMULATOR_PARAMS, run_cocotb
-from fpga_hdl.top import SYS_CLK_HZ
+from fpga_hdl.top import UART_CLK_HZ
 
 HERE = Path(__file__).parent
 
@@ -22,6 +22,6 @@ TIMING_TESTS = ",".join((
 
 @pytest.mark.parametrize("simulator", SIMULATOR_PARAMS)
 def test_ublox_uart_on_generated_verilog(simulator):
-    core = UbloxM8Core(sys_clk_hz=SYS_CLK_HZ)
+    core = UbloxM8Core(sys_clk_hz=UART_CLK_HZ)
     run_cocotb(core, "ublox_m8", "cocotb_ublox_uart", module_dir=HERE, simulator=simulator,
                testcase=None if simulator == "verilator" else TIMING_TESTS)  # fmt: skip

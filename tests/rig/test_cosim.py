@@ -197,8 +197,12 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     # the first frame after its last byte; loss of fix and jamming reach PX4's decoder, and
     # the epoch with the bad checksum never arrives.
     assert [received.sent_us // 1000 for _, received in fixes] == [50, 100, 150, 250, 300, 350]
+    # The line: 99 bytes of 10 bits and the last one's 9.5 at 32 cycles a bit on the
+    # 3.6864 MHz UART clock, plus the receiver's 3 input registers: 31,987 cycles, 8678 µs.
+    line_us = -(-(99 * 10 * 32 + 9 * 32 + 16 + 3) * 1_000_000 // 3_686_400)
+    assert line_us == 8678
     for delivered_us, received in fixes:
-        assert received.time_us - received.sent_us == 8696
+        assert received.time_us - received.sent_us == line_us
         assert delivered_us == received.sent_us + 9000
     # Each LIDAR-Lite cycle collects the acquisition the previous one started (none at the
     # first); muted, the collect is NACKed and stays due, and the first cycle after it

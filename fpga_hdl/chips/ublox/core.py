@@ -15,9 +15,9 @@ from fpga_hdl.host.host_port import chip_sample_latch
 __all__ = ["BAUD_RATES", "RESET_BAUD", "UbloxM8Core"]
 
 #: Baud rates the core switches to on a CFG-PRT for UART1: PX4's auto-detection list
-#: (38400, 57600, 9600, 115200, 230400, 460800, 921600) and 19200, except 921600: at a
-#: 16 MHz system clock its divider (17) is 2.1 % fast, outside ``MAX_BAUD_ERROR``, and PX4
-#: asks for it only in moving-base heading setups.
+#: (38400, 57600, 9600, 115200, 230400, 460800, 921600) and 19200, except 921600: on
+#: SensorTop's 3.6864 MHz UART clock its divider would be 4, below ``MIN_DIVIDER`` (and a
+#: 16 MHz clock's 17 is 2.1 % fast), and PX4 asks for it only in moving-base heading setups.
 BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 230400, 460800)
 #: UART1's power-on rate on a u-blox M8.
 RESET_BAUD = 9600
@@ -55,7 +55,8 @@ class UbloxM8Core(wiring.Component):
     Parameters
     ----------
     sys_clk_hz : float
-        Frequency of ``sync``; every rate in :data:`BAUD_RATES` must fit its divider.
+        Frequency of the core's ``sync`` (SensorTop's ``uart`` domain); every rate in
+        :data:`BAUD_RATES` must fit its divider.
     baud : int
         Power-on rate of UART1 (u-blox default 9600).
     nav_pvt_at_reset : bool

@@ -54,20 +54,21 @@ def receiver_solution(fix: GpsFix, now_us: int, fault: GpsFault | None = None) -
 
 class TlmUbloxUart:
     """:class:`~fpga_hdl.buses.transactions.UartPort` over the twin: its bytes, with the line
-    time the RTL's UART takes at ``sys_clk_hz`` (the same divider, back-to-back bytes).
+    time the RTL's UART takes on its clock of ``clk_hz`` (SensorTop's ``UART_CLK_HZ``: the
+    same divider, back-to-back bytes).
 
     A burst at a rate other than the receiver's is lost (a real receiver sees framing
     errors and answers nothing), so a handshake at the wrong rate fails here as on the RTL.
     """
 
-    def __init__(self, model: UbloxM8Model, *, sys_clk_hz: float) -> None:
+    def __init__(self, model: UbloxM8Model, *, clk_hz: float) -> None:
         self.model = model
-        self.sys_clk_hz = sys_clk_hz
+        self.clk_hz = clk_hz
 
     async def exchange(self, tx: bytes, *, baud: int) -> UartTransfer:
         if baud != self.model.baud:
             return UartTransfer(b"", 0)
         self.model.receive(tx)
         data = self.model.transmit()
-        cycles = line_cycles(len(data), divider_for(self.sys_clk_hz, baud))
-        return UartTransfer(data, cycles_to_us(cycles, self.sys_clk_hz))
+        cycles = line_cycles(len(data), divider_for(self.clk_hz, baud))
+        return UartTransfer(data, cycles_to_us(cycles, self.clk_hz))
