@@ -125,6 +125,12 @@ def main(argv: list[str] | None = None) -> int:
     identify.add_argument("--vibration", action="store_true",
                           help="fit the IMU noise and the vibration per operating point instead "
                                "and print [imu]/[vibration] lines")  # fmt: skip
+    identify.add_argument("--raw-imu", type=Path, default=None, metavar="DIR",
+                          help="write the log's raw IMU FIFO and the vehicle's IMU model at rest "
+                               "(--rest) at the chip's rate as real_/sim_<gyro|accel>.parquet "
+                               "tables for a credibility plan, instead")  # fmt: skip
+    identify.add_argument("--rest", type=float, nargs=2, metavar=("START", "END"),
+                          help="with --raw-imu: boot seconds the rotors are stopped")  # fmt: skip
     identify.add_argument("--imu-hz", type=float, default=800.0,
                           help="the replay's IMU rate the vibration is fitted at (default 800, "
                                "PX4's lockstep at the X500's IMU_GYRO_RATEMAX)")  # fmt: skip
@@ -362,6 +368,16 @@ def _identify(args: argparse.Namespace) -> int:
 
     try:
         vehicle = load_vehicle(args.vehicle or identify.vehicle_name_for_log(args.log))
+        if args.raw_imu is not None:
+            from rig.apps import vibration  # on demand
+
+            if args.rest is None:
+                raise identify.IdentificationError("--raw-imu needs --rest START END")
+            for path in vibration.write_raw_imu_tables(
+                args.log, vehicle, tuple(args.rest), args.raw_imu
+            ):
+                print(path)
+            return 0
         if args.vibration:
             from rig.apps import vibration  # on demand
 

@@ -65,6 +65,8 @@ HOVER_SMOOTH_S = 1.0
 HOVER_MAX_SPEED_MPS = 0.6
 HOVER_MAX_RATE_RADPS = 0.25
 MIN_HOVER_S = 3.0
+#: … and the thrust set-point within this fraction of its airborne median.
+HOVER_THRUST_BAND = 0.2
 #: Both legs of the joint input-output estimate must reach this coherence (γ²) at a
 #: frequency for it to enter the fit: below ≈ 0.4 the random error of one leg exceeds
 #: ≈ 30 % with the segment counts of a one-minute log (Bendat & Piersol ε_r).
@@ -348,17 +350,22 @@ def _airborne_span(log: _Log) -> tuple[float, float]:
 
 # ------------------------------------------------------------------ hover
 def hover_windows(log_path: str | Path) -> tuple[tuple[float, float], ...]:
-    """Steady-hover spans of a log: airborne, RMS |v| ≤ HOVER_MAX_SPEED_MPS and RMS of every
-    body rate ≤ HOVER_MAX_RATE_RADPS (over HOVER_SMOOTH_S), for at least MIN_HOVER_S."""
+    """Steady-hover spans of a log: airborne, RMS |v| ≤ HOVER_MAX_SPEED_MPS (vz alone where
+    PX4 flags vx, vy invalid), RMS of every body rate ≤ HOVER_MAX_RATE_RADPS (over
+    HOVER_SMOOTH_S) and the thrust within HOVER_THRUST_BAND of its airborne median, for at
+    least MIN_HOVER_S."""
     return _hover_windows(_read_log(Path(log_path)))
 
 
 def _hover_windows(log: _Log) -> tuple[tuple[float, float], ...]:
     why = "velocity for hover detection"
-    time_s, vx = log.series("vehicle_local_position", "vx", why)
-    speed_sq = vx**2 + sum(
-        log.series("vehicle_local_position", f, why)[1] ** 2 for f in ("vy", "vz")
-    )
+    time_s, vz = log.series("vehicle_local_position", "vz", why)
+    horizontal_sq = sum(log.series("vehicle_local_position", f, why)[1] ** 2 for f in ("vx", "vy"))
+    if "v_xy_valid" in log.topic("vehicle_local_position", why):
+        # without a horizontal aid (no GNSS: the 8S quad's log) PX4 flags vx, vy invalid and
+        # they drift to nonsense; the vertical speed (baro) and the rates still find a hover
+        horizontal_sq *= log.series("vehicle_local_position", "v_xy_valid", why)[1]
+    speed_sq = vz**2 + horizontal_sq
     t_landed, landed = log.series("vehicle_land_detected", "landed", "airborne span")
     landed_now = landed[np.clip(np.searchsorted(t_landed, time_s, "right") - 1, 0, None)]
     # averaged over HOVER_SMOOTH_S: a pilot's small corrections are hover, a manoeuvre not
@@ -366,6 +373,14 @@ def _hover_windows(log: _Log) -> tuple[tuple[float, float], ...]:
     # a running mean of squares can dip below zero by rounding: clip before the root
     mean_speed_sq = np.maximum(uniform_filter1d(speed_sq, span), 0.0)
     steady = (landed_now < 0.5) & (np.sqrt(mean_speed_sq) <= HOVER_MAX_SPEED_MPS)
+    # the collective thrust near its airborne median: the land detector calls a heavy
+    # vehicle's slow spin-up airborne before it lifts (the 8S quad: 110-120 s at thrust
+    # 0.2-0.55 against 0.65 in hover), and a climb without velocity (no GNSS) looks level
+    if "vehicle_thrust_setpoint" in log.topics:  # else the hover's thrust names it missing
+        t_thrust, thrust = log.series("vehicle_thrust_setpoint", "xyz[2]", "hover detection")
+        thrust = np.interp(time_s, t_thrust, -thrust)
+        median = float(np.median(thrust[landed_now < 0.5])) if np.any(landed_now < 0.5) else 0.0
+        steady &= np.abs(thrust - median) <= HOVER_THRUST_BAND * median
     for axis in range(3):
         t_rate, rate = log.series("vehicle_angular_velocity", f"xyz[{axis}]", "hover detection")
         rate_sq = np.interp(

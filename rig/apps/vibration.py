@@ -330,10 +330,10 @@ def fit_vibration(
     alone, broadband alone, the white noise alone) weighted by the squared levels."""
     stream_hz = measured.stream_rate_hz
     imu = vehicle.imu
-    if any(p.name == "stopped" for p in measured.points):
+    stopped = rest_point(vehicle, measured)
+    if stopped is not None:
         # The densities that give the log's σ at rest through the same pipeline (the rotors
         # stopped: white noise alone), one per triad: the RMS over the axes.
-        stopped = measured.point("stopped")
         model = model_spectrum(vehicle, stopped, imu_rate_hz, stream_hz).sigma
         accel, gyro = (
             float(np.sqrt(np.mean(stopped.spectrum.sigma[t] ** 2) / np.mean(model[t] ** 2)))
@@ -346,7 +346,8 @@ def fit_vibration(
         )
         vehicle = replace(vehicle, imu=imu)
     densities = (imu.gyro_noise_density_radps_per_sqrthz, imu.accel_noise_density_mps2_per_sqrthz)
-    points = sorted((measured.point(name) for name in fitted), key=_mean_speed(vehicle))
+    turning = [name for name in fitted if stopped is None or name != stopped.name]
+    points = sorted((measured.point(name) for name in turning), key=_mean_speed(vehicle))
     speeds = tuple(_mean_speed(vehicle)(p) for p in points)
     ones = tuple((1.0, 1.0, 1.0) for _ in points)
     zeros = tuple((0.0, 0.0, 0.0) for _ in points)
@@ -386,6 +387,16 @@ def fit_vibration(
     }
     vib = replace(vehicle.vibration, level_rotor_speed_radps=speeds, **tables)
     return replace(vehicle, vibration=vib), densities
+
+
+def rest_point(vehicle: Vehicle, measured: LogVibration) -> OperatingPoint | None:
+    """The log's window with the rotors stopped, if any. An armed idle at which the
+    vehicle's ESCs do not start the motors (the 8S quad: 1100 µs armed, below its ESCs'
+    start) comes first: a disarmed window may hold the props coasting down (the X500's)."""
+    names = {point.name for point in measured.points}
+    if "idle" in names and _mean_speed(vehicle)(measured.point("idle")) == 0.0:
+        return measured.point("idle")
+    return measured.point("stopped") if "stopped" in names else None
 
 
 def _mean_speed(vehicle: Vehicle):
@@ -429,3 +440,112 @@ def vibration_toml(vehicle: Vehicle, measured: LogVibration, imu_rate_hz: float)
         rows = [[round(v, 3) for v in row] for row in getattr(vib, name)]
         lines.append(f"{name} = {rows}")
     return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ raw IMU at rest
+#: PX4's raw IMU FIFO topics (a log with SDLOG_PROFILE's raw-FIFO bit): each message holds up
+#: to 32 consecutive chip samples ``dt`` µs apart, in counts times ``scale``, chip axes.
+FIFO_TOPICS = {"gyro": "sensor_gyro_fifo", "accel": "sensor_accel_fifo"}
+_FIFO_AXES = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class RawImu:
+    """One triad's raw samples: times (µs), values (SI, N × 3) and the chip's rate."""
+
+    time_us: NDArray[np.int64]
+    values: NDArray[np.float64]
+    rate_hz: float
+
+
+def read_raw_imu(log_path: str | Path) -> dict[str, RawImu]:
+    """The log's raw gyro and accel FIFO samples, unpacked (``gyro``, ``accel``). A message's
+    samples are laid ``dt`` apart from its ``timestamp_sample`` (the first sample's time in
+    PX4's FIFO drivers); between messages the logger may have dropped a few."""
+    path = Path(log_path)
+    if not path.is_file():
+        raise IdentificationError(f"{path}: log file not found")
+    try:
+        ulog, _ = read_ulog(path, tuple(FIFO_TOPICS.values()))
+    except CredibilityError as error:
+        raise IdentificationError(str(error)) from None
+    topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+    raw = {}
+    for triad, topic in FIFO_TOPICS.items():
+        data = topics.get(topic)
+        if data is None:
+            raise IdentificationError(
+                f"{path}: no topic {topic!r} (the raw IMU FIFO: log it with SDLOG_PROFILE's "
+                "raw-FIFO bit)"
+            )
+        counts = np.array(data["samples"], dtype=int)
+        dt_us = np.asarray(data["dt"], dtype=float)
+        keep = [np.arange(n) < n for n in counts]  # each message's valid slots
+        offsets = np.arange(counts.max())[None, :] * dt_us[:, None]
+        times = np.asarray(data["timestamp_sample"], dtype=float)[:, None] + offsets
+        mask = np.array([np.pad(k, (0, counts.max() - k.size)) for k in keep])
+        columns = [
+            np.column_stack([data[f"{axis}[{k}]"] for k in range(counts.max())]).astype(float)
+            * np.asarray(data["scale"], dtype=float)[:, None]
+            for axis in _FIFO_AXES
+        ]
+        raw[triad] = RawImu(
+            time_us=np.round(times[mask]).astype(np.int64),
+            values=np.column_stack([column[mask] for column in columns]),
+            rate_hz=1e6 / float(np.median(dt_us)),
+        )
+    return raw
+
+
+def raw_imu_at_rest(
+    vehicle: Vehicle, raw: dict[str, RawImu], span_s: tuple[float, float], seed: int = 0
+) -> dict[str, RawImu]:
+    """The vehicle's IMU model at rest (on the stand, rotors stopped) sampled at the chip's
+    rate, one sample for each of the log's samples in ``span_s``, on the log's timestamps
+    (so a plan segment selects the same samples). Nothing but the IMU's own noise and bias
+    acts at rest, so this holds for any airframe, the quad-only model's or not."""
+    rng = np.random.default_rng(seed)
+    modelled = {}
+    for triad, log in raw.items():
+        inside = (log.time_us >= span_s[0] * 1e6) & (log.time_us <= span_s[1] * 1e6)
+        if inside.sum() < 2:
+            raise IdentificationError(
+                f"--rest {span_s[0]:g} {span_s[1]:g}: no {triad} FIFO samples in that span"
+            )
+        rate_hz = round(log.rate_hz)  # the model steps whole physics steps per sample
+        model = QuadModel(
+            vehicle, rng, mount=Mount.THRUST_STAND, physics_rate_hz=model_rate_for(rate_hz)
+        )
+        imu = ImuModel(vehicle, model.environment, np.random.default_rng(seed + 1), rate_hz)
+        stopped = np.zeros(ROTOR_COUNT)
+        samples = np.empty((int(inside.sum()), 3))
+        for k in range(samples.shape[0]):
+            model.advance(stopped, 1.0 / rate_hz)
+            reading = imu.sample(model.truth)
+            samples[k] = reading.gyro_radps if triad == "gyro" else reading.accel_mps2
+        modelled[triad] = RawImu(log.time_us[inside], samples, float(rate_hz))
+    return modelled
+
+
+def write_raw_imu_tables(
+    log_path: str | Path, vehicle: Vehicle, rest_s: tuple[float, float], out_dir: Path
+) -> tuple[Path, ...]:
+    """``real_<triad>.parquet`` (the log's FIFO, all of it) and ``sim_<triad>.parquet`` (the
+    model at rest over ``rest_s``) in ``out_dir``, columns ``timestamp`` (µs) and
+    ``sensor_<triad>_fifo.x|y|z`` (SI), for a credibility plan to compare."""
+    import pandas as pd  # on demand, as credibility reads tables
+
+    raw = read_raw_imu(log_path)
+    modelled = raw_imu_at_rest(vehicle, raw, rest_s)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for role, triads in (("real", raw), ("sim", modelled)):
+        for triad, samples in triads.items():
+            columns = {"timestamp": samples.time_us} | {
+                f"{FIFO_TOPICS[triad]}.{axis}": samples.values[:, k]
+                for k, axis in enumerate(_FIFO_AXES)
+            }
+            path = out_dir / f"{role}_{triad}.parquet"
+            pd.DataFrame(columns).to_parquet(path, index=False)
+            written.append(path)
+    return tuple(written)

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 from pyulog import ULog
 
-from quad_model.environment import PX4_DEFAULT_HOME, isa_density_kgpm3
+from quad_model.environment import (
+    DRY_AIR_GAS_CONSTANT,
+    PX4_DEFAULT_HOME,
+    Environment,
+    isa_density_kgpm3,
+    isa_pressure_pa,
+    isa_temperature_k,
+)
 from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import VEHICLES_DIR, load_vehicle
 from rig.apps import cli
@@ -187,13 +194,19 @@ def test_recovers_inertia_within_the_aliasing_bound_at_50_hz(synthetic_flight):
     assert abs(offset.value - truth.propulsion.speed_offset_radps) <= 3 * offset.uncertainty
 
 
-def _hover_throttle_at(vehicle, voltage_v: float) -> float:
+def _hover_throttle_at(vehicle, voltage_v: float, density_kgpm3: float | None = None) -> float:
     """The model's own hover throttle on a bench supply at ``voltage_v`` (the model's default
-    home, 488 m, has the log's air density 1.167 kg/m³)."""
+    home, 488 m, has the X500 log's air density 1.167 kg/m³; another density is the day's
+    temperature there, as a replay flies it)."""
     battery = replace(vehicle.battery, cell_full_v=voltage_v / vehicle.battery.cell_count,
                       internal_resistance_ohm=0.0)  # fmt: skip
+    environment = Environment()
+    if density_kgpm3 is not None:
+        altitude = PX4_DEFAULT_HOME.alt_amsl_m
+        temperature_k = isa_pressure_pa(altitude) / (DRY_AIR_GAS_CONSTANT * density_kgpm3)
+        environment = Environment(temperature_offset_k=temperature_k - isa_temperature_k(altitude))
     model = QuadModel(replace(vehicle, battery=battery), np.random.default_rng(0),
-                      mount=Mount.THRUST_STAND)  # fmt: skip
+                      environment, mount=Mount.THRUST_STAND)  # fmt: skip
     return model.hover_throttle()
 
 
@@ -390,3 +403,74 @@ def test_an_older_px4_layout_is_identified_from_what_it_logged(tmp_path, real_id
     assert result.pwm_range_us == (1100.0, 1900.0)
     assert result.hover.throttle.value == pytest.approx(current.hover.throttle.value, rel=0.015)
     assert result.hover.thrust_setpoint == pytest.approx(current.hover.thrust_setpoint, rel=0.015)
+
+
+# -- the 8S quad (airframe 4001): no GNSS, a Stabilized hover, its own vehicle file ----------
+QUAD4001_LOG = FLIGHT_LOGS / "px4_quad4001_v6c_stab_hover_2026-03-09.ulg"
+
+
+@pytest.fixture(scope="module")
+def quad4001_identification():
+    vehicle = load_vehicle("quad4001_8s")
+    return identify_vehicle(QUAD4001_LOG, vehicle), vehicle
+
+
+def test_a_log_without_gnss_finds_its_hover_from_vz_and_the_thrust(quad4001_identification):
+    """The 8S quad flew without GNSS: PX4 flags vx, vy invalid (they drift to 19 m/s), so only
+    vz screens the hover; and the land detector calls the slow spin-up airborne at 110.1 s
+    while the thrust set-point is still 0.2-0.55 (SOURCES.md: lift-off about 113-115 s), so
+    the thrust must be near its airborne median too. The hover then reads as SOURCES.md
+    has it: thrust set-point about 0.66, motors 1-2 about 0.75 and 3-4 about 0.57."""
+    result, _ = quad4001_identification
+    hover = result.hover
+    assert hover.windows_s[0][0] >= 118.0
+    assert hover.windows_s[-1][1] <= 195.7  # landed at 195.7 s
+    assert sum(b - a for a, b in hover.windows_s) > 60.0
+    assert hover.thrust_setpoint == pytest.approx(0.66, abs=0.01)
+    assert hover.px4_hover_thrust == pytest.approx(hover.thrust_setpoint, abs=0.01)
+    np.testing.assert_allclose(hover.motor_command, [0.75, 0.75, 0.57, 0.57], atol=0.02)
+
+
+def test_quad4001_vehicle_file_holds_what_rig_identify_prints(quad4001_identification, capsys):
+    """quad4001_8s.toml's [identified] lines are `rig identify`'s: the speed curve and the
+    centre of mass (--toml), the roll and pitch inertia (flagged unreliable and so not
+    printed as a line, but used: the file says why), and the [imu] and [vibration] levels
+    (--vibration); the speed curve flies the log's hover throttle on the model."""
+    result, vehicle = quad4001_identification
+    printed = tomllib.loads(identification_toml(result, vehicle))
+    for key in ("speed_slope_radps", "speed_offset_radps"):
+        assert getattr(vehicle.propulsion, key) == printed["propulsion"][key], key
+    assert printed["propulsion"]["position_frd_m"] == [
+        list(row) for row in vehicle.propulsion.position_frd_m
+    ]
+    for index, name in enumerate(("roll", "pitch")):
+        axis = result.axis(name)
+        assert not axis.reliable
+        assert vehicle.body.inertia_kgm2[index][index] == pytest.approx(
+            axis.inertia_kgm2.value, rel=1e-3
+        )
+    hover = result.hover
+    throttle = _hover_throttle_at(vehicle, hover.battery_voltage_v, hover.air_density_kgpm3)
+    assert throttle == pytest.approx(hover.throttle.value, abs=0.005)
+    assert cli.main(["identify", str(QUAD4001_LOG), "--vehicle", "quad4001_8s", "--vibration"]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if not line.startswith("#")]
+    sections = tomllib.loads("\n".join(lines))
+    for key, value in sections["imu"].items():
+        assert getattr(vehicle.imu, key) == pytest.approx(value, rel=1e-3), key
+    for key, value in sections["vibration"].items():
+        np.testing.assert_allclose(getattr(vehicle.vibration, key), value, atol=1e-3, err_msg=key)
+
+
+def test_the_8s_quads_armed_idle_is_its_rest(quad4001_identification):
+    """Armed at command 0 its outputs sit at 1100 µs, below its ESCs' start (min_throttle
+    0.12 of the 1000-2000 µs range): the model's rotors stand, so `--vibration` takes that
+    armed window as the rest for the white noise, and fits the levels in hover alone."""
+    from rig.apps import vibration
+
+    _, vehicle = quad4001_identification
+    measured = vibration.read_log_vibration(QUAD4001_LOG)
+    idle = measured.point("idle")
+    assert idle.windows_s[0][0] < 106.0
+    assert idle.windows_s[0][1] > 109.0
+    assert vibration.rest_point(vehicle, measured) is idle
+    assert vehicle.vibration.level_rotor_speed_radps == pytest.approx((394.8,), abs=0.1)
