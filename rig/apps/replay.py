@@ -35,7 +35,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -150,6 +150,8 @@ PILOT_DISARM_REASONS = frozenset({1, 2, 4})
 #: nav_states flown on the pilot's sticks: PX4 needs manual control input in them.
 STICK_MODES = frozenset({0, 1, 2, 10, 15})
 NAV_STATE_MISSION, NAV_STATE_OFFBOARD = 3, 14
+#: nav_states whose throttle is the pilot's stick, not a climb rate: Manual, Acro, Stabilized.
+MANUAL_THRUST_MODES = frozenset({0, 10, 15})
 #: navigator_mission_item frames with a global position (MAV_FRAME GLOBAL*, PX4 stores 0).
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6})
 #: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
@@ -258,6 +260,9 @@ class Replay:
     #: (vehicle_air_data.rho): thrust ∝ ρ, so the rotors turn as fast as the real ones.
     temperature_offset_k: float = 0.0
     air_density_kgpm3: float | None = None
+    #: A PX4 replay's parameters the log's firmware learned in flight rather than read from
+    #: its parameters (:func:`_learned_parameters`), set after the log's own.
+    learned: dict[str, float] = field(default_factory=dict)
 
     @property
     def px4(self) -> bool:
@@ -315,7 +320,8 @@ class Replay:
                 continue
             at_s = event.time_s - origin
             if event.kind == "arm":
-                commands.append(Arm(at_s=at_s))
+                if not self.start_height_m:  # an airborne start's lead-in armed already
+                    commands.append(Arm(at_s=at_s))
             elif event.kind == "disarm":
                 commands.append(Disarm(at_s=at_s, may_refuse=True))
             elif event.nav_state == NAV_STATE_OFFBOARD:
@@ -341,7 +347,7 @@ class Replay:
     def autopilot_params(self) -> tuple[str, ...]:
         """The applied parameters as ``--param NAME=VALUE`` (repr: the exact float); PX4 also
         gets the rig's own stick input mode (:data:`STICK_PARAMETERS`)."""
-        applied = self.parameters | (STICK_PARAMETERS if self.px4 else {})
+        applied = self.parameters | self.learned | (STICK_PARAMETERS if self.px4 else {})
         return tuple(f"{name}={value!r}" for name, value in applied.items())
 
     @property
@@ -412,6 +418,12 @@ class Replay:
             ("warn", f"replay: skipped ({reason}): {', '.join(names)}")
             for reason, names in by_reason.items()
         ]
+        notes += [
+            ("info", f"replay: {name} = {value:.3f}, learned in the flight: the log's "
+                     "hover_thrust_estimate, which its PX4 (MPC_USE_HTE = 1) maps to the centre "
+                     "of the throttle stick in Stabilized, where this SITL maps MPC_THR_HOVER")
+            for name, value in self.learned.items()
+        ]  # fmt: skip
         logged = {s.name: f"{s.value:g}" for s in self.skipped}
         notes.append((
             "info",
@@ -488,6 +500,7 @@ class Replay:
             ],
             "parameters_unknown_count": self.unknown_parameter_count,
             "parameters_set_by_the_rig": self.rig_parameters,
+            "parameters_learned_in_the_flight": self.learned,
             "log_warnings": list(self.log_warnings),
             "start_yaw_deg": math.degrees(self.yaw_rad),
             "home": None
@@ -623,11 +636,29 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         mission_notes=mission_notes,
         sticks=sticks,
         firmware=log.firmware,
+        learned=_learned_parameters(log, parameters, events),
         **_wind(path, vehicle_document, vehicle),
         **_air(log, home, start_s, end_s),
     )
     replay.scenario(Path(vehicle))  # a bad rate fails here, before a run folder exists
     return replay
+
+
+def _learned_parameters(
+    log: _FlightLog, applied: Mapping[str, float], events: tuple[FlightEvent, ...]
+) -> dict[str, float]:
+    """MPC_THR_HOVER = the log's hover-thrust estimate when its PX4 flew a stick-throttle
+    mode on that estimate (MPC_USE_HTE = 1): the 8S quad's v1.16 puts the centre of the
+    throttle stick at the estimate in Stabilized (0.655 in hover, where its MPC_THR_HOVER
+    is 0.5), where the v1.14 SITL puts it at MPC_THR_HOVER; without this the pilot's centred
+    stick gives the SITL 0.50 thrust where the real one gave 0.66, and it never lifts. The
+    estimate converges in the first seconds airborne, so its median over the flight is taken.
+    In the climb-rate modes PX4 runs on its own estimate, so nothing is set there."""
+    manual = any(e.commanded and e.nav_state in MANUAL_THRUST_MODES for e in events)
+    estimate = log.hover_thrust()
+    if not manual or "MPC_THR_HOVER" not in applied or not log.parameters.get("MPC_USE_HTE"):
+        return {}
+    return {} if estimate is None else {"MPC_THR_HOVER": estimate}
 
 
 def _wind(path: Path, vehicle_document: dict[str, Any], vehicle: str) -> dict[str, Any]:
@@ -768,7 +799,11 @@ class _FlightLog:
             raise ReplayError(f"{path}: the ULog holds no logged data")
         self.parameters: dict[str, float | int] = dict(ulog.initial_parameters)
         self.firmware = firmware_name(ulog.msg_info_dict)
-        self.first_s = min(float(d.data["timestamp"][0]) for d in ulog.data_list) / 1e6
+        # A topic's first sample may be its last one before the logger started (published
+        # at boot: the 8S quad's actuator_outputs at 0.6 s, logging from 104.9 s); the
+        # header's start time bounds the logged span (0 in some logs, the X500's).
+        first_us = min(float(d.data["timestamp"][0]) for d in ulog.data_list)
+        self.first_s = max(first_us, float(ulog.start_timestamp)) / 1e6
         self.last_s = max(float(d.data["timestamp"][-1]) for d in ulog.data_list) / 1e6
 
     def topic(self, name: str, why: str) -> dict[str, NDArray[Any]]:
@@ -824,6 +859,18 @@ class _FlightLog:
         rho = rho[np.isfinite(rho) & (rho > 0.5) & (rho < 1.5)]  # air from sea level to 5 km
         return float(rho.mean()) if rho.size else None
 
+    def hover_thrust(self) -> float | None:
+        """Median of the valid hover_thrust_estimate.hover_thrust (None: none logged)."""
+        data = self.topics.get("hover_thrust_estimate")
+        if data is None or "hover_thrust" not in data:
+            return None
+        valid = (
+            data["valid"].astype(bool) if "valid" in data else np.ones(data["timestamp"].size, bool)
+        )
+        thrust = data["hover_thrust"][valid]
+        thrust = thrust[np.isfinite(thrust) & (thrust > 0) & (thrust < 1)]
+        return float(np.median(thrust)) if thrust.size else None
+
     def home(self) -> GeoPoint | None:
         """The first valid home position (the flying site), None without one."""
         data = self.topics.get("home_position")
@@ -863,9 +910,9 @@ class _FlightLog:
         chose itself in a failsafe, nor the mode it returns to after an automatic disarm.
         """
         status = self.topic("vehicle_status", "the flight's arm, disarm and mode switches")
-        for field in ("nav_state", "arming_state"):
-            if field not in status:
-                raise ReplayError(f"{self.path}: topic vehicle_status has no field {field}")
+        for needed in ("nav_state", "arming_state"):
+            if needed not in status:
+                raise ReplayError(f"{self.path}: topic vehicle_status has no field {needed}")
         times_s = status["timestamp"] / 1e6
         nav = status["nav_state"].astype(int)
         intended = status.get("nav_state_user_intention", status["nav_state"]).astype(int)
@@ -1028,14 +1075,18 @@ class _FlightLog:
 
 def _clipped(events: list[FlightEvent], start_s: float, end_s: float) -> tuple[FlightEvent, ...]:
     """The events in ``[start_s, end_s)``; the pilot's mode in force at ``start_s`` (if the
-    flight was armed then) comes first, moved to ``start_s``."""
+    flight was armed then) comes first, moved to ``start_s``, and the arm with it when it
+    came before ``start_s`` (the logger starts on arming: the 8S quad's arm is 5 ms before
+    its log's start)."""
     before = [e for e in events if e.time_s < start_s]
     inside = [e for e in events if start_s <= e.time_s < end_s]
     modes = [e for e in before if e.kind == "mode"]
     armed = [e for e in before if e.kind in ("arm", "disarm")]
     if modes and armed and armed[-1].kind == "arm":
-        inside.insert(0, replace(modes[-1], time_s=start_s, commanded=True,
-                                 detail="in force at --start"))  # fmt: skip
+        inside[:0] = [
+            replace(modes[-1], time_s=start_s, commanded=True, detail="in force at --start"),
+            replace(armed[-1], time_s=start_s, detail=f"{armed[-1].detail}, before --start"),
+        ]
     return tuple(inside)
 
 

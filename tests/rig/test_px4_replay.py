@@ -69,7 +69,10 @@ def log_parameters() -> dict:
 def stand_in_build(tmp_path_factory, log_parameters) -> Path:
     """A folder shaped like a PX4 build whose parameter list holds every name of the log but
     ADC_ADS1115_EN, with PX4 v1.14's EKF2_GPS_CHECK (9 bits, max 511): enough to plan."""
-    root = tmp_path_factory.mktemp("px4_build")
+    return _stand_in_build(tmp_path_factory.mktemp("px4_build"), log_parameters)
+
+
+def _stand_in_build(root: Path, log_parameters: dict) -> Path:
     (root / "bin").mkdir()
     (root / "bin/px4").write_text("#!/bin/sh\nexit 1\n")
     (root / "bin/px4").chmod(0o755)
@@ -380,3 +383,34 @@ def test_px4_ran_with_the_logs_parameters_and_the_rigs_own(flown, log_parameters
     events = [m.message for m in rig.logged_messages]
     assert any(text.startswith("replay: the log was flown by PX4 v1.17.0rc") for text in events)
     assert "mission of 4 items uploaded" in events
+
+
+# -- the 8S quad's Stabilized hover: armed before its log starts, a stick-throttle mode ------
+QUAD4001 = LOGS / "px4_quad4001_v6c_stab_hover_2026-03-09.ulg"
+#: The 8S quad's ULog header start_timestamp; its actuator_outputs holds a stale sample from
+#: 0.6 s (published at boot, written when the logger started), which is not the flight.
+QUAD_START_S = 104.889396
+STABILIZED = 15
+
+
+def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
+    """The logger starts on arming, 5 ms after it here: the replay starts at the header's
+    start, selects Stabilized 1 s before and arms at the start (20 s after PX4's boot), and
+    sets MPC_THR_HOVER to the log's hover-thrust estimate, which this PX4 (MPC_USE_HTE = 1,
+    v1.16) put at the centre of the throttle stick in Stabilized and v1.14 SITL does not."""
+    parameters = pyulog.ULog(str(QUAD4001), ["vehicle_status"]).initial_parameters
+    build = _stand_in_build(tmp_path, parameters)
+    options = ReplayOptions(autopilot="px4", px4_dir=build, vehicle="quad4001_8s")
+    quad = plan_replay(QUAD4001, options)
+    assert quad.start_s == QUAD_START_S
+    assert [(e.kind, e.nav_state) for e in quad.events[:2]] == [("mode", STABILIZED), ("arm", None)]
+    timed = [(type(c).__name__, c.at_s) for c in quad.commands if not isinstance(c, Track)]
+    assert timed[:2] == [("SetMode", PX4_BOOT_S - ARM_MODE_LEAD_S), ("Arm", PX4_BOOT_S)]
+    assert quad.learned["MPC_THR_HOVER"] == pytest.approx(0.657, abs=0.002)
+    assert "MPC_THR_HOVER=0.65" in " ".join(quad.autopilot_params)
+    assert quad.summary()["parameters_learned_in_the_flight"] == quad.learned
+
+
+def test_a_climb_rate_flight_learns_nothing(plan):
+    """The X500 flew POSCTL, ALTCTL, Mission and Land, where PX4 runs on its own estimate."""
+    assert plan.learned == {}

@@ -487,3 +487,18 @@ def test_the_three_real_logs_are_planned_or_refused_naming_what_is_missing(
         plan_replay(auriol_log, ReplayOptions(vehicle="x500_v2"))
     with pytest.raises(IdentificationError, match=r"no topic 'vehicle_land_detected'"):
         identify_vehicle(auriol_log, x500)
+
+
+def test_the_8s_quads_replay_starts_at_its_logs_header(quad4001_log):
+    """Its topics hold samples published long before logging began (actuator_outputs at
+    0.6 s, the logger started at 104.889 s, on arming): the replay starts at the header's
+    start time and arms as soon as the reference autopilot can, with the log's 8 cells."""
+    plan = plan_replay(
+        quad4001_log,
+        ReplayOptions(vehicle="quad4001_8s", drive="attitude", window_s=(109.0, 195.5)),
+    )
+    assert plan.start_s == pytest.approx(104.889396, abs=1e-6)
+    assert plan.arm_s == pytest.approx(plan.start_s + 1.0)
+    assert plan.cell_count == 8
+    assert plan.initial_battery_voltage_v == pytest.approx(30.9, abs=0.1)
+    assert plan.learned == {}  # PX4's hover estimate matters to PX4 only
