@@ -49,7 +49,18 @@ fuzz: $(STAMP)
 # until it is flown again (--force).
 # A report whose verdict is "fail" (exit 1) is a result, not a build error; bad input (2) and a
 # report that could not be scored (3: a topic missing, a replay too short) are.
+# Then the other two real logs, each scored for what it can support (issue 14 item 6): the 8S
+# quad's Stabilized hover (quad4001_8s, identified from it) replayed by PX4 from its sticks
+# with PX4_DIR, else by the reference autopilot from its attitude set-points; and, when its
+# log is found (SHARED_LOGS), the X8 octo's raw IMU at rest against the rig's 6X-RT IMU model.
+# Last, one table over all reports: per log, what was scored and what was not, and why
+# ($(REPORTS)/summary.md).
 X500_LOG    := data/flight_logs/px4_x500v2_v6xrt_flight_2026-03-20.ulg
+QUAD_LOG    := data/flight_logs/px4_quad4001_v6c_stab_hover_2026-03-09.ulg
+SHARED_LOGS ?= ../shared/flight_logs
+X8_LOG      := $(SHARED_LOGS)/px4_octoX8_auriol_v6xrt_highrate_groundrun_2024-10-29.ulg
+QUAD_STUDY  := runs/credibility/quad4001
+X8_TABLES   := runs/credibility/x8
 STUDY       := runs/credibility/x500
 REPORTS     := runs/credibility/reports
 MODEL_high  := x500_v2
@@ -64,22 +75,54 @@ STUDY_LOGS  := $(foreach role,sim sim_attitude sim_rates,--log $(role)=$(STUDY)/
                $(foreach role,sim_low sim_attitude_low sim_rates_low,\
                  --log $(role)=$(STUDY)/px4_low/px4.ulg)
 VALIDATION  := x500_validation_px4
+QUAD_RUN    := $(QUAD_STUDY)/px4
+QUAD_LOGS   := --log sim=$(QUAD_RUN)/px4.ulg
+QUAD_REPORT := quad4001_validation_px4
 else
 STUDY_WHAT  := the reference autopilot (set PX4_DIR to fly PX4)
 REPLAYS     := velocity attitude rates
 STUDY_LOGS  :=
 VALIDATION  := x500_validation
+QUAD_RUN    := $(QUAD_STUDY)/attitude
+QUAD_LOGS   :=
+QUAD_REPORT := quad4001_validation
 endif
+X8_RUN      := $(if $(wildcard $(X8_LOG)),$(X8_TABLES)/.complete)
 STUDY_RUNS  := $(foreach run,$(REPLAYS) bench,\
                  $(foreach model,high low,$(STUDY)/$(run)_$(model)/.complete))
 
-credibility: $(STUDY_RUNS)
+credibility: $(STUDY_RUNS) $(QUAD_RUN)/.complete $(X8_RUN)
 	@echo "credibility study: the X500 flight flown by $(STUDY_WHAT); models $(MODEL_high)" \
 		"(high precision) and $(MODEL_low) (low)"
 	$(BIN)/credibility report credibility/plans/x500_pitch_bench.toml \
 		--out $(REPORTS)/x500_pitch_bench || [ $$? -eq 1 ]
 	$(BIN)/credibility report credibility/plans/x500_validation.toml $(STUDY_LOGS) \
 		--out $(REPORTS)/$(VALIDATION) || [ $$? -eq 1 ]
+	@echo "credibility study: the 8S quad's hover flown by $(STUDY_WHAT); model quad4001_8s"
+	$(BIN)/credibility report credibility/plans/quad4001_validation.toml $(QUAD_LOGS) \
+		--out $(REPORTS)/$(QUAD_REPORT) || [ $$? -eq 1 ]
+	$(if $(X8_RUN),$(BIN)/credibility report credibility/plans/x8_raw_imu_rest.toml \
+		--out $(REPORTS)/x8_raw_imu_rest || [ $$? -eq 1 ],\
+		@echo "credibility study: no X8 log at $(X8_LOG) (SHARED_LOGS): its part is skipped")
+	$(BIN)/credibility summary $(REPORTS)/x500_pitch_bench/x500_pitch_bench.json \
+		$(REPORTS)/$(VALIDATION)/x500_validation.json \
+		$(REPORTS)/$(QUAD_REPORT)/quad4001_validation.json \
+		$(if $(X8_RUN),$(REPORTS)/x8_raw_imu_rest/x8_raw_imu_rest.json) \
+		--out $(REPORTS)/summary.md
+
+$(QUAD_STUDY)/px4/.complete: $(QUAD_LOG) | $(STAMP)
+	$(BIN)/rig replay $(QUAD_LOG) --autopilot px4 --px4 $(PX4_DIR) --vehicle quad4001_8s \
+		--out $(@D) --force
+	touch $@
+
+$(QUAD_STUDY)/attitude/.complete: $(QUAD_LOG) | $(STAMP)
+	$(BIN)/rig replay $(QUAD_LOG) --drive attitude --window 109 195.5 --vehicle quad4001_8s \
+		--out $(@D) --force
+	touch $@
+
+$(X8_TABLES)/.complete: $(X8_LOG) | $(STAMP)
+	$(BIN)/rig identify $(X8_LOG) --vehicle x500_v2 --raw-imu $(@D) --rest 926.8 927.3
+	touch $@
 
 $(STUDY)/bench_%/.complete: | $(STAMP)
 	$(BIN)/rig run pitch_sweep_bench --vehicle $(MODEL_$*) --out $(@D) --force

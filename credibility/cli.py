@@ -1,4 +1,4 @@
-"""``credibility`` command line: ``report PLAN.toml`` and ``paper``.
+"""``credibility`` command line: ``report PLAN.toml``, ``summary REPORT.json ...`` and ``paper``.
 
 Exit codes: 0 when η_min ≥ ε_min, 1 when not, 2 for bad input or usage (one line on
 stderr), 3 when the inputs were read but too few tests could be scored for a verdict.
@@ -21,6 +21,7 @@ from credibility.indices import KINDS
 from credibility.paper import paper_comparison
 from credibility.plan import load_plan, with_weights
 from credibility.report import ExitCode, exit_code, write_report
+from credibility.study import read_report, summary_markdown
 
 #: ``credibility report --help`` ends with what each exit code means.
 EXIT_CODES = """exit codes:
@@ -113,6 +114,12 @@ def _parser() -> argparse.ArgumentParser:
         help="replace one kind's η_all weight (repeatable, after --weights); then normalized",
     )
     report.add_argument("--out", type=Path, default=Path("."), help="output directory")
+    summary = commands.add_parser(
+        "summary",
+        help="one table over several reports: per real log, what was scored and what not, why",
+    )
+    summary.add_argument("reports", type=Path, nargs="+", help="reports' JSON (report --out)")
+    summary.add_argument("--out", type=Path, default=None, help="also write it here (Markdown)")
     commands.add_parser("paper", help="recompute the paper's tables beside its printed numbers")
     return parser
 
@@ -146,6 +153,10 @@ def _report(args: argparse.Namespace, console: Console) -> int:
         console.print(
             f"{len(assessment.not_scored)} of {len(plan.tests)} tests not scored: "
             + ", ".join(item.test.name for item in assessment.not_scored)
+        )
+    for item in plan.not_scorable:
+        console.print(
+            f"not scorable from these logs: {item.name} ({item.kind}): {item.reason}", markup=False
         )
     if code == ExitCode.NOT_SCORED:
         verdict = f"could not be scored: {assessment.unscorable_reason}"
@@ -183,6 +194,15 @@ def _paper(console: Console) -> int:
     return 0
 
 
+def _summary(args: argparse.Namespace) -> int:
+    text = summary_markdown([read_report(path) for path in args.reports])
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text, encoding="utf-8")
+    print(text, end="")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     # A pipe gets 80 columns from rich; the paper table needs about 130.
@@ -191,6 +211,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "paper":
             return _paper(out)
+        if args.command == "summary":
+            return _summary(args)
         return _report(args, err)
     except CredibilityError as exc:
         print(f"credibility: error: {exc}", file=sys.stderr)

@@ -218,6 +218,17 @@ class FrequencyTest(_Test):
 Test = PerformanceTest | TimeTest | FrequencyTest
 
 
+@table(kw_only=True)
+class NotScorable:
+    """A test this plan's logs cannot support, and why (``[[not_scorable]]``): the report
+    lists it beside the scored ones, so a reader sees what the study left out on purpose
+    (a log without GNSS has no position test) and not only what failed to score."""
+
+    name: Text
+    kind: Literal[indices.KINDS]
+    reason: Text
+
+
 @table
 class PlanSettings:
     """``[plan]``: the name (default: the file's stem) and the method's settings."""
@@ -251,12 +262,13 @@ class PlanFile:
     plan: PlanSettings = PlanSettings()
     #: None: equal shares over the kinds in the plan.
     weights: Weights | None = None
+    not_scorable: tuple[NotScorable, ...] = ()
 
     def __post_init__(self) -> None:
-        names = [test.name for test in self.tests]
+        names = [test.name for test in self.tests] + [item.name for item in self.not_scorable]
         duplicates = sorted({name for name in names if names.count(name) > 1})
         if duplicates:
-            raise FieldError("tests", duplicates, "duplicate test names")
+            raise FieldError("tests", duplicates, "duplicate test names (tests, not_scorable)")
         for index, test in enumerate(self.tests):
             uses = [("real", test.real), ("sim", test.sim)]
             uses += [("compare", role) for role in test.compare]
@@ -281,6 +293,7 @@ class Plan:
     weights_source: str
     logs: Mapping[str, Path]
     tests: tuple[Test, ...]
+    not_scorable: tuple[NotScorable, ...] = ()
 
 
 def load_plan(path: Path, log_overrides: Mapping[str, Path] | None = None) -> Plan:
@@ -310,6 +323,7 @@ def load_plan(path: Path, log_overrides: Mapping[str, Path] | None = None) -> Pl
         weights_source=weights_source,
         logs=logs,
         tests=tests,
+        not_scorable=file.not_scorable,
     )
 
 

@@ -256,6 +256,7 @@ def to_dict(assessment: Assessment) -> dict[str, Any]:
             "tests": len(plan.tests),
             "scored": len(assessment.results),
             "not_scored": [item.test.name for item in assessment.not_scored],
+            "not_scorable": [dataclasses.asdict(item) for item in plan.not_scorable],
             "warnings": len(assessment.caveats),
             "means": assessment.means,
             "eta_all": assessment.eta_all,
@@ -565,6 +566,7 @@ def render_html(assessment: Assessment) -> str:
             for c in assessment.caveats
         ],
         weakest_rows=_weakest_rows(assessment),
+        not_scorable_rows=[[item.name, item.kind, item.reason] for item in plan.not_scorable],
         sections=sections,
         package_version=assessment.package_version,
         created_utc=assessment.created_utc,

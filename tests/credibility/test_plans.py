@@ -145,3 +145,42 @@ def test_x500_pitch_bench_recovers_a_known_loop_from_the_scenario_sweep(tmp_path
         load_plan(path, {"reference": tmp_path / "high.csv", "sim": tmp_path / "high.csv"})
     )
     assert same.eta_all == pytest.approx(1.0, abs=1e-12)
+
+
+def test_quad4001_validation_scores_the_real_hover_against_itself_as_one():
+    """Every test of the 8S quad's study resolves on the real log (its signals, its
+    segments, the 200 Hz averaging), identical logs give η = 1, the real σ are SOURCES.md's,
+    and the plan names what the log cannot score (no GNSS, the pilot's height, yaw)."""
+    result = assess(_real_for_every_role("quad4001_validation"))
+    assert not result.not_scored
+    assert result.eta_all == pytest.approx(1.0, abs=1e-12)
+    assert set(result.means) == {"performance", "time", "frequency"}
+    by_name = {r.test.name: r.rows[0] for r in result.results}
+    # SOURCES.md, motors stopped: gyro σ 0.0031/0.0037/0.0036 rad/s, accel 0.017/0.019/0.020
+    rest = zip("xyz", (0.0031, 0.0037, 0.0036), (0.017, 0.019, 0.020), strict=True)
+    for axis, gyro, accel in rest:
+        assert by_name[f"gyro_{axis}_sigma_rest"].p_e == pytest.approx(gyro, rel=0.1)
+        assert by_name[f"accel_{axis}_sigma_rest"].p_e == pytest.approx(accel, rel=0.1)
+    # hover, 5 Hz high-pass: accel 0.55/0.42/0.74 m/s²
+    for axis, accel in zip("xyz", (0.55, 0.42, 0.74), strict=True):
+        assert by_name[f"accel_{axis}_sigma_hover"].p_e == pytest.approx(accel, rel=0.1)
+    unscorable = {item.name: item.kind for item in result.plan.not_scorable}
+    assert unscorable["position_and_velocity"] == "time"
+    assert unscorable["yaw_rate_response"] == "frequency"
+    assert "height_and_climb_rate" in unscorable
+
+
+def test_x8_plan_compares_the_fifo_tables_and_lists_what_needs_an_octo():
+    """Each test pairs the real FIFO table with the model's of the same triad, all inside
+    the rest after the props coasted down; what needs eight rotors or a flight is listed."""
+    plan = load_plan(PLANS / "x8_raw_imu_rest.toml")
+    for test in plan.tests:
+        triad = "gyro" if test.name.startswith("gyro") else "accel"
+        assert (test.roles.real, test.roles.sim) == (f"real_{triad}", f"sim_{triad}")
+        assert test.signal.path.startswith(f"sensor_{triad}_fifo.")
+        assert 926.8 <= test.segment_s[0] < test.segment_s[1] <= 927.3
+    assert len(plan.tests) == 12
+    assert {item.name for item in plan.not_scorable} >= {
+        "idle_and_ground_run_vibration",
+        "flight_dynamics",
+    }

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from credibility.assess import Assessment, TimeResult, assess
@@ -82,3 +83,91 @@ def test_the_zero_output_curve_scores_near_zero(scored):
 def test_the_real_flight_scores_one_against_itself():
     same = _study(X500_LOG, X500_LOG, X500_LOG)
     assert same.eta_all == pytest.approx(1.0)
+
+
+# -- the 8S quad's hover and the X8's rest: the study's other two logs, shortened ------------
+QUAD_PLAN = REPO / "credibility/plans/quad4001_validation.toml"
+QUAD_LOG = REPO / "data/flight_logs/px4_quad4001_v6c_stab_hover_2026-03-09.ulg"
+X8_PLAN = REPO / "credibility/plans/x8_raw_imu_rest.toml"
+#: Rest 105.2-108.9 s and the ground spin 111.5-113.5 s are inside; the attitude drive takes
+#: over at 109 s as in `make credibility`.
+QUAD_END_S = 114.0
+
+
+@pytest.fixture(scope="module")
+def quad_rest_and_spin(tmp_path_factory) -> Assessment:
+    """The reference autopilot's replay of the 8S quad's first 9 s (armed at rest, then the
+    pilot's spin-up from the attitude set-points), scored by the study plan's tests there."""
+    options = ReplayOptions(
+        end_s=QUAD_END_S, vehicle="quad4001_8s", drive="attitude", window_s=(109.0, 113.9)
+    )
+    out = tmp_path_factory.mktemp("quad4001")
+    run = run_replay(
+        plan_replay(QUAD_LOG, options), RunOptions(instance=free_test_instance(), out_dir=out)
+    )
+    plan = load_plan(QUAD_PLAN, {"sim": run.autopilot_log})
+    tests = tuple(t for t in plan.tests if t.name.endswith(("_rest", "_spin")))
+    return assess(dataclasses.replace(plan, tests=tests, weights={"performance": 1.0}))
+
+
+def _sigmas(assessment: Assessment, suffix: str, triad: str) -> tuple[np.ndarray, np.ndarray]:
+    rows = [
+        r.rows[0] for r in assessment.results if r.test.name.startswith(triad)
+        and r.test.name.endswith(suffix)
+    ]  # fmt: skip
+    return np.array([row.p_e for row in rows]), np.array([row.p_s for row in rows])
+
+
+def test_the_8s_quads_rest_noise_is_the_identified_density(quad_rest_and_spin):
+    """At rest (armed, rotors stopped below the ESCs' start) the sim's σ is the white noise
+    `rig identify --vibration` fitted there, one density per triad: the RMS over the axes
+    within 15 % (the fit went through PX4's trapezoids at 800 Hz, the reference autopilot
+    logs plain 200 Hz means of its 1 kHz samples)."""
+    for triad in ("gyro", "accel"):
+        real, sim = _sigmas(quad_rest_and_spin, "_rest", triad)
+        assert len(real) == 3
+        rms = np.sqrt(np.mean(sim**2)) / np.sqrt(np.mean(real**2))
+        assert rms == pytest.approx(1.0, abs=0.15), triad
+
+
+def test_the_8s_quads_ground_spin_vibrates_between_rest_and_hover(quad_rest_and_spin):
+    """On the ground spin (rotors at about 26 %) the sim's accelerometer σ rises an order of
+    magnitude above rest, as the real one does (0.02 → 0.1-0.2 m/s²): the levels fitted in
+    hover, taken down linearly in rotor speed, with nothing fitted at this point."""
+    _, rest = _sigmas(quad_rest_and_spin, "_rest", "accel")
+    real, spin = _sigmas(quad_rest_and_spin, "_spin", "accel")
+    assert np.all(spin > 4 * rest)
+    assert np.all(real > 4 * rest)
+    assert len(quad_rest_and_spin.results) == 12
+
+
+def test_the_x8s_raw_imu_at_rest_is_scored_against_the_model(auriol_log, tmp_path, capsys):
+    """`rig identify --raw-imu` unpacks the X8's FIFO (SOURCES.md at rest: gyro σ
+    0.007/0.010/0.005 rad/s, accel 0.12/0.11/0.24 m/s²) and samples the x500_v2 IMU at the
+    chip's 8,371 Hz on the same timestamps, where its white noise has σ = N·√rate in closed
+    form; the plan scores one against the other (the model, fitted to a 200 Hz stream, is
+    5× too noisy here and white where the chip's noise falls off above 1 kHz)."""
+    from quad_model.vehicle import load_vehicle
+    from rig.apps import cli
+
+    out = tmp_path / "x8"
+    argv = ["identify", str(auriol_log), "--vehicle", "x500_v2", "--raw-imu", str(out)]
+    assert cli.main([*argv, "--rest", "926.8", "927.3"]) == 0
+    capsys.readouterr()
+    plan = load_plan(X8_PLAN, {f"{r}_{t}": out / f"{r}_{t}.parquet" for r in ("real", "sim")
+                               for t in ("gyro", "accel")})  # fmt: skip
+    result = assess(plan)
+    assert not result.not_scored
+    imu = load_vehicle("x500_v2").imu
+    rate = 8371.0
+    closed_form = {
+        "gyro": imu.gyro_noise_density_radps_per_sqrthz * np.sqrt(rate),
+        "accel": imu.accel_noise_density_mps2_per_sqrthz * np.sqrt(rate),
+    }
+    sources = {"gyro": (0.007, 0.010, 0.005), "accel": (0.12, 0.11, 0.24)}
+    for triad in ("gyro", "accel"):
+        real, sim = _sigmas(result, "_rest", triad)
+        # 3,900 samples: σ's own spread is 1.1 %; the bias walk adds nothing in 0.5 s
+        np.testing.assert_allclose(sim, closed_form[triad], rtol=0.04)
+        np.testing.assert_allclose(real, sources[triad], rtol=0.1, atol=5e-4)
+    assert result.eta_min < 0.1
