@@ -152,6 +152,11 @@ STICK_MODES = frozenset({0, 1, 2, 10, 15})
 NAV_STATE_MISSION, NAV_STATE_OFFBOARD = 3, 14
 #: nav_states whose throttle is the pilot's stick, not a climb rate: Manual, Acro, Stabilized.
 MANUAL_THRUST_MODES = frozenset({0, 10, 15})
+#: What a PX4 replay of a stick-throttle mode takes from the flight (:func:`_learned_parameters`).
+LEARNED = {
+    "MPC_THR_HOVER": "its hover_thrust_estimate, the centre stick's thrust in its PX4",
+    "MPC_MANTHR_MIN": "its thrust set-point with the throttle stick at the bottom",
+}
 #: navigator_mission_item frames with a global position (MAV_FRAME GLOBAL*, PX4 stores 0).
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6})
 #: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
@@ -419,9 +424,8 @@ class Replay:
             for reason, names in by_reason.items()
         ]
         notes += [
-            ("info", f"replay: {name} = {value:.3f}, learned in the flight: the log's "
-                     "hover_thrust_estimate, which its PX4 (MPC_USE_HTE = 1) maps to the centre "
-                     "of the throttle stick in Stabilized, where this SITL maps MPC_THR_HOVER")
+            ("info", f"replay: {name} = {value:.3f}, from the flight ({LEARNED[name]}): this "
+                     "SITL's stick → thrust map as the log's PX4 had it")
             for name, value in self.learned.items()
         ]  # fmt: skip
         logged = {s.name: f"{s.value:g}" for s in self.skipped}
@@ -647,18 +651,30 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
 def _learned_parameters(
     log: _FlightLog, applied: Mapping[str, float], events: tuple[FlightEvent, ...]
 ) -> dict[str, float]:
-    """MPC_THR_HOVER = the log's hover-thrust estimate when its PX4 flew a stick-throttle
-    mode on that estimate (MPC_USE_HTE = 1): the 8S quad's v1.16 puts the centre of the
-    throttle stick at the estimate in Stabilized (0.655 in hover, where its MPC_THR_HOVER
-    is 0.5), where the v1.14 SITL puts it at MPC_THR_HOVER; without this the pilot's centred
-    stick gives the SITL 0.50 thrust where the real one gave 0.66, and it never lifts. The
-    estimate converges in the first seconds airborne, so its median over the flight is taken.
-    In the climb-rate modes PX4 runs on its own estimate, so nothing is set there."""
-    manual = any(e.commanded and e.nav_state in MANUAL_THRUST_MODES for e in events)
-    estimate = log.hover_thrust()
-    if not manual or "MPC_THR_HOVER" not in applied or not log.parameters.get("MPC_USE_HTE"):
+    """Where a PX4 replay flew a stick-throttle mode, the parameters that give this SITL the
+    log's own stick → thrust map, which PX4 changed between versions (the 8S quad's v1.16
+    against the v1.14 SITL):
+
+    - MPC_THR_HOVER = the log's hover-thrust estimate when its PX4 ran on it (MPC_USE_HTE):
+      v1.16 puts the centre stick there in Stabilized (0.655 in hover; its MPC_THR_HOVER is
+      0.5), v1.14 at MPC_THR_HOVER; without it the centred stick gives the SITL 0.50 where
+      the real one gave 0.66, and it never lifts. The estimate converges in the first seconds
+      airborne, so its median over the flight is taken.
+    - MPC_MANTHR_MIN = the log's thrust set-point with the stick at the bottom (0 there:
+      armed, the motors stopped), which v1.14 holds at MPC_MANTHR_MIN (0.08: the SITL's
+      rotors idled through the log's rest).
+
+    In the climb-rate modes PX4 flies on its own estimate, so nothing is set there."""
+    if not any(e.commanded and e.nav_state in MANUAL_THRUST_MODES for e in events):
         return {}
-    return {} if estimate is None else {"MPC_THR_HOVER": estimate}
+    learned = {}
+    estimate = log.hover_thrust()
+    if "MPC_THR_HOVER" in applied and log.parameters.get("MPC_USE_HTE") and estimate is not None:
+        learned["MPC_THR_HOVER"] = estimate
+    bottom = log.thrust_at_bottom_stick()
+    if "MPC_MANTHR_MIN" in applied and bottom is not None:
+        learned["MPC_MANTHR_MIN"] = bottom
+    return learned
 
 
 def _wind(path: Path, vehicle_document: dict[str, Any], vehicle: str) -> dict[str, Any]:
@@ -870,6 +886,18 @@ class _FlightLog:
         thrust = data["hover_thrust"][valid]
         thrust = thrust[np.isfinite(thrust) & (thrust > 0) & (thrust < 1)]
         return float(np.median(thrust)) if thrust.size else None
+
+    def thrust_at_bottom_stick(self) -> float | None:
+        """Median collective thrust set-point while the throttle stick sat at its bottom
+        (within 1 %), None without such samples or either topic."""
+        sticks = self.topics.get("manual_control_setpoint")
+        thrust = self.topics.get("vehicle_thrust_setpoint")
+        if sticks is None or thrust is None or "throttle" not in sticks or "xyz[2]" not in thrust:
+            return None
+        index = np.searchsorted(sticks["timestamp"], thrust["timestamp"], "right") - 1
+        held = sticks["throttle"][np.clip(index, 0, None)]
+        bottom = (index >= 0) & (held <= -0.99)
+        return float(np.median(-thrust["xyz[2]"][bottom])) if bottom.any() else None
 
     def home(self) -> GeoPoint | None:
         """The first valid home position (the flying site), None without one."""

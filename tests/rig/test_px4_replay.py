@@ -395,9 +395,11 @@ STABILIZED = 15
 
 def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
     """The logger starts on arming, 5 ms after it here: the replay starts at the header's
-    start, selects Stabilized 1 s before and arms at the start (20 s after PX4's boot), and
-    sets MPC_THR_HOVER to the log's hover-thrust estimate, which this PX4 (MPC_USE_HTE = 1,
-    v1.16) put at the centre of the throttle stick in Stabilized and v1.14 SITL does not."""
+    start, selects Stabilized 1 s before and arms at the start (20 s after PX4's boot). The
+    SITL gets the log's stick → thrust map, which PX4 changed after v1.14: the centre stick
+    at the log's hover-thrust estimate (its v1.16 with MPC_USE_HTE = 1; v1.14 takes
+    MPC_THR_HOVER, 0.5 in the log) and the bottom at the log's thrust there, 0 (v1.14 holds
+    MPC_MANTHR_MIN, 0.08 in the log, and idled the rotors through the log's rest)."""
     parameters = pyulog.ULog(str(QUAD4001), ["vehicle_status"]).initial_parameters
     build = _stand_in_build(tmp_path, parameters)
     options = ReplayOptions(autopilot="px4", px4_dir=build, vehicle="quad4001_8s")
@@ -407,6 +409,7 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
     timed = [(type(c).__name__, c.at_s) for c in quad.commands if not isinstance(c, Track)]
     assert timed[:2] == [("SetMode", PX4_BOOT_S - ARM_MODE_LEAD_S), ("Arm", PX4_BOOT_S)]
     assert quad.learned["MPC_THR_HOVER"] == pytest.approx(0.657, abs=0.002)
+    assert quad.learned["MPC_MANTHR_MIN"] == 0.0
     assert "MPC_THR_HOVER=0.65" in " ".join(quad.autopilot_params)
     assert quad.summary()["parameters_learned_in_the_flight"] == quad.learned
 
