@@ -14,6 +14,13 @@ from typing import Any
 from credibility.errors import CredibilityError
 from credibility.indices import KINDS
 
+#: What the table reads from each report's summary (``not_scorable`` is optional: older
+#: reports had none declared).
+SUMMARY_KEYS = frozenset(
+    {"outcome", "exit_code", "scored", "tests", "eta_all", "eta_min", "means", "not_scored",
+     "unscorable_reason"}
+)  # fmt: skip
+
 
 def read_report(path: Path) -> dict[str, Any]:
     """A report's JSON; anything else is one line naming the file."""
@@ -23,13 +30,24 @@ def read_report(path: Path) -> dict[str, Any]:
         raise CredibilityError(f"{path}: not a readable credibility report ({error})") from None
     if not isinstance(report, dict) or not {"plan", "summary", "logs"} <= report.keys():
         raise CredibilityError(f"{path}: not a credibility report (no plan, summary and logs)")
+    missing = sorted(SUMMARY_KEYS - report["summary"].keys())
+    if missing:
+        raise CredibilityError(
+            f"{path}: the report's summary has no {', '.join(missing)} (written by an older "
+            "credibility: report it again)"
+        )
     return report
 
 
 def _real_logs(report: dict[str, Any]) -> str:
-    """The real logs a report scored against (roles named real*), by file name."""
-    names = {Path(log["path"]).name for log in report["logs"] if log["role"].startswith("real")}
-    return ", ".join(sorted(names)) or "(no real role)"
+    """What a report scored against, by file name: its roles named real* (a real flight's
+    log, or tables made from one) or, in a plan of two models, its reference."""
+    names = {
+        Path(log["path"]).name
+        for log in report["logs"]
+        if log["role"].startswith("real") or log["role"] == "reference"
+    }
+    return ", ".join(sorted(names)) or "(no real or reference role)"
 
 
 def _pct(value: float | None) -> str:
