@@ -95,7 +95,7 @@ def test_a_bad_report_or_a_duplicate_name_is_one_line(plan_path, tmp_path, capsy
     older.write_text(json.dumps({"plan": {}, "logs": [], "summary": {"eta_all": 0.5}}))
     assert main(["summary", str(older)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"credibility: error: {older}: the report's summary has no exit_code")
+    assert err.startswith(f"credibility: error: {older}: the report's summary has no eta_min, ")
     assert err.endswith("(written by an older credibility: report it again)")
     plan_path.write_text(PLAN.replace('name = "position"', 'name = "gyro_x_rest"'))
     with pytest.raises(CredibilityError, match=r"gyro_x_rest.*duplicate test names") as error:
