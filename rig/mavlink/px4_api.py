@@ -105,20 +105,24 @@ class Ports:
 
 def free_instance(first: int, count: int, index: int = 0) -> int:
     """The first instance from ``first + index % count`` on (wrapping within the range)
-    whose simulator TCP and onboard UDP ports are free right now, so concurrent runs given
-    consecutive indices start on different instances and a port held by anyone else is
-    skipped. Raises ``OSError`` when every instance in the range is busy."""
+    whose ports are all free right now, the rig's and the autopilot's, so concurrent runs
+    given consecutive indices start on different instances, and a port held by anyone
+    else (an autopilot still shutting down, another program) is skipped. Raises
+    ``OSError`` when every instance in the range is busy."""
     for step in range(count):
         instance = first + (index + step) % count
         ports = Ports(instance)
-        tcp, udp = socket.socket(), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        udp_ports = (ports.onboard_remote_udp, ports.gcs_local_udp, ports.api_local_udp,
+                     ports.onboard_local_udp)  # fmt: skip
+        sockets = [socket.socket(), *(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                                      for _ in udp_ports)]  # fmt: skip
         try:
-            tcp.bind(("127.0.0.1", ports.simulator_tcp))
-            udp.bind(("127.0.0.1", ports.onboard_remote_udp))
+            for sock, port in zip(sockets, (ports.simulator_tcp, *udp_ports), strict=True):
+                sock.bind(("127.0.0.1", port))
         except OSError:
             continue
         finally:
-            tcp.close()
-            udp.close()
+            for sock in sockets:
+                sock.close()
         return instance
     raise OSError(f"no free SITL instance in {first}..{first + count - 1}")

@@ -46,10 +46,14 @@ def test_dialect_is_mavlink2_with_hil_sensor_id_extension():
     assert decoded.zacc == pytest.approx(-9.81)
 
 
-def test_free_instance_skips_an_instance_whose_port_is_taken():
+@pytest.mark.parametrize("port", ["simulator_tcp", "onboard_remote_udp", "gcs_local_udp",
+                                  "api_local_udp", "onboard_local_udp"])  # fmt: skip
+def test_free_instance_skips_an_instance_whose_port_is_taken(port):
+    """The rig's ports and the autopilot's: an autopilot still shutting down holds its own."""
     first = free_test_instance()
-    with socket.socket() as held:
-        held.bind(("127.0.0.1", Ports(first).simulator_tcp))
+    kind = socket.SOCK_STREAM if port.endswith("tcp") else socket.SOCK_DGRAM
+    with socket.socket(socket.AF_INET, kind) as held:
+        held.bind(("127.0.0.1", getattr(Ports(first), port)))
         assert free_instance(first, 2) == first + 1
         with pytest.raises(OSError, match=rf"no free SITL instance in {first}\.\.{first}"):
             free_instance(first, 1)

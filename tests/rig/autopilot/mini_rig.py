@@ -48,7 +48,15 @@ class MiniRig:
             [sys.executable, "-m", "rig.autopilots.reference", "--instance", str(instance), "--log",
              str(log_path)], stderr=self._stderr,
         )  # fmt: skip
-        self.sim, _ = self.listener.accept()
+        try:
+            self.sim, _ = self.listener.accept()
+        except OSError:  # the autopilot never connected: leave no process or port behind
+            self.process.kill()
+            self.process.wait()
+            self.listener.close()
+            if self._stderr is not None:
+                self._stderr.close()
+            raise
         self.sim.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.armed = False
 
