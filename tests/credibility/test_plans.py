@@ -66,6 +66,8 @@ def test_x500_validation_roles_follow_the_replay_layout():
     assert dict(plan.weights) == {"performance": 0.3, "time": 0.3, "frequency": 0.4}
     assert plan.pass_mark == 0.6
     assert {t.kind for t in plan.tests} == {"performance", "time", "frequency"}
+    unscorable = {item.name for item in plan.not_scorable}
+    assert unscorable == {"raw_imu_spectrum", "response_above_25_hz", "rotor_speeds"}
 
 
 def test_x500_validation_scores_the_real_flight_against_itself_as_one():
