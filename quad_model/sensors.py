@@ -64,6 +64,8 @@ class MagSample:
 class GpsSample:
     #: When the receiver outputs the fix (its measurement epoch + latency).
     time_us: int
+    #: The measurement epoch the fix is of: the receiver's time of week (NAV-PVT iTOW).
+    epoch_us: int
     lat_deg: float
     lon_deg: float
     alt_amsl_m: float
@@ -332,6 +334,11 @@ class GpsModel:
     one is due (epochs every 1/fix_rate s, each output ``latency_s`` after its epoch),
     otherwise None. Latency resolves to the calling period. Draws: the initial position
     error, then per fix the position error's innovation and the velocity noise.
+
+    ``fix_rate_hz`` is the receiver's *maximum* navigation rate (a NEO-M8N: 10 Hz with
+    concurrent GNSS), the finest grid of epochs it can report. Which of them it does report
+    is its configuration's: the emulated u-blox keeps those whose time of week (the
+    sample's ``epoch_us``) its CFG-RATE measRate divides, so PX4's 200 ms gives 5 Hz.
     """
 
     def __init__(
@@ -382,6 +389,7 @@ class GpsModel:
         velocity = at_epoch.velocity_ned_mps + gps.velocity_noise_std_mps * self._normals.take(3)
         return GpsSample(
             time_us=now,
+            epoch_us=epoch_us,
             lat_deg=lat,
             lon_deg=lon,
             alt_amsl_m=alt,

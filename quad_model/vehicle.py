@@ -214,6 +214,8 @@ class GpsParams:
     error_correlation_time_s: Positive
     velocity_noise_std_mps: NonNegative
     latency_s: NonNegative
+    #: The receiver's maximum navigation rate; the rate it reports at is the one the
+    #: autopilot configures (CFG-RATE), at most this (``quad_model.sensors.GpsModel``).
     fix_rate_hz: Positive
     satellites_visible: PositiveInteger
 

@@ -450,7 +450,7 @@ class _Loop:
             pulses=tuple(pulses),
             si=readings,
             gps=None if readings.gps is None else receiver_solution(
-                gps_fix(readings.gps), self.run_us, self.faults.gps_fault()),
+                gps_fix(readings.gps), readings.gps.epoch_us, self.faults.gps_fault()),
             range=None if readings.range is None else sample_from_range(readings.range.distance_m),
         )  # fmt: skip
         out = self.layer.frame(chip_frame)

@@ -95,10 +95,12 @@ def model_rate_for(imu_hz: int) -> int:
 class Rates:
     """Simulation and sensor rates (Hz); one lockstep frame is one IMU period.
 
-    The GPS rate is the receiver's (``fix_rate_hz`` in the vehicle file, 10 Hz for the
-    bundled ones), with its latency. ``pwm_tick_hz`` is the PWM capture core's tick, the
-    resolution of the measured pulse widths; in the RTL layer its clock runs all the
-    time, one simulated cycle per tick, so a coarser tick trades resolution for speed.
+    The GPS epochs come at the receiver's maximum navigation rate (``fix_rate_hz`` in the
+    vehicle file, 10 Hz for the bundled ones), with its latency; the receiver reports
+    those its CFG-RATE selects (PX4 configures 200 ms: 5 Hz). ``pwm_tick_hz`` is the PWM
+    capture core's tick, the resolution of the measured pulse widths; in the RTL layer its
+    clock runs all the time, one simulated cycle per tick, so a coarser tick trades
+    resolution for speed.
     Without ``model_hz`` the model runs at :func:`model_rate_for` the IMU rate.
     """
 

@@ -22,7 +22,7 @@ from cocotbext.uart import UartSink, UartSource
 
 from fpga_hdl.buses.uart import MAX_BAUD_ERROR, divider_for
 from fpga_hdl.chips.ublox import ubx
-from fpga_hdl.chips.ublox.core import BAUD_RATES, RESET_BAUD
+from fpga_hdl.chips.ublox.core import BAUD_RATES, EPOCH_DECISION_CYCLES, RESET_BAUD
 from fpga_hdl.chips.ublox.driver import (
     GpsFix,
     UbxDecoder,
@@ -214,7 +214,8 @@ async def px4_handshake_then_nav_pvt_read_by_uartsink_equal_to_tlm(dut):
     bench.mark()
     await bench.load(fixes[0])
     expected = bench.model.transmit()
-    await ClockCycles(dut.clk, 10)  # the first NAV-PVT has started
+    # The first NAV-PVT has started: the epoch decided, then a few cycles to its start bit.
+    await ClockCycles(dut.clk, EPOCH_DECISION_CYCLES + 10)
     for fix in fixes[1:]:  # two epochs during it: the latest follows it at once
         await bench.load(fix)
     expected += bench.model.transmit()

@@ -8,6 +8,7 @@ NACKs included; the rig's layer compares the PWM capture with the TLM frame by f
 """
 
 import asyncio
+import struct
 import subprocess
 import sys
 
@@ -15,8 +16,14 @@ import pytest
 
 from fpga_hdl.buses.transactions import UnknownDevice
 from fpga_hdl.buses.uart import divider_for, line_cycles
-from fpga_hdl.chips.ublox.driver import px4_configuration
-from fpga_hdl.chips.ublox.link import TlmUbloxUart
+from fpga_hdl.chips.ublox import ubx
+from fpga_hdl.chips.ublox.driver import (
+    GpsFix,
+    UbloxDriver,
+    UbxDecoder,
+    px4_configuration,
+)
+from fpga_hdl.chips.ublox.link import TlmUbloxUart, receiver_solution
 from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.cosim.harness import CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason
@@ -99,6 +106,71 @@ def test_px4s_gps_handshake_is_answered_and_timed_as_the_twin_predicts(harness):
     assert model.baud == 115200
     silence = _run(harness.uart.exchange(b"", baud=115200))
     assert (silence.data, silence.line_us) == (b"", 0)
+
+
+FIX = GpsFix(
+    fix_type=3, satellites_used=12, latitude_deg=47.3977419, longitude_deg=8.5455938,
+    altitude_msl_m=488.1, altitude_ellipsoid_m=535.4, eph=0.8, epv=1.2, vel_n_m_s=1.0,
+    vel_e_m_s=-2.0, vel_d_m_s=0.1, vel_m_s=2.24, cog_rad=1.0, s_variance_m_s=0.2,
+    c_variance_rad=0.1, vel_ned_valid=True,
+)  # fmt: skip
+
+
+def test_nav_pvt_follows_cfg_rate_on_the_rtl_as_on_the_twin():
+    """After PX4's configuration, CFG-RATE measRate 1000, 200 and 100 ms: two seconds of
+    the rig's 10 Hz measurements (the receiver's maximum) give NAV-PVT at 1, 5 and 10 Hz,
+    the epochs whose iTOW measRate divides, through the host port, the crossing into the
+    UART clock and the core, byte for byte and µs for µs as the twin. 50 ms (20 Hz, above
+    what the rig measures) is ACKed and gives the 10 Hz measured; 10 ms (below u-blox's
+    25 ms floor) is NAKed and the rate in force stays."""
+    from fpga_hdl.cosim.native import NativeHarness
+
+    harness = NativeHarness()
+    try:
+        harness.reset()
+        model = UbloxM8Model()
+        twin = TlmUbloxUart(model, clk_hz=UART_CLK_HZ)
+        rtl_driver, tlm_driver = UbloxDriver(harness.uart), UbloxDriver(twin)
+        _run(rtl_driver.configure())
+        asyncio.run(tlm_driver.configure())
+        assert model.meas_rate_ms == 200
+        start_ms = 345_600_000  # Tuesday 00:00 GPS time: every measRate divides it
+        epochs = {}
+        for meas_rate_ms, answer in ((1000, ubx.ID_ACK_ACK), (200, ubx.ID_ACK_ACK),
+                                     (100, ubx.ID_ACK_ACK), (50, ubx.ID_ACK_ACK),
+                                     (10, ubx.ID_ACK_NAK)):  # fmt: skip
+            frame = ubx.frame(
+                ubx.CLASS_CFG, ubx.ID_CFG_RATE, struct.pack("<HHH", meas_rate_ms, 1, 0)
+            )
+            rtl = _run(harness.uart.exchange(frame, baud=115200))
+            assert rtl == asyncio.run(twin.exchange(frame, baud=115200))
+            (reply,) = UbxDecoder().feed(rtl.data)
+            assert (reply.cls, reply.msg_id, reply.payload) == (ubx.CLASS_ACK, answer, frame[2:4])
+            itows = []
+            for k in range(20):
+                epoch_us = (start_ms + k * 100) * 1000
+                pvt = receiver_solution(FIX, epoch_us)
+                harness.host.load({"gps": pvt.fields()}, now_us=epoch_us)
+                model.load_fix(pvt)
+                rtl = _run(harness.uart.exchange(b"", baud=115200))
+                assert rtl == asyncio.run(twin.exchange(b"", baud=115200))
+                itows += [
+                    ubx.NavPvt.from_payload(f.payload).iTOW for f in UbxDecoder().feed(rtl.data)
+                ]
+            epochs[meas_rate_ms] = itows
+            start_ms += 2000
+        assert model.meas_rate_ms == 50
+    finally:
+        harness.close()
+    assert {rate: len(itows) for rate, itows in epochs.items()} == {
+        1000: 2,
+        200: 10,
+        100: 20,
+        50: 20,
+        10: 20,
+    }
+    assert epochs[1000] == [345_600_000, 345_601_000]
+    assert all(itow % 200 == 0 for itow in epochs[200])
 
 
 def test_an_unknown_spi_device_is_refused_before_the_simulator(harness):

@@ -247,7 +247,7 @@ def run_rtl(rx_frames: list[bytes], fixes: list[NavPvt], *, read_len: int) -> by
 
 def test_rtl_equals_twin_for_an_ack_and_a_nav_pvt():
     enable = ubx.frame(ubx.CLASS_CFG, ubx.ID_CFG_MSG, bytes([1, 7, 1]))
-    fix = nav_pvt_for_fix(FIX, itow_ms=5)
+    fix = nav_pvt_for_fix(FIX, itow_ms=7000)  # an epoch of the power-on 1000 ms measRate
     model = UbloxM8Model(baud=SIM_BAUD)
     model.receive(enable)
     model.load_fix(fix)

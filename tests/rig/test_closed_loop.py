@@ -59,7 +59,9 @@ def test_hover_holds_altitude_with_rtl_sensors(tmp_path, free_instance):
     assert np.abs(altitude - 3.0).max() < HOVER_BOUND_M
     assert rig_log.msg_info_dict["ver_hw"] == "RIG_RTL"
     gps = rig_log.get_dataset("sensor_gps").data
-    assert len(gps["timestamp"]) >= 85  # 10 Hz for 9 s, less the receiver's latency
+    # 5 Hz (PX4's CFG-RATE 200 ms of the receiver's 10 Hz): epochs at 0, 200, ... 8800 ms,
+    # each out at the first 4 ms frame 110 ms on and delivered 12 ms later, by 9 s.
+    assert len(gps["timestamp"]) == 45
     assert set(gps["timestamp"] - gps["timestamp_sample"]) == {12_000}
     assert set(gps["fix_type"]) == {3}
     ranges = rig_log.get_dataset("distance_sensor").data
@@ -141,7 +143,12 @@ def test_after_a_landing_hold_lets_it_arm_and_fly_again(tmp_path, free_instance)
     assert messages.count("arm: accepted") == 2
     assert "hold: accepted" in messages
     heights = -truth_at(rig_log, [6.0, 16.5, 24.0])["z"]
-    assert heights == pytest.approx([2.0, 0.0, 2.0], abs=HOVER_BOUND_M)
+    assert heights[:2] == pytest.approx([2.0, 0.0], abs=HOVER_BOUND_M)
+    # The reference autopilot holds height on the barometer, its velocity corrected by
+    # GPS: with the receiver at PX4's 5 Hz (it was fed 10 Hz before issue 16) its estimate
+    # is 0.45 m high 6 s into the second hop (0.34 m at 10 Hz), so the truth is held to
+    # 0.6 m there.
+    assert heights[2] == pytest.approx(2.0, abs=0.6)
 
 
 def test_rangefinder_landing_crawls_the_last_metre_and_lands(tmp_path, free_instance):

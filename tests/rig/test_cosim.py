@@ -42,9 +42,11 @@ BOUNDARY_FRAMES = range(340, 400)
 #: Widths of those periods: a period starting 1.5 ms before a frame time ends 3..0 µs
 #: before it; the others in between change every width back to 1200 µs.
 BOUNDARY_WIDTHS_US, BETWEEN_WIDTH_US = (1497, 1498, 1499, 1500), 1200
-#: A GPS epoch every this many frames (20 Hz at 1 kHz: more epochs than a receiver's
-#: 5 Hz in a short test), and the receiver faults of some of them.
-GPS_EVERY = 50
+#: A GPS measurement every this many frames (40 Hz at 1 kHz), each stamped with 4 × its
+#: frame time as time of week, so that a short test holds many of the navigation epochs
+#: PX4's 200 ms CFG-RATE selects (every other measurement) and as many that are not; and
+#: the receiver faults of some epochs.
+GPS_EVERY, GPS_TIME_SCALE = 25, 4
 GPS_FAULTS = {100: GpsFault.LOSS_OF_FIX, 150: GpsFault.JAMMED, 200: GpsFault.BAD_CHECKSUM}
 #: A LIDAR-Lite driver cycle every this many frames (PX4's 50 ms at 1 kHz), offset from the
 #: GPS epochs; the LIDAR-Lite is muted over the cycles at frames 175 and 225.
@@ -81,7 +83,7 @@ def _frames(rng, count, *, frame_us=1000, faults=None):
             ranged = sample_from_range(float(rng.uniform(0.1, 30.0)) if k != 325 else None)
         gps = None
         if k % GPS_EVERY == 0:
-            gps = receiver_solution(_gps_fix(rng), now_us, gps_fault)
+            gps = receiver_solution(_gps_fix(rng), GPS_TIME_SCALE * now_us, gps_fault)
         yield ChipFrame(
             now_us=now_us,
             imu=Mpu6000Sample.from_si(rng.normal(0, 20, 3), rng.normal(0, 3, 3), 30.0),
@@ -194,8 +196,9 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     assert timed_out.index(True, 20) + 1 == 248
     assert not any(timed_out[295:])
     # Each epoch's NAV-PVT (100 bytes at 115200 baud: 8.7 ms on the line) is delivered at
-    # the first frame after its last byte; loss of fix and jamming reach PX4's decoder, and
-    # the epoch with the bad checksum never arrives.
+    # the first frame after its last byte; the measurements between epochs send nothing;
+    # loss of fix and jamming reach PX4's decoder, and the epoch with the bad checksum
+    # never arrives.
     assert [received.sent_us // 1000 for _, received in fixes] == [50, 100, 150, 250, 300, 350]
     # The line: 99 bytes of 10 bits and the last one's 9.5 at 32 cycles a bit on the
     # 3.6864 MHz UART clock, plus the receiver's 3 input registers: 31,987 cycles, 8678 µs.

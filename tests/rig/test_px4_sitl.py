@@ -202,7 +202,8 @@ def test_takeoff_hover_land_through_the_rtl_chips_at_1khz(tmp_path, free_instanc
     assert set(delivered["timestamp"] - delivered["timestamp_sample"]) == {9000}
     gps_t, gps = _topic(px4_log, "vehicle_gps_position")
     assert (gps["fix_type"][gps_t > 5.0] >= 3).all()
-    assert np.diff(gps_t[gps_t > 5.0]).max() < 0.15  # every 10 Hz fix arrived
+    # Every fix arrived: 5 Hz, the rate PX4's CFG-RATE (200 ms) asks of the receiver.
+    assert np.diff(gps_t[gps_t > 5.0]).max() < 0.25
 
 
 def test_gps_loss_px4_fails_safe_as_documented(tmp_path, free_instance, px4_dir):

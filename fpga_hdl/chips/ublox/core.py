@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from amaranth.hdl import Const, Module, Mux, Signal, Value
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -12,7 +12,14 @@ from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.ubx import Source
 from fpga_hdl.host.host_port import chip_sample_latch
 
-__all__ = ["BAUD_RATES", "RESET_BAUD", "UbloxM8Core"]
+__all__ = [
+    "BAUD_RATES",
+    "EPOCH_DECISION_CYCLES",
+    "MIN_MEAS_RATE_MS",
+    "RESET_BAUD",
+    "RESET_MEAS_RATE_MS",
+    "UbloxM8Core",
+]
 
 #: Baud rates the core switches to on a CFG-PRT for UART1: PX4's auto-detection list
 #: (38400, 57600, 9600, 115200, 230400, 460800, 921600) and 19200, except 921600: on
@@ -21,6 +28,16 @@ __all__ = ["BAUD_RATES", "RESET_BAUD", "UbloxM8Core"]
 BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 230400, 460800)
 #: UART1's power-on rate on a u-blox M8.
 RESET_BAUD = 9600
+#: CFG-RATE measRate at power-on: one navigation epoch a second (u-blox M8 default).
+RESET_MEAS_RATE_MS = 1000
+#: The shortest measRate CFG-RATE takes; a shorter one (or 0) is NAKed and the rate kept.
+#: u-blox's CFG-RATE description: "Measurement rate should be greater than or equal to
+#: 25 ms". A rate between this and the receiver's maximum navigation rate is ACKed; the
+#: epochs then come at most as fast as the rig loads them (the vehicle's ``fix_rate_hz``).
+MIN_MEAS_RATE_MS = 25
+#: Cycles from a fix's strobe until the core knows whether it is a navigation epoch: one
+#: bit of the 32-bit iTOW a cycle (:meth:`UbloxM8Core._navigation_epoch`).
+EPOCH_DECISION_CYCLES = 32
 
 #: The frames the sequencer can send, by number.
 FRAMES: dict[str, tuple[Source, ...]] = {
@@ -36,15 +53,22 @@ class UbloxM8Core(wiring.Component):
 
     Behaviour emulated:
 
-    - **Output.** Each fix the host loads (``sample_stb``) is one navigation epoch: one
-      NAV-PVT (92-byte M8 payload) once CFG-MSG has enabled it on this port (off at power
-      on unless ``nav_pvt_at_reset``; a nonzero rate sends every epoch, the rig sets the
-      epoch rate). A fix loaded while a frame is on the line is used after it (latest wins).
+    - **Output.** Each fix the host loads (``sample_stb``) is a measurement of the rig's
+      GNSS model (at the receiver's maximum rate); the ones whose iTOW is a whole multiple
+      of CFG-RATE's measRate are navigation epochs, aligned to GPS time as on a u-blox
+      (power on: 1000 ms; navRate is taken as 1, as PX4 sends it, and timeRef's UTC and
+      GPS seconds differ by whole leap seconds, which a measRate dividing 1000 ms ignores).
+      Each epoch sends one NAV-PVT (92-byte M8 payload) once CFG-MSG has enabled it on
+      this port (off at power on unless ``nav_pvt_at_reset``; a nonzero rate sends every
+      epoch). Whether an iTOW is an epoch takes :data:`EPOCH_DECISION_CYCLES` to find,
+      so fixes come at most one per that many cycles. A fix loaded while a frame is on
+      the line is used after it (latest wins).
     - **Input.** UBX frames are parsed as PX4's own decoder does (sync, class, id, length,
       payload, CK_A, CK_B). A bad checksum or a framing error drops the frame silently, as
       a receiver does. Valid CFG-class frames are answered with ACK-ACK (class, id);
-      CFG-VALSET (protocol 27+, unknown to protocol 18), CFG polls (length <= 1) and a
-      CFG-PRT for UART1 at a rate outside :data:`BAUD_RATES` get ACK-NAK. An empty
+      CFG-VALSET (protocol 27+, unknown to protocol 18), CFG polls (length <= 1), a
+      CFG-PRT for UART1 at a rate outside :data:`BAUD_RATES` and a CFG-RATE below
+      :data:`MIN_MEAS_RATE_MS` get ACK-NAK. An empty
       MON-VER poll is answered with MON-VER.
     - **Baud.** UART1 starts at ``baud``. A CFG-PRT for UART1 switches both directions to
       its baudRate once its ACK has left at the old rate.
@@ -74,6 +98,8 @@ class UbloxM8Core(wiring.Component):
         A loaded fix waits for the frame on the line to end.
     baud : Out(20)
         UART1's current rate.
+    meas_rate_ms : Out(16)
+        CFG-RATE's measRate in force.
     fault : In(BUS_FAULT)
         ``mute`` holds TXD idle (bytes are lost); ``flip`` is XORed into every byte after
         a frame's 6-byte header (payload and checksum), so the driver finds the frame and
@@ -97,6 +123,7 @@ class UbloxM8Core(wiring.Component):
                 "sample_stb": In(1),
                 "sample_pending": Out(1),
                 "baud": Out(20, init=baud),
+                "meas_rate_ms": Out(16, init=RESET_MEAS_RATE_MS),
                 "fault": In(BUS_FAULT),
             }
         )
@@ -179,6 +206,7 @@ class UbloxM8Core(wiring.Component):
                         pvt_enabled=pvt_enabled,
                         switch=(switch_pending, new_divider, new_baud),
                     )
+        epoch = self._navigation_epoch(m)
 
         # --- output: the frame sequencer -------------------------------------------------
         frame = Signal(range(len(FRAMES)))
@@ -234,9 +262,43 @@ class UbloxM8Core(wiring.Component):
         with m.Elif(pvt_pending & ~latch.pending):
             m.d.sync += [*start("nav_pvt"), pvt_pending.eq(0)]
         # After the sequencer: an epoch in the cycle a NAV-PVT starts is not lost.
-        with m.If(self.sample_stb & pvt_enabled):
+        with m.If(epoch & pvt_enabled):
             m.d.sync += pvt_pending.eq(1)
         return m
+
+    def _navigation_epoch(self, m: Module) -> Value:
+        """1 for a cycle when the last loaded fix's iTOW is a whole multiple of measRate.
+
+        Hand-written restoring division (Amaranth's library has no divider, and a
+        combinational 32-by-16-bit remainder would be a large, slow block for a question
+        asked ten times a second): the remainder takes one dividend bit a cycle.
+        """
+        dividend = Signal(EPOCH_DECISION_CYCLES)
+        remainder = Signal(16)
+        bits_left = Signal(range(EPOCH_DECISION_CYCLES + 1))
+        shifted = Signal(17)  # remainder · 2 + the next dividend bit
+        reduced = Signal(17)
+        epoch = Signal()
+        m.d.comb += [
+            shifted.eq(Cat(dividend[-1], remainder)),
+            reduced.eq(Mux(shifted >= self.meas_rate_ms, shifted - self.meas_rate_ms, shifted)),
+        ]
+        m.d.sync += epoch.eq(0)
+        with m.If(self.sample_stb):
+            m.d.sync += [
+                dividend.eq(self.sample.iTOW),
+                remainder.eq(0),
+                bits_left.eq(EPOCH_DECISION_CYCLES),
+            ]
+        with m.Elif(bits_left != 0):
+            m.d.sync += [
+                dividend.eq(dividend << 1),
+                remainder.eq(reduced),
+                bits_left.eq(bits_left - 1),
+            ]
+            with m.If(bits_left == 1):
+                m.d.sync += epoch.eq(reduced == 0)
+        return epoch
 
     def _act(
         self, m, rx_class, rx_id, rx_len, captured, *, ack, mon_ver_pending, pvt_enabled, switch
@@ -262,6 +324,12 @@ class UbloxM8Core(wiring.Component):
                     m.d.sync += ack_is_ack.eq(supported & accepted)
                 with m.Else():
                     m.d.sync += ack_is_ack.eq(accepted)
+            with m.Elif(rx_id == ubx.ID_CFG_RATE):
+                meas_rate = Cat(p0, p1)
+                supported = (rx_len == ubx.CFG_RATE_LEN) & (meas_rate >= MIN_MEAS_RATE_MS)
+                m.d.sync += ack_is_ack.eq(accepted & supported)
+                with m.If(accepted & supported):
+                    m.d.sync += self.meas_rate_ms.eq(meas_rate)
             with m.Elif(rx_id == ubx.ID_CFG_MSG):
                 m.d.sync += ack_is_ack.eq(accepted)
                 is_pvt = (p0 == ubx.CLASS_NAV) & (p1 == ubx.ID_NAV_PVT) & (rx_len == 3)

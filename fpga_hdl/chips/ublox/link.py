@@ -36,9 +36,10 @@ class GpsFault(StrEnum):
     BAD_CHECKSUM = "bad_checksum"
 
 
-def receiver_solution(fix: GpsFix, now_us: int, fault: GpsFault | None = None) -> NavPvt:
-    """The NAV-PVT the receiver computes at ``now_us`` for ``fix``, under ``fault``."""
-    pvt = nav_pvt_for_fix(fix, itow_ms=now_us // 1000)
+def receiver_solution(fix: GpsFix, epoch_us: int, fault: GpsFault | None = None) -> NavPvt:
+    """The NAV-PVT the receiver computes for ``fix`` measured at ``epoch_us`` (its iTOW),
+    under ``fault``."""
+    pvt = nav_pvt_for_fix(fix, itow_ms=epoch_us // 1000)
     if fault is GpsFault.LOSS_OF_FIX:
         return replace(pvt, fixType=0, flags=0, numSV=0)
     if fault is GpsFault.JAMMED:

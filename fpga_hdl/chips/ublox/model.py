@@ -9,7 +9,12 @@ what the core sends next, in the core's order, at the rate :attr:`baud` names.
 from __future__ import annotations
 
 from fpga_hdl.chips.ublox import ubx
-from fpga_hdl.chips.ublox.core import BAUD_RATES, RESET_BAUD
+from fpga_hdl.chips.ublox.core import (
+    BAUD_RATES,
+    MIN_MEAS_RATE_MS,
+    RESET_BAUD,
+    RESET_MEAS_RATE_MS,
+)
 from fpga_hdl.chips.ublox.ubx import NavPvt
 
 __all__ = ["UbloxM8Model"]
@@ -26,6 +31,8 @@ class UbloxM8Model:
             raise ValueError(f"baud must be one of {BAUD_RATES}, not {baud!r}")
         self.baud = baud
         self.nav_pvt_enabled = nav_pvt_at_reset
+        #: CFG-RATE's measRate in force: fixes whose iTOW it divides are navigation epochs.
+        self.meas_rate_ms = RESET_MEAS_RATE_MS
         #: Fault injection, as the core's ``fault.mute`` / ``fault.flip``.
         self.fault_mute = False
         self.fault_flip = 0
@@ -40,9 +47,10 @@ class UbloxM8Model:
         self._ck = (0, 0)
 
     def load_fix(self, fix: NavPvt) -> None:
-        """One navigation epoch (the host port's ``sample_stb``)."""
+        """One measurement (the host port's ``sample_stb``); a navigation epoch when
+        measRate divides its iTOW."""
         self._fix = fix
-        if self.nav_pvt_enabled:
+        if self.nav_pvt_enabled and fix.iTOW % self.meas_rate_ms == 0:
             self._pvt = True
 
     def receive(self, data: bytes) -> None:
@@ -123,6 +131,12 @@ class UbloxM8Model:
                         self._switch_to = rate
             elif msg_id == ubx.ID_CFG_MSG and length == 3 and payload[:2] == _NAV_PVT:
                 self.nav_pvt_enabled = payload[2] != 0
+            elif msg_id == ubx.ID_CFG_RATE:
+                meas_rate = int.from_bytes(payload[:2], "little")
+                accepted = accepted and length == ubx.CFG_RATE_LEN
+                accepted = accepted and meas_rate >= MIN_MEAS_RATE_MS
+                if accepted:
+                    self.meas_rate_ms = meas_rate
             self._ack = (accepted, cls, msg_id)
         elif cls == ubx.CLASS_MON and msg_id == ubx.ID_MON_VER and length == 0:
             self._mon_ver = True

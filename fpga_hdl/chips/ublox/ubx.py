@@ -52,6 +52,8 @@ PORT_UART1 = 0x01
 #: CFG-PRT payload bytes per port block; baudRate is the u32 at offset 8.
 CFG_PRT_BLOCK_LEN = 20
 CFG_PRT_BAUD_OFFSET = 8
+#: CFG-RATE's payload: measRate, navRate, timeRef (U2 each).
+CFG_RATE_LEN = 6
 
 #: Source of one frame byte: a constant, (value name, byte index little-endian), or a
 #: checksum byte.
