@@ -417,3 +417,29 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
 def test_a_climb_rate_flight_learns_nothing(plan):
     """The X500 flew POSCTL, ALTCTL, Mission and Land, where PX4 runs on its own estimate."""
     assert plan.learned == {}
+
+
+@pytest.mark.closed_loop
+def test_px4_holds_the_8s_quads_rest_then_spins_up_on_its_sticks(tmp_path):
+    """The first 10 s of the 8S quad's log through PX4 SITL: armed in Stabilized at the log's
+    start, the rotors stand while the stick sits at the bottom (105-108.9 s: the log's rest,
+    motors at 0), and turn from the pilot's spin-up on (the log's motors 0.2-0.3 at 112-114 s)."""
+    build = find_px4()
+    if build is None:
+        pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl)")
+    options = ReplayOptions(autopilot="px4", vehicle="quad4001_8s", end_s=114.5, seed=3)
+    timeouts = LinkTimeouts(connect_s=60, answer_s=30)
+    result = run_replay(plan_replay(QUAD4001, options),
+                        RunOptions(instance=free_test_instance(), out_dir=tmp_path,
+                                   timeouts=timeouts))  # fmt: skip
+    px4 = pyulog.ULog(str(result.autopilot_log), ["vehicle_status", "actuator_motors"])
+    status = px4.get_dataset("vehicle_status").data
+    armed = status["arming_state"] == 2
+    assert status["timestamp"][armed][0] / 1e6 == pytest.approx(QUAD_START_S, abs=0.1)
+    assert set(status["nav_state"][armed]) == {STABILIZED}
+    truth = pyulog.ULog(str(result.rig_log), ["rig_propulsion_groundtruth"])
+    rotors = truth.get_dataset("rig_propulsion_groundtruth").data
+    time_s = rotors["timestamp"] / 1e6
+    speed = np.column_stack([rotors[f"rotor_speed_radps[{k}]"] for k in range(4)])
+    assert np.all(speed[(time_s > 105.0) & (time_s < 108.9)] == 0.0)
+    assert np.all(speed[(time_s > 112.0) & (time_s < 114.0)] > 100.0)
