@@ -160,6 +160,11 @@ LEARNED = {
 #: navigator_mission_item frames with a global position (MAV_FRAME GLOBAL*, PX4 stores 0).
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6})
 #: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
+#: What a mission item needs to go up (``Flight.flown_mission``).
+_MISSION_ITEM_FIELDS = (
+    "sequence_current", "frame", "latitude", "longitude", "altitude", "altitude_is_relative",
+    "nav_cmd", "time_inside", "acceptance_radius", "loiter_radius", "yaw",
+)  # fmt: skip
 _DRIVE_FIELDS = {
     "velocity": ("vehicle_local_position_setpoint", ("vx", "vy", "vz", "yaw")),
     "attitude": ("vehicle_attitude_setpoint",
@@ -822,16 +827,20 @@ class _FlightLog:
         self.first_s = max(first_us, float(ulog.start_timestamp)) / 1e6
         self.last_s = max(float(d.data["timestamp"][-1]) for d in ulog.data_list) / 1e6
 
-    def topic(self, name: str, why: str) -> dict[str, NDArray[Any]]:
+    def topic(self, name: str, why: str, fields: tuple[str, ...] = ()) -> dict[str, NDArray[Any]]:
+        """Topic ``name`` holding ``fields``; a log without them is one line saying ``why``
+        they were needed (a damaged or older log)."""
         if name not in self.topics:
             raise ReplayError(f"{self.path}: topic {name} ({why}) is not in the log")
-        return self.topics[name]
+        data = self.topics[name]
+        missing = [field for field in fields if field not in data]
+        if missing:
+            raise ReplayError(f"{self.path}: topic {name} has no field {missing[0]} ({why})")
+        return data
 
     def _at(self, name: str, field: str, time_s: float, why: str) -> float:
         """The field's value in force at ``time_s`` (the first sample's before the topic starts)."""
-        data = self.topic(name, why)
-        if field not in data:
-            raise ReplayError(f"{self.path}: topic {name} has no field {field} ({why})")
+        data = self.topic(name, why, (field,))
         index = max(int(np.searchsorted(data["timestamp"] / 1e6, time_s, "right")) - 1, 0)
         return float(data[field][index])
 
@@ -915,13 +924,13 @@ class _FlightLog:
         The arm time is ``vehicle_status.armed_time`` of the first armed sample: the logger
         starts on arming, so the first sample comes after it.
         """
-        status = self.topic("vehicle_status", "arming times")
+        status = self.topic("vehicle_status", "arming times", ("arming_state",))
         times_s = status["timestamp"] / 1e6
         armed = status["arming_state"] == ARMING_STATE_ARMED
         if not armed.any():
             return None, None
         first = int(np.argmax(armed))
-        arm_s = float(status["armed_time"][first]) / 1e6 or float(times_s[first])
+        arm_s = _arm_time_s(status, first)
         disarmed_after = np.nonzero(~armed[first:])[0]
         disarm_s = float(times_s[first + disarmed_after[0]]) if len(disarmed_after) else None
         arm_s = max(arm_s, start_s) if arm_s < end_s else None
@@ -937,10 +946,10 @@ class _FlightLog:
         1.14): a replay commands it while armed (and the mode armed in), never a mode PX4
         chose itself in a failsafe, nor the mode it returns to after an automatic disarm.
         """
-        status = self.topic("vehicle_status", "the flight's arm, disarm and mode switches")
-        for needed in ("nav_state", "arming_state"):
-            if needed not in status:
-                raise ReplayError(f"{self.path}: topic vehicle_status has no field {needed}")
+        status = self.topic(
+            "vehicle_status", "the flight's arm, disarm and mode switches",
+            ("nav_state", "arming_state"),
+        )  # fmt: skip
         times_s = status["timestamp"] / 1e6
         nav = status["nav_state"].astype(int)
         intended = status.get("nav_state_user_intention", status["nav_state"]).astype(int)
@@ -973,8 +982,7 @@ class _FlightLog:
         self, status: dict[str, NDArray[Any]], k: int, armed: bool, reasons: NDArray[Any] | None
     ) -> FlightEvent:
         if armed:  # the logger starts on arming: the arm comes before the first sample
-            arm_s = float(status["armed_time"][k]) / 1e6 or float(status["timestamp"][k]) / 1e6
-            return FlightEvent(arm_s, "arm", None, True, "the pilot's")
+            return FlightEvent(_arm_time_s(status, k), "arm", None, True, "the pilot's")
         reason = None if reasons is None else int(reasons[k])
         whose = ("the pilot's" if reason is None or reason in PILOT_DISARM_REASONS else
                  f"PX4's own, reason {reason}")  # fmt: skip
@@ -1015,6 +1023,10 @@ class _FlightLog:
         if data is None or not len(data["timestamp"]):
             return (), ("the log flew Mission mode but holds no navigator_mission_item: no "
                         "mission to upload",)  # fmt: skip
+        missing = [field for field in _MISSION_ITEM_FIELDS if field not in data]
+        if missing:
+            return (), (f"navigator_mission_item has no field {missing[0]}: no mission to "
+                        "upload",)  # fmt: skip
         last = {int(seq): k for k, seq in enumerate(data["sequence_current"])}
         flown = 0
         while flown in last:
@@ -1081,12 +1093,7 @@ class _FlightLog:
         is landed at the start) and a rate or thrust is 0. Yaw stays NaN (not controlled).
         """
         name, fields = _DRIVE_FIELDS[drive]
-        data = self.topic(name, f"needed by --drive {drive}")
-        missing = [f for f in fields if f not in data]
-        if missing:
-            raise ReplayError(
-                f"{self.path}: topic {name} has no field {missing[0]} (needed by --drive {drive})"
-            )
+        data = self.topic(name, f"needed by --drive {drive}", fields)
         times_s = data["timestamp"] / 1e6
         values = np.column_stack([data[f].astype(float) for f in fields])
         if drive != "velocity":
@@ -1137,6 +1144,14 @@ def _initial(drive: str, first: NDArray[np.float64]) -> NDArray[np.float64]:
     if drive == "attitude":
         return np.array([*first[:4], 0.0])
     return np.zeros(4)
+
+
+def _arm_time_s(status: dict[str, NDArray[Any]], k: int) -> float:
+    """When the vehicle armed, for armed sample ``k``: ``armed_time`` (the logger starts on
+    arming, so the first armed sample comes after it), or the sample's time in a log
+    without it (or with 0 there)."""
+    armed_us = float(status["armed_time"][k]) if "armed_time" in status else 0.0
+    return (armed_us or float(status["timestamp"][k])) / 1e6
 
 
 def _hold_last_finite(values: NDArray[np.float64]) -> NDArray[np.float64]:

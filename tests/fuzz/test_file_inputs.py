@@ -80,3 +80,23 @@ def test_a_topic_whose_definition_lost_its_timestamp_is_refused_in_one_line(tmp_
         with pytest.raises(REFUSALS) as refusal:
             read(path)
         one_line(refusal.value)
+
+
+@pytest.mark.parametrize("field", ["armed_time", "arming_state", "nav_state"])
+def test_vehicle_status_without_an_arming_or_mode_field_is_read_or_refused(tmp_path, field):
+    """Found by the fuzz above: a flipped byte renamed ``vehicle_status.armed_time`` and
+    the replay planner failed with a KeyError. Without ``armed_time`` the arm is the first
+    armed sample's time, and the reference autopilot's replay needs no mode; without the
+    arming state there are no arming times: one line."""
+    data = seed_log()
+    at = data.index(b"vehicle_status:")
+    renamed = data[at:].replace(f" {field};".encode(), f" {field[:-1]}_;".encode(), 1)
+    path = tmp_path / "flight.ulg"
+    path.write_bytes(data[:at] + renamed)
+    if field != "arming_state":
+        assert plan_replay(path).drive == "velocity"
+        return
+    with pytest.raises(REFUSALS) as refusal:
+        plan_replay(path)
+    assert str(refusal.value).startswith(f"{path}: topic vehicle_status has no field {field} (")
+    one_line(refusal.value)
