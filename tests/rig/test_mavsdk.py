@@ -92,8 +92,9 @@ def test_takeoff_and_land_as_the_example(tmp_path, free_instance):
     _all_ok(health)
     result = rig.finish(timeout_s=60)
     _, altitude_m = _altitude(pyulog.ULog(str(result.rig_log)))
-    # MIS_TAKEOFF_ALT 2.5 m, reached; the climb overshoots by up to 0.4 m (no take-off ramp)
-    assert 2.4 < altitude_m.max() < 2.9
+    # MIS_TAKEOFF_ALT 2.5 m, reached; the climb overshoots (no take-off ramp): up to 0.4 m
+    # with 10 Hz fixes, 0.41 m measured in CI since the receiver sends PX4's 5 Hz
+    assert 2.4 < altitude_m.max() < 3.0
     assert altitude_m[-1] < 0.1  # landed
 
 
