@@ -889,10 +889,7 @@ class _FlightLog:
         data = self.topics.get("hover_thrust_estimate")
         if data is None or "hover_thrust" not in data:
             return None
-        valid = (
-            data["valid"].astype(bool) if "valid" in data else np.ones(data["timestamp"].size, bool)
-        )
-        thrust = data["hover_thrust"][valid]
+        thrust = data["hover_thrust"][_valid(data)]
         thrust = thrust[np.isfinite(thrust) & (thrust > 0) & (thrust < 1)]
         return float(np.median(thrust)) if thrust.size else None
 
@@ -996,9 +993,7 @@ class _FlightLog:
         fields = ("roll", "pitch", "yaw", "throttle")
         if data is None or any(f not in data for f in fields):
             return None
-        valid = (
-            data["valid"].astype(bool) if "valid" in data else np.ones(len(data["timestamp"]), bool)
-        )
+        valid = _valid(data)
         if not valid.any():
             return None
         times_s = data["timestamp"][valid] / 1e6
@@ -1144,6 +1139,13 @@ def _initial(drive: str, first: NDArray[np.float64]) -> NDArray[np.float64]:
     if drive == "attitude":
         return np.array([*first[:4], 0.0])
     return np.zeros(4)
+
+
+def _valid(data: dict[str, NDArray[Any]]) -> NDArray[np.bool_]:
+    """A topic's ``valid`` flags (every sample valid in a topic without them)."""
+    if "valid" in data:
+        return data["valid"].astype(bool)
+    return np.ones(len(data["timestamp"]), bool)
 
 
 def _arm_time_s(status: dict[str, NDArray[Any]], k: int) -> float:

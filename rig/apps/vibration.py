@@ -478,14 +478,19 @@ def read_raw_imu(log_path: str | Path) -> dict[str, RawImu]:
                 f"{path}: no topic {topic!r} (the raw IMU FIFO: log it with SDLOG_PROFILE's "
                 "raw-FIFO bit)"
             )
-        counts = np.array(data["samples"], dtype=int)
+        slots = max((int(n) for n in data.get("samples", ())), default=0)
+        fields = ("samples", "dt", "scale", "timestamp_sample",
+                  *(f"{axis}[{k}]" for axis in _FIFO_AXES for k in range(slots)))  # fmt: skip
+        missing = [field for field in fields if field not in data]
+        if missing or slots == 0:
+            what = f"no field {missing[0]}" if missing else "no samples"
+            raise IdentificationError(f"{path}: topic {topic} has {what} (the raw IMU FIFO)")
         dt_us = np.asarray(data["dt"], dtype=float)
-        keep = [np.arange(n) < n for n in counts]  # each message's valid slots
-        offsets = np.arange(counts.max())[None, :] * dt_us[:, None]
+        offsets = np.arange(slots)[None, :] * dt_us[:, None]
         times = np.asarray(data["timestamp_sample"], dtype=float)[:, None] + offsets
-        mask = np.array([np.pad(k, (0, counts.max() - k.size)) for k in keep])
+        mask = np.arange(slots)[None, :] < np.asarray(data["samples"], dtype=int)[:, None]
         columns = [
-            np.column_stack([data[f"{axis}[{k}]"] for k in range(counts.max())]).astype(float)
+            np.column_stack([data[f"{axis}[{k}]"] for k in range(slots)]).astype(float)
             * np.asarray(data["scale"], dtype=float)[:, None]
             for axis in _FIFO_AXES
         ]
