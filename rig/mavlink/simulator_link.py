@@ -31,6 +31,10 @@ PX4_NEVER_RECONNECTS = "PX4 never reconnects to a simulator: start a new PX4 pro
 #: The rig's own MAVLink identity on the simulator link (Gazebo uses 1/51; PX4 ignores it).
 RIG_SYSTEM_ID, RIG_COMPONENT_ID = 1, 51
 _RECV_BYTES = 65536
+#: How long a closed link waits for the autopilot's process to be seen ended, so the error
+#: names how it ended: the kernel closes a killed process's sockets before its parent can
+#: reap it, and a link can reset a few milliseconds before the exit status exists.
+_EXIT_AFTER_CLOSE_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -107,7 +111,7 @@ class SimulatorLink:
         self.state_interval_us: int | None = None
         self.peer_heartbeat: mavlink.MAVLink_heartbeat_message | None = None
         self.lockstep = False
-        self.peer_exit = peer_exit or (lambda: None)
+        self.peer_exit = peer_exit
         self._latest: ActuatorControls | None = None
         self._sent_us = 0  # time_usec of the newest frame sent
         self._first_sent_us: int | None = None  # the clock need not start at 0 (a replay)
@@ -147,7 +151,7 @@ class SimulatorLink:
                     f"no autopilot connected to {self.endpoint} within "
                     f"{self.timeouts.connect_s:g} s; start {waiting_for}"
                 )
-            exit_reason = self.peer_exit()
+            exit_reason = self._peer_exit_reason()
             if exit_reason is not None:
                 raise AutopilotNotConnected(
                     f"the autopilot process ended before connecting to {self.endpoint} "
@@ -171,7 +175,7 @@ class SimulatorLink:
             self._connection().sendall(payload)
         except OSError as error:
             raise AutopilotStalled(
-                f"the autopilot closed the simulator link ({self.endpoint}: {error.strerror}) "
+                f"the autopilot closed the simulator link ({self.endpoint}: {error.strerror})"
                 f"{self._exit_note()}; {PX4_NEVER_RECONNECTS}"
             ) from None
         self.stats.send_s += time.perf_counter() - packed
@@ -258,7 +262,7 @@ class SimulatorLink:
         ready, _, _ = select.select([conn], [], [], timeout_s)
         if not ready:
             self.stats.wait_s += time.perf_counter() - started
-            exit_reason = self.peer_exit()
+            exit_reason = self._peer_exit_reason()
             if exit_reason is not None:
                 raise AutopilotStalled(
                     f"the autopilot process ended ({exit_reason}) while the rig waited for "
@@ -275,7 +279,7 @@ class SimulatorLink:
         self.stats.wait_s += received - started
         if not data:
             raise AutopilotStalled(
-                f"the autopilot closed the simulator link ({self.endpoint}: {reason}) "
+                f"the autopilot closed the simulator link ({self.endpoint}: {reason})"
                 f"{self._exit_note()}; {PX4_NEVER_RECONNECTS}"
             )
         for message in self.mav.parse_buffer(data) or ():
@@ -306,5 +310,14 @@ class SimulatorLink:
             self.stats.malformed += 1
 
     def _exit_note(self) -> str:
-        exit_reason = self.peer_exit()
+        """`` (autopilot process …)`` when the peer's process ends within
+        :data:`_EXIT_AFTER_CLOSE_S` of the link closing, else nothing."""
+        if self.peer_exit is None:
+            return ""
+        deadline = time.monotonic() + _EXIT_AFTER_CLOSE_S
+        while (exit_reason := self.peer_exit()) is None and time.monotonic() < deadline:
+            time.sleep(0.02)
         return f" (autopilot process {exit_reason})" if exit_reason else ""
+
+    def _peer_exit_reason(self) -> str | None:
+        return None if self.peer_exit is None else self.peer_exit()

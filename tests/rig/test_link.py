@@ -8,6 +8,7 @@ answers each HIL_SENSOR with ``id = 0`` with one HIL_ACTUATOR_CONTROLS echoing i
 
 import json
 import re
+import time
 
 import pytest
 
@@ -118,6 +119,31 @@ def test_killed_autopilot_process_is_named(listening_link, start_double):
     process.kill()
     process.wait()
     with pytest.raises(AutopilotStalled, match=r"autopilot process.*exit code -9"):
+        _run_frames(link, 40_000, start=21)
+
+
+def test_a_killed_autopilot_is_named_though_its_link_resets_before_it_is_reaped(
+    listening_link, start_double
+):
+    """The kernel closes a killed process's socket before its parent can reap it: the
+    link's reset must still name how the process ended (CI saw the bare reset once). The
+    window is made 0.3 s wide here, so the test does not depend on the scheduler."""
+    link = listening_link()
+    process = start_double(link.ports.simulator_tcp, "px4", "--after", "0")
+    seen_ended_at = []
+
+    def reaped_late():
+        if process.poll() is None:
+            return None
+        seen_ended_at.append(seen_ended_at[0] if seen_ended_at else time.monotonic())
+        return None if time.monotonic() - seen_ended_at[0] < 0.3 else "exit code -9"
+
+    link.peer_exit = reaped_late
+    link.accept()
+    _run_frames(link, 20)
+    process.kill()
+    process.wait()
+    with pytest.raises(AutopilotStalled, match=r"\(autopilot process exit code -9\); PX4"):
         _run_frames(link, 40_000, start=21)
 
 
