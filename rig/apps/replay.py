@@ -59,6 +59,7 @@ from quad_model.environment import (
     isa_pressure_pa,
     isa_temperature_k,
 )
+from quad_model.frames import geodetic_to_ned, ned_to_geodetic
 from quad_model.model import ModelInputError, charge_used_for_voltage_c
 from quad_model.vehicle import VEHICLES_DIR, BatteryParams, VehicleFileError, vehicle_from_dict
 
@@ -157,6 +158,14 @@ LEARNED = {
     "MPC_THR_HOVER": "its hover_thrust_estimate, the centre stick's thrust in its PX4",
     "MPC_MANTHR_MIN": "its thrust set-point with the throttle stick at the bottom",
 }
+#: A mission item the real PX4 left within this long of making it current was passed where
+#: the vehicle stood, not flown to: the X500's first waypoint, 1.1 m below the hovering
+#: vehicle, was current for 50 ms in its v1.17. PX4 v1.14 SITL, given it as logged,
+#: descended to it first (NAV_MC_ALT_RAD 0.8 m) and ran the mission 1.9 s late; given no
+#: such item, it climbed to the next one's height before leaving (its in-air take-off
+#: step), 3.3 s late. Uploaded at the height it was passed at, it is passed at once too.
+#: No multicopter reaches a waypoint outside its acceptance radius this fast.
+PASSED_AT_ONCE_S = 0.25
 #: navigator_mission_item frames with a global position (MAV_FRAME GLOBAL*, PX4 stores 0).
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6})
 #: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
@@ -857,6 +866,24 @@ class _FlightLog:
             )
         return height
 
+    def altitude_at(self, time_s: float) -> float | None:
+        """The vehicle's altitude AMSL in force at ``time_s`` (None: not logged)."""
+        return self._logged_at("vehicle_global_position", "alt", time_s)
+
+    def home_altitude_at(self, time_s: float) -> float | None:
+        """The real PX4's home altitude AMSL in force at ``time_s`` (None: not logged)."""
+        return self._logged_at("home_position", "alt", time_s)
+
+    def _logged_at(self, name: str, field: str, time_s: float) -> float | None:
+        """:meth:`_at` for what a replay can do without: None when the topic, the field or
+        a finite value is missing."""
+        data = self.topics.get(name)
+        if data is None or field not in data or not len(data["timestamp"]):
+            return None
+        index = max(int(np.searchsorted(data["timestamp"] / 1e6, time_s, "right")) - 1, 0)
+        value = float(data[field][index])
+        return value if math.isfinite(value) else None
+
     def battery_voltage_v(self, time_s: float) -> float | None:
         """The pack's voltage at ``time_s`` (None: no battery_status). The replay starts
         landed and disarmed, where only the avionics load the pack: ≈ its open-circuit
@@ -1010,10 +1037,11 @@ class _FlightLog:
     def flown_mission(
         self, home: GeoPoint | None
     ) -> tuple[tuple[MissionItem, ...], tuple[str, ...]]:
-        """The mission as PX4 flew it (``navigator_mission_item``: for each sequence number
-        the last item logged with it; one the navigator inserted, such as a climb before the
-        first waypoint, is logged before it), uploadable as MISSION_ITEM_INT, and what the
-        log could not say about it."""
+        """The mission as PX4 flew it, uploadable as MISSION_ITEM_INT, and what the log
+        could not say about it. ``navigator_mission_item`` holds for each sequence number
+        the last item logged with it (one the navigator inserted, such as a climb before the
+        first waypoint, is logged before it); positions and heights are put where the real
+        vehicle flew them (:func:`_mission_positions`, :meth:`_mission_altitudes`)."""
         data = self.topics.get("navigator_mission_item")
         if data is None or not len(data["timestamp"]):
             return (), ("the log flew Mission mode but holds no navigator_mission_item: no "
@@ -1041,7 +1069,7 @@ class _FlightLog:
         if total > flown:
             notes.append(
                 f"the log's mission had {total} items; {flown} became current and "
-                f"are uploaded (the log holds no more)"
+                f"could be uploaded (the log holds no more)"
             )
         rows = [last[seq] for seq in range(flown)]
         frames = {int(data["frame"][k]) for k in rows}
@@ -1051,33 +1079,65 @@ class _FlightLog:
                 f"mission frame(s) {sorted(frames - GLOBAL_FRAMES)} are not "
                 "global positions: no mission to upload",
             )
-        lat = np.array([float(data["latitude"][k]) for k in rows])
-        lon = np.array([float(data["longitude"][k]) for k in rows])
-        shift = (0.0, 0.0)
-        if home is not None:
-            shift = tuple(
-                float(np.round(h - np.median(v)))
-                for h, v in ((home.lat_deg, lat), (home.lon_deg, lon))
-            )
-            if shift != (0.0, 0.0):
-                notes.append(
-                    f"the mission items lie {shift[0]:g}° N, {shift[1]:g}° E from the "
-                    "log's home: whole degrees, the uploader's offset of the log's "
-                    "positions, taken out"
-                )
+        positions, position_notes = _mission_positions(data, rows, home)
+        altitudes, altitude_notes = self._mission_altitudes(data, rows, home)
+        notes += [*position_notes, *altitude_notes]
         items = tuple(
             MissionItem(
                 frame=(mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT if data["altitude_is_relative"][k]
                        else mavlink.MAV_FRAME_GLOBAL_INT),
                 command=int(data["nav_cmd"][k]),
-                lat_deg=float(la) + shift[0], lon_deg=float(lo) + shift[1],
-                alt_m=float(data["altitude"][k]),
+                lat_deg=lat, lon_deg=lon, alt_m=altitude,
                 param1=float(data["time_inside"][k]), param2=float(data["acceptance_radius"][k]),
                 param3=float(data["loiter_radius"][k]), param4=math.degrees(float(data["yaw"][k])),
             )
-            for k, la, lo in zip(rows, lat, lon, strict=True)
+            for k, (lat, lon), altitude in zip(rows, positions, altitudes, strict=True)
         )  # fmt: skip
         return items, tuple(notes)
+
+    def _mission_altitudes(
+        self, data: dict[str, NDArray[Any]], rows: list[int], home: GeoPoint | None
+    ) -> tuple[list[float], list[str]]:
+        """Each item's altitude for this replay, whose home is the log's first (where it
+        armed, on the ground): a relative one is moved by the home the real PX4 held when
+        it flew the item (PX4 sets home again at take-off, on its estimate then), and one
+        passed at once (:data:`PASSED_AT_ONCE_S`) is put where the vehicle passed it."""
+        times_s = data["timestamp"] / 1e6
+        sequence = data["sequence_current"].astype(int)
+        altitudes, notes = [float(data["altitude"][k]) for k in rows], []
+        if home is None:
+            return altitudes, notes
+        relative = [bool(data["altitude_is_relative"][k]) for k in rows]
+        home_moves = {
+            k: home_then - home.alt_amsl_m
+            for k, is_relative in zip(rows, relative, strict=True)
+            if is_relative and (home_then := self.home_altitude_at(times_s[k])) is not None
+        }
+        moved = sorted({round(m, 2) for m in home_moves.values() if abs(m) >= 0.01})
+        if moved:
+            notes.append(
+                f"relative mission altitudes moved by {', '.join(f'{m:+g}' for m in moved)} m: "
+                f"the real PX4 flew them above a home it set again at take-off, not the log's "
+                f"first ({home.alt_amsl_m:.2f} m), this replay's"
+            )
+        for index, k in enumerate(rows):
+            altitudes[index] += home_moves.get(k, 0.0)
+            following = np.nonzero(sequence > sequence[k])[0]
+            if index == len(rows) - 1 or not len(following):
+                continue
+            current_s = float(times_s[following[0]] - times_s[k])
+            standing = self.altitude_at(float(times_s[k]))
+            if current_s >= PASSED_AT_ONCE_S or standing is None:
+                continue
+            passed_at = standing - (home.alt_amsl_m if relative[index] else 0.0)
+            notes.append(
+                f"mission item {sequence[k]} was current for {current_s:.2f} s: the real PX4 "
+                f"passed it where the vehicle stood, {passed_at:.1f} m against its "
+                f"{altitudes[index]:.1f} m; uploaded at that height, so this PX4 passes it "
+                "too instead of flying to it first"
+            )
+            altitudes[index] = passed_at
+        return altitudes, notes
 
     def track(self, drive: str, start_s: float, end_s: float) -> SetpointTrack:
         """The drive's setpoints in run seconds from ``start_s``, first the one in force then.
@@ -1101,6 +1161,38 @@ class _FlightLog:
         track_times = (0.0, *(float(t) - start_s for t in times_s[inside]))
         rows = (first, *values[inside])
         return SetpointTrack(drive, track_times, tuple(tuple(float(v) for v in r) for r in rows))
+
+
+def _mission_positions(
+    data: dict[str, NDArray[Any]], rows: list[int], home: GeoPoint | None
+) -> tuple[list[tuple[float, float]], list[str]]:
+    """Each mission item's latitude and longitude for this replay. A log whose positions
+    were moved by whole degrees to hide the site (its home, not its mission) has each item
+    put at its distance and bearing from the home moved back: a shift in degrees would
+    scale the east-west legs by the ratio of the two latitudes' cosines."""
+    lat = np.array([float(data["latitude"][k]) for k in rows])
+    lon = np.array([float(data["longitude"][k]) for k in rows])
+    positions = [(float(a), float(o)) for a, o in zip(lat, lon, strict=True)]
+    if home is None:
+        return positions, []
+    shift = tuple(
+        float(np.round(h - np.median(v))) for h, v in ((home.lat_deg, lat), (home.lon_deg, lon))
+    )
+    if shift == (0.0, 0.0):
+        return positions, []
+    site_lat, site_lon = home.lat_deg - shift[0], home.lon_deg - shift[1]
+    moved = []
+    for item_lat, item_lon in positions:
+        north, east, _ = geodetic_to_ned(item_lat, item_lon, 0.0, site_lat, site_lon, 0.0)
+        moved.append(ned_to_geodetic((north, east, 0.0), home.lat_deg, home.lon_deg, 0.0)[:2])
+    scale = math.cos(math.radians(home.lat_deg)) / math.cos(math.radians(site_lat))
+    note = (
+        f"the mission items lie {shift[0]:g}° N, {shift[1]:g}° E from the log's home: whole "
+        "degrees, the uploader's offset of the log's positions, taken out; each item keeps "
+        f"its distance and bearing from home (moved in degrees, the east-west legs would "
+        f"scale by {scale:.2f})"
+    )
+    return moved, [note]
 
 
 def _clipped(events: list[FlightEvent], start_s: float, end_s: float) -> tuple[FlightEvent, ...]:

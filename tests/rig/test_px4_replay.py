@@ -185,24 +185,39 @@ def test_the_replay_follows_the_logs_events(plan):
 
 def test_the_mission_is_uploaded_as_it_was_flown(plan):
     """navigator_mission_item: items 0-3 (the climb the navigator put before item 0 is not
-    one of them), altitudes above home, moved back by the uploader's whole-degree offset
-    onto the log's home; the log's fifth item never flew, so it is not known."""
-    assert [(i.frame, i.command, i.alt_m) for i in plan.mission] == [
-        (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_CMD_NAV_WAYPOINT, alt)
-        for alt in (5.0, 10.0, 5.0, 10.0)
-    ]
+    one of them; the log's fifth item never flew, so it is not known), put where the real
+    vehicle flew them: each at its distance and bearing from home (the uploader moved the
+    home by whole degrees, not the mission), each height above the home the real PX4 held
+    then (it set home again at take-off, 1.82 m higher), and item 0, which PX4 passed 50 ms
+    after making it current, at the height the vehicle hovered at then."""
+    assert [(i.frame, i.command) for i in plan.mission] == [
+        (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_CMD_NAV_WAYPOINT)
+    ] * 4
+    # home_position.alt 184.01 m at arming, 185.84 m from the take-off (412.2 s); the
+    # vehicle at 190.00 m when item 0 (logged 5 m) was passed at 438.27 s
+    assert [i.alt_m for i in plan.mission] == pytest.approx([5.98, 11.82, 6.82, 11.82], abs=0.01)
     home = plan.home
-    distances = [
-        math.hypot(*geodetic_to_ned(i.lat_deg, i.lon_deg, 0.0, home.lat_deg, home.lon_deg, 0.0)[:2])
+    offsets = [
+        geodetic_to_ned(i.lat_deg, i.lon_deg, 0.0, home.lat_deg, home.lon_deg, 0.0)[:2]
         for i in plan.mission
     ]
-    assert distances[0] < 1.0  # the first waypoint is above the take-off point
-    assert max(distances) < 50.0  # the legs SOURCES.md describes, ~40 m
+    assert math.hypot(*offsets[0]) < 1.0  # the first waypoint is above the take-off point
+    # the first leg, north-east: 0.000262° of longitude east of home at the real site's
+    # 41.9° N is 21.7 m (at the moved home's 51.9° N it would be 18.0 m)
+    assert offsets[1] == pytest.approx((8.95, 21.7), abs=0.1)
+    assert max(math.hypot(*o) for o in offsets) < 50.0  # SOURCES.md's legs, ~40 m
     assert all(math.isnan(i.param4) and i.param2 == 0.0 for i in plan.mission)
     assert plan.mission_notes == (
-        "the log's mission had 5 items; 4 became current and are uploaded (the log holds no more)",
+        "the log's mission had 5 items; 4 became current and could be uploaded (the log holds "
+        "no more)",
         "the mission items lie 10° N, 2° E from the log's home: whole degrees, the uploader's "
-        "offset of the log's positions, taken out",
+        "offset of the log's positions, taken out; each item keeps its distance and bearing "
+        "from home (moved in degrees, the east-west legs would scale by 0.83)",
+        "relative mission altitudes moved by +1.82 m: the real PX4 flew them above a home it "
+        "set again at take-off, not the log's first (184.01 m), this replay's",
+        "mission item 0 was current for 0.05 s: the real PX4 passed it where the vehicle "
+        "stood, 6.0 m against its 6.8 m; uploaded at that height, so this PX4 passes it too "
+        "instead of flying to it first",
     )
     assert plan.summary()["mission"][0]["param4"] is None
 
