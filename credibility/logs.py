@@ -4,8 +4,12 @@ A signal is named ``topic[.instance].field`` (``sensor_accel.1.x``,
 ``vehicle_angular_velocity.xyz[0]``). A field ``<array>.roll|pitch|yaw`` of a quaternion
 array (``vehicle_attitude.q.pitch``, ``vehicle_attitude_setpoint.q_d.roll``) is derived as
 the ZYX Euler angle in radians (PX4's Hamilton quaternion, w first); yaw is unwrapped so it
-is a continuous curve. Tables hold a time column (``timestamp`` in µs, as PX4 logs it, or
-``time_s``) and one column per signal, named exactly like the plan's signal path.
+is a continuous curve. ``vehicle_local_position.v_forward|v_right`` is the horizontal
+velocity along the vehicle's heading and to its right (from ``vx``, ``vy`` and
+``heading``): the axes a pilot's sticks command in Position mode, so a replay whose heading
+differs compares the response, not the heading. Tables hold a time column (``timestamp``
+in µs, as PX4 logs it, or ``time_s``) and one column per signal, named exactly like the
+plan's signal path.
 """
 
 import contextlib
@@ -29,6 +33,8 @@ from credibility.signals import Signal
 from hil_config import Number, table
 
 _EULER = ("roll", "pitch", "yaw")
+#: Derived fields of the horizontal velocity in the heading frame (see the module docstring).
+_HEADING_FRAME = ("v_forward", "v_right")
 _PATH = re.compile(r"^(?P<topic>[A-Za-z_][\w]*)(?:\.(?P<instance>\d+))?\.(?P<field>[\w.\[\]]+)$")
 
 #: Named unit conversions a plan may apply (factor multiplies the logged value).
@@ -117,6 +123,13 @@ def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Pa
     quaternion = [f"{base}[{i}]" for i in range(4)]
     if angle in _EULER and all(q in fields for q in quaternion):
         return _euler(*(fields[q].astype(float) for q in quaternion))[_EULER.index(angle)]
+    if field in _HEADING_FRAME and all(f in fields for f in ("vx", "vy", "heading")):
+        north, east = fields["vx"].astype(float), fields["vy"].astype(float)
+        heading = fields["heading"].astype(float)
+        cos_h, sin_h = np.cos(heading), np.sin(heading)
+        return (
+            north * cos_h + east * sin_h if field == "v_forward" else east * cos_h - north * sin_h
+        )
     listed = ", ".join(sorted(f for f in fields if f != "timestamp_s")[:20])
     raise NotScorable(
         "missing_topic", f"{path}: no field {field!r} (signal {name!r}); fields: {listed}"

@@ -138,3 +138,22 @@ def test_euler_angles_of_a_quaternion_are_pxs_zyx_with_yaw_unwrapped(tmp_path):
                             ("yaw", yaw)):  # fmt: skip
         signal = log.signal(SignalSpec(f"vehicle_attitude.q.{angle}"))
         assert signal.values == pytest.approx(expected, abs=1e-12)
+
+
+def test_velocity_in_the_heading_frame_is_the_sticks_axes(tmp_path):
+    """Closed form: facing east (90°) and flying north at 3 m/s is 3 m/s to the left
+    (v_right = −3), none forward; facing north-east and flying east at √2 m/s is 1 m/s
+    forward and 1 m/s to the right."""
+    table = pd.DataFrame({
+        "timestamp": [1_000_000, 2_000_000],
+        "vehicle_local_position.vx": [3.0, 0.0],
+        "vehicle_local_position.vy": [0.0, np.sqrt(2.0)],
+        "vehicle_local_position.heading": [np.pi / 2, np.pi / 4],
+    })  # fmt: skip
+    path = tmp_path / "position.csv"
+    table.to_csv(path, index=False)
+    log = open_log(path)
+    forward = log.signal(SignalSpec("vehicle_local_position.v_forward")).values
+    right = log.signal(SignalSpec("vehicle_local_position.v_right")).values
+    assert forward == pytest.approx([0.0, 1.0], abs=1e-12)
+    assert right == pytest.approx([-3.0, 1.0], abs=1e-12)
