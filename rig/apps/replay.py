@@ -159,11 +159,11 @@ LEARNED = {
     "MPC_MANTHR_MIN": "its thrust set-point with the throttle stick at the bottom",
 }
 #: A mission item the real PX4 left within this long of making it current was passed where
-#: the vehicle stood, not flown to: the X500's first waypoint, 1.1 m below the hovering
-#: vehicle, was current for 50 ms in its v1.17. PX4 v1.14 SITL, given it as logged,
-#: descended to it first (NAV_MC_ALT_RAD 0.8 m) and ran the mission 1.9 s late; given no
-#: such item, it climbed to the next one's height before leaving (its in-air take-off
-#: step), 3.3 s late. Uploaded at the height it was passed at, it is passed at once too.
+#: the vehicle stood, not flown to: the X500's first waypoint, 0.8 m above the hovering
+#: vehicle, was current for 50 ms in its v1.17. PX4 v1.14 SITL, given it as logged (on the
+#: home at arming: 1.1 m below), descended to it first and ran the mission 1.9 s late;
+#: given no such item, it climbed to the next one's height before leaving (its in-air
+#: take-off step), 3.3 s late. Uploaded at the height it was passed, it is passed too.
 #: No multicopter reaches a waypoint outside its acceptance radius this fast.
 PASSED_AT_ONCE_S = 0.25
 #: navigator_mission_item frames with a global position (MAV_FRAME GLOBAL*, PX4 stores 0).
