@@ -110,35 +110,23 @@ def test_closed_link_says_px4_never_reconnects(listening_link, start_double):
         _run_until_failure(link)
 
 
-def test_killed_autopilot_process_is_named(listening_link, start_double):
+@pytest.mark.parametrize("exit_seen_after_s", [0.0, 0.3])
+def test_killed_autopilot_process_is_named(listening_link, start_double, exit_seen_after_s):
+    """The kernel closes a killed process's socket before its parent can reap it, so the
+    link may reset before the exit is seen (CI saw the bare reset once): the error still
+    names how the process ended. The 0.3 s case widens that window so the test does not
+    depend on the scheduler."""
     link = listening_link()
     process = start_double(link.ports.simulator_tcp, "px4", "--after", "0")
-    link.peer_exit = _peer_exit(process)
-    link.accept()
-    _run_frames(link, 20)
-    process.kill()
-    process.wait()
-    with pytest.raises(AutopilotStalled, match=r"autopilot process.*exit code -9"):
-        _run_frames(link, 40_000, start=21)
+    first_seen_s = []
 
-
-def test_a_killed_autopilot_is_named_though_its_link_resets_before_it_is_reaped(
-    listening_link, start_double
-):
-    """The kernel closes a killed process's socket before its parent can reap it: the
-    link's reset must still name how the process ended (CI saw the bare reset once). The
-    window is made 0.3 s wide here, so the test does not depend on the scheduler."""
-    link = listening_link()
-    process = start_double(link.ports.simulator_tcp, "px4", "--after", "0")
-    seen_ended_at = []
-
-    def reaped_late():
+    def exit_seen_late():
         if process.poll() is None:
             return None
-        seen_ended_at.append(seen_ended_at[0] if seen_ended_at else time.monotonic())
-        return None if time.monotonic() - seen_ended_at[0] < 0.3 else "exit code -9"
+        first_seen_s.append(first_seen_s[0] if first_seen_s else time.monotonic())
+        return None if time.monotonic() - first_seen_s[0] < exit_seen_after_s else "exit code -9"
 
-    link.peer_exit = reaped_late
+    link.peer_exit = exit_seen_late
     link.accept()
     _run_frames(link, 20)
     process.kill()
