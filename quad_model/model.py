@@ -169,7 +169,7 @@ def charge_used_for_voltage_c(battery: BatteryParams, voltage_v: float) -> float
     return (1.0 - state_of_charge) * battery.capacity_ah * 3600.0
 
 
-def pack_params(vehicle: Vehicle, environment: Environment, mount: Mount) -> NDArray[np.float64]:
+def pack_params(vehicle: Vehicle, environment: Environment) -> NDArray[np.float64]:
     """One row of kernel parameters (layout in :mod:`quad_model.dynamics`)."""
     body, prop, bat = vehicle.body, vehicle.propulsion, vehicle.battery
     p = np.zeros(dyn.P_SIZE)
@@ -198,12 +198,11 @@ def pack_params(vehicle: Vehicle, environment: Environment, mount: Mount) -> NDA
     p[dyn.P_R_INTERNAL] = bat.internal_resistance_ohm
     p[dyn.P_EFFICIENCY] = bat.propulsion_efficiency
     p[dyn.P_AVIONICS_W] = bat.avionics_power_w
-    p[dyn.P_HEALTH : dyn.P_HEALTH + ROTOR_COUNT] = 1.0
+    p[dyn.P_SPEED_SCALE : dyn.P_SPEED_SCALE + ROTOR_COUNT] = 1.0
     p[dyn.P_HOME_ALT] = environment.home.alt_amsl_m
     p[dyn.P_WIND_STEADY : dyn.P_WIND_STEADY + 3] = environment.wind.steady_ned_mps
     p[dyn.P_W20] = environment.wind.wind_at_6m_mps
     p[dyn.P_TEMP_OFFSET] = environment.temperature_offset_k
-    p[dyn.P_MOUNT] = int(mount)
     return p
 
 
@@ -242,11 +241,20 @@ class QuadBatch:
         self._start_us = 0
         self._steps = 0
         self._rng = rng
-        rows = {id(v): pack_params(v, self.environment, self.mount) for v in self.vehicles}
-        self.params = np.array([rows[id(v)] for v in self.vehicles])
-        self.states = np.zeros((count, dyn.X_SIZE))
-        self.outputs = np.zeros((count, dyn.A_SIZE))
-        self.throttles = np.zeros((count, ROTOR_COUNT))
+        # The kernel's arrays are [slot, vehicle] (see quad_model.dynamics); users see
+        # [vehicle, slot] views of them.
+        rows = {id(v): pack_params(v, self.environment) for v in self.vehicles}
+        self._params = np.array([rows[id(v)] for v in self.vehicles]).T.copy()
+        self._states = np.zeros((dyn.X_SIZE, count))
+        self._outputs = np.zeros((dyn.A_SIZE, count))
+        self._throttles = np.zeros((ROTOR_COUNT, count))
+        self.params = self._params.T
+        self.states = self._states.T
+        self.outputs = self._outputs.T
+        self.throttles = self._throttles.T
+        #: Thrust fraction of each motor (set_motor_health); the kernel uses its square root.
+        self.motor_health = np.ones((count, ROTOR_COUNT))
+        self._work = np.zeros((-(-count // dyn.LANES), dyn.W_SIZE * dyn.LANES))
         self._turbulent = bool(np.any(self.params[:, dyn.P_W20] > 0))
         self._no_noise = np.zeros((count, 0, 3))
         self._kernel = (
@@ -338,11 +346,13 @@ class QuadBatch:
             else self._no_noise
         )
         if not self._kernel(
-            self.states,
-            self.outputs,
-            self.params,
-            self.throttles,
+            self._states,
+            self._outputs,
+            self._params,
+            self._throttles,
             noise,
+            self._work,
+            int(self.mount),
             n_steps,
             self.physics_dt_s,
         ):
@@ -364,7 +374,8 @@ class QuadBatch:
             raise ModelInputError(f"thrust_fraction={thrust_fraction} must be within 0..1")
         if not 0 <= motor < ROTOR_COUNT:
             raise ModelInputError(f"motor={motor} must be within 0..{ROTOR_COUNT - 1}")
-        self.params[vehicle_index, dyn.P_HEALTH + motor] = thrust_fraction
+        self.motor_health[vehicle_index, motor] = thrust_fraction
+        self.params[vehicle_index, dyn.P_SPEED_SCALE + motor] = math.sqrt(thrust_fraction)
 
     def truth(self, index: int) -> VehicleTruth:
         """Ground truth of one vehicle (a snapshot: safe to keep)."""
@@ -378,11 +389,13 @@ class QuadBatch:
         then the ESC speed curve at that voltage.
         """
         p, s = self.params[index], self.states[index]
-        density_ratio = dyn.air_density_kgpm3(p, s[dyn.X_POS + 2]) / p[dyn.P_RHO_REF]
+        block = dyn.lane_block(p)
+        density = dyn.air_density_kgpm3(block, 0, s[dyn.X_POS + 2])
+        density_ratio = density / p[dyn.P_RHO_REF]
         ct, cq = p[dyn.P_CT] * density_ratio, p[dyn.P_CQ] * density_ratio
         speed = math.sqrt(p[dyn.P_MASS] * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * ct))
         load_w = ROTOR_COUNT * cq * speed**3 / p[dyn.P_EFFICIENCY] + p[dyn.P_AVIONICS_W]
-        voltage, _ = dyn.battery_terminal(p, s[dyn.X_CHARGE_USED], load_w)
+        voltage, _ = dyn.battery_terminal(block, 0, s[dyn.X_CHARGE_USED], load_w)
         curve_speed = speed * p[dyn.P_CURVE_VOLTAGE] / voltage
         return (curve_speed - p[dyn.P_SPEED_OFFSET]) / p[dyn.P_SPEED_SLOPE]
 
@@ -438,7 +451,7 @@ class QuadModel:
 
     @property
     def motor_health(self) -> NDArray[np.float64]:
-        return self._batch.params[0, dyn.P_HEALTH : dyn.P_HEALTH + ROTOR_COUNT].copy()
+        return self._batch.motor_health[0].copy()
 
     @property
     def truth(self) -> VehicleTruth:

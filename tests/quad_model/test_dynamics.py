@@ -3,6 +3,7 @@
 import math
 
 import control
+import numba
 import numpy as np
 import pytest
 
@@ -10,7 +11,7 @@ from quad_model import Environment, ModelInputError, Mount, QuadBatch, QuadModel
 from quad_model import dynamics as dyn
 from quad_model.environment import isa_density_kgpm3
 from quad_model.frames import STANDARD_GRAVITY_MPS2, euler_from_quat, quat_from_euler, quat_to_dcm
-from quad_model.model import charge_used_for_voltage_c, pack_params
+from quad_model.model import PARALLEL_MIN_VEHICLES, charge_used_for_voltage_c, pack_params
 
 G = STANDARD_GRAVITY_MPS2
 HOME_ALT_M = Environment().home.alt_amsl_m
@@ -170,13 +171,13 @@ def test_open_circuit_voltage_law_round_trips_through_charge_used(x500, f450):
     assert charge_used_for_voltage_c(x500.battery, 15.2) == pytest.approx(18000 * 4 / 7, rel=1e-12)
     for vehicle in (x500, f450):
         battery = vehicle.battery
-        params = pack_params(vehicle, Environment(), Mount.FREE)
+        params = dyn.lane_block(pack_params(vehicle, Environment()))
         empty_v, full_v = (
             battery.cell_count * v for v in (battery.cell_empty_v, battery.cell_full_v)
         )
         for voltage in np.linspace(empty_v, full_v, 7):
             charge = charge_used_for_voltage_c(battery, float(voltage))
-            assert dyn.open_circuit_voltage(params, charge) == pytest.approx(voltage, rel=1e-12)
+            assert dyn.open_circuit_voltage(params, 0, charge) == pytest.approx(voltage, rel=1e-12)
         assert charge_used_for_voltage_c(battery, full_v) == 0.0
         assert charge_used_for_voltage_c(battery, empty_v) == pytest.approx(
             battery.capacity_ah * 3600.0, rel=1e-12
@@ -296,18 +297,49 @@ def test_motor_health_hook_scales_thrust(f450, rng):
 
 
 def test_batch_matches_single_vehicle_serial_and_parallel(f450, x500):
+    # Bit for bit: a lone vehicle runs the kernel's scalar loop, a batch its SIMD loop
+    # (LANES vehicles per instruction) and, from PARALLEL_MIN_VEHICLES on, both cores. No
+    # fastmath, so every lane does the same IEEE operations in the same order.
     commands = np.array([0.62, 0.60, 0.61, 0.63])
     single = QuadModel(f450, np.random.default_rng(1))
     single.reset(position_ned_m=(0, 0, -5), rotor_speed_radps=[560.0] * 4)
+    single.set_motor_health(1, 0.8)
     single.advance(commands, 0.5)
-    for count in (3, 40):  # 40 runs on all cores
+    single.advance(commands * 1.05, 0.013)
+    assert PARALLEL_MIN_VEHICLES <= 40
+    for count in (3, dyn.LANES + 3, 40):  # a part chunk; a whole and a part; all cores
         vehicles = [f450] * (count - 1) + [x500]
         batch = QuadBatch(vehicles, count, np.random.default_rng(1))
         batch.reset(position_ned_m=(0, 0, -5), rotor_speed_radps=[560.0] * 4)
+        for k in range(count):
+            batch.set_motor_health(k, 1, 0.8)
         batch.advance(np.tile(commands, (count, 1)), 0.5)
-        np.testing.assert_array_equal(batch.states[0], batch.states[count - 2])
-        np.testing.assert_array_equal(batch.truth(0).position_ned_m, single.truth.position_ned_m)
+        batch.advance(np.tile(commands * 1.05, (count, 1)), 0.013)
+        for k in range(count - 1):
+            np.testing.assert_array_equal(batch.states[k], single._batch.states[0])
+            np.testing.assert_array_equal(batch.outputs[k], single._batch.outputs[0])
         assert not np.array_equal(batch.states[-1], batch.states[0])  # the X500 differs
+
+
+def test_batch_gives_the_same_numbers_on_one_or_two_threads(f450):
+    # The QuadBatch promise: a seed gives the same numbers on any core count (turbulence on,
+    # so the noise is drawn too).
+    env = Environment(wind=Wind(steady_ned_mps=(3.0, 1.0, 0.0), wind_at_6m_mps=8.0))
+    assert 5 * dyn.LANES >= PARALLEL_MIN_VEHICLES  # the batch runs the parallel kernel
+    runs = []
+    for threads in (1, 2):
+        batch = QuadBatch(f450, 5 * dyn.LANES, np.random.default_rng(9), env)
+        batch.reset(position_ned_m=(0, 0, -10), rotor_speed_radps=[560.0] * 4)
+        previous = numba.get_num_threads()
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        try:
+            batch.advance(np.full((batch.count, 4), 0.6), 0.05)
+        finally:
+            numba.set_num_threads(previous)
+        runs.append((batch.states.copy(), batch.outputs.copy()))
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    assert np.ptp(runs[0][1][:, dyn.A_WIND_NED]) > 0.0  # the vehicles saw different gusts
 
 
 def test_dryden_turbulence_intensity_and_determinism(f450):
