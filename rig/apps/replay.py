@@ -213,7 +213,10 @@ class SkippedParameter:
 class FlightEvent:
     """Something the pilot, a ground station or PX4 did in the real flight (log seconds):
     ``kind`` arm, disarm, mode (the pilot's mode, ``nav_state_user_intention``) or autopilot
-    (PX4 changed mode by itself: a failsafe). ``commanded``: a PX4 replay sends it."""
+    (PX4 changed mode by itself: a failsafe). ``commanded``: a PX4 replay sends it. A
+    failsafe's mode (and the one it returns to) is commanded when a ground station can
+    select it: the replay does not recreate the failsafe's cause (the X500's estimator lost
+    its position for 2 s), and the pilot's sticks mean something else in another mode."""
 
     time_s: float
     kind: str
@@ -998,8 +1001,11 @@ class _FlightLog:
                 events.append(FlightEvent(time_s, "mode", mode, commanded, detail))
             elif nav[k] != nav[k - 1]:
                 cause = "failsafe" if failsafe[k] else "back from a failsafe"
-                events.append(FlightEvent(float(times_s[k]), "autopilot", int(nav[k]), False,
-                                          f"{cause}: PX4 decides again"))  # fmt: skip
+                flown_mode = int(nav[k]) in PX4_MODES and bool(armed[k])
+                detail = (f"{cause}: commanded, so the sticks act in the mode the vehicle flew"
+                          if flown_mode else f"{cause}: PX4 decides again")  # fmt: skip
+                events.append(FlightEvent(float(times_s[k]), "autopilot", int(nav[k]),
+                                          flown_mode, detail))  # fmt: skip
         return _clipped(events, start_s, end_s)
 
     def _arming_event(

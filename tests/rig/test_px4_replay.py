@@ -151,8 +151,8 @@ def test_the_replay_follows_the_logs_events(plan):
         (round(ARMED_S, 3), "mode", POSCTL, True),  # the mode it armed in
         (MISSION_S, "mode", MISSION, True),  # DO_SET_MODE from the ground station
         (TAKEOVER_S, "mode", POSCTL, True),  # "Pilot took over using sticks"
-        (474.362, "autopilot", ALTCTL, False),  # "Failsafe: blind land"
-        (476.353, "autopilot", POSCTL, False),
+        (474.362, "autopilot", ALTCTL, True),  # "Failsafe: blind land": position invalid
+        (476.353, "autopilot", POSCTL, True),  # and back
         (LAND_S, "mode", LAND, True),
         (DISARMED_S, "disarm", None, True),  # "Disarmed by landing": sent, PX4 landed by then?
         (DISARMED_S, "mode", POSCTL, False),  # PX4's own after the disarm
@@ -169,6 +169,8 @@ def test_the_replay_follows_the_logs_events(plan):
         ("Arm", round(ARMED_S, 3), None),
         ("SetMode", MISSION_S, MISSION),
         ("SetMode", TAKEOVER_S, POSCTL),
+        ("SetMode", 474.362, ALTCTL),  # the pilot's sticks act in Altitude as they did
+        ("SetMode", 476.353, POSCTL),
         ("SetMode", LAND_S, LAND),
         ("Disarm", DISARMED_S, None),
     ]
@@ -179,8 +181,10 @@ def test_the_replay_follows_the_logs_events(plan):
     assert scenario.rates.imu_hz == 800  # the log's IMU_GYRO_RATEMAX: its rate loop's rate
     assert {type(c) for c in scenario.tracks} == {Track, SetMode, UploadMission}
     notes = [text for _, text in plan.notes]
-    assert "replay: log event 474.362 s PX4 switched to Altitude by itself (failsafe: PX4 " \
-           "decides again): not commanded" in notes  # fmt: skip
+    assert (
+        "replay: log event 474.362 s PX4 switched to Altitude by itself (failsafe: commanded, "
+        "so the sticks act in the mode the vehicle flew): commanded"
+    ) in notes
 
 
 def test_the_mission_is_uploaded_as_it_was_flown(plan):
