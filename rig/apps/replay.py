@@ -153,10 +153,17 @@ STICK_MODES = frozenset({0, 1, 2, 10, 15})
 NAV_STATE_MISSION, NAV_STATE_OFFBOARD = 3, 14
 #: nav_states whose throttle is the pilot's stick, not a climb rate: Manual, Acro, Stabilized.
 MANUAL_THRUST_MODES = frozenset({0, 10, 15})
-#: What a PX4 replay of a stick-throttle mode takes from the flight (:func:`_learned_parameters`).
+#: What a PX4 replay takes from the flight where PX4 changed between versions, and why
+#: (:func:`_learned_parameters`).
+_STICK_THRUST = "this SITL's stick → thrust map as the log's PX4 had it"
 LEARNED = {
-    "MPC_THR_HOVER": "its hover_thrust_estimate, the centre stick's thrust in its PX4",
-    "MPC_MANTHR_MIN": "its thrust set-point with the throttle stick at the bottom",
+    "MPC_THR_HOVER": f"its hover_thrust_estimate, the centre stick's thrust in its PX4: "
+    f"{_STICK_THRUST}",
+    "MPC_MANTHR_MIN": f"its thrust set-point with the throttle stick at the bottom: "
+    f"{_STICK_THRUST}",
+    "MPC_YAWRAUTO_MAX": "its peak yaw rate in Mission, where its PX4 limited the yaw "
+    "acceleration (MPC_YAWRAUTO_ACC, not in this build): this SITL's mission turns last "
+    "about as long",
 }
 #: A mission item the real PX4 left within this long of making it current was passed where
 #: the vehicle stood, not flown to: the X500's first waypoint, 0.8 m above the hovering
@@ -441,8 +448,7 @@ class Replay:
             for reason, names in by_reason.items()
         ]
         notes += [
-            ("info", f"replay: {name} = {value:.3f}, from the flight ({LEARNED[name]}): this "
-                     "SITL's stick → thrust map as the log's PX4 had it")
+            ("info", f"replay: {name} = {value:.3f}, from the flight ({LEARNED[name]})")
             for name, value in self.learned.items()
         ]  # fmt: skip
         logged = {s.name: f"{s.value:g}" for s in self.skipped}
@@ -668,9 +674,10 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
 def _learned_parameters(
     log: _FlightLog, applied: Mapping[str, float], events: tuple[FlightEvent, ...]
 ) -> dict[str, float]:
-    """Where a PX4 replay flew a stick-throttle mode, the parameters that give this SITL the
-    log's own stick → thrust map, which PX4 changed between versions (the 8S quad's v1.16
-    against the v1.14 SITL):
+    """The parameters that give this SITL the log's own behaviour where PX4 changed it
+    between versions (the 8S quad's v1.16 and the X500's v1.17 against the v1.14 SITL).
+
+    Where the replay flew a stick-throttle mode, the log's stick → thrust map:
 
     - MPC_THR_HOVER = the log's hover-thrust estimate when its PX4 ran on it (MPC_USE_HTE):
       v1.16 puts the centre stick there in Stabilized (0.655 in hover; its MPC_THR_HOVER is
@@ -681,16 +688,32 @@ def _learned_parameters(
       armed, the motors stopped), which v1.14 holds at MPC_MANTHR_MIN (0.08: the SITL's
       rotors idled through the log's rest).
 
-    In the climb-rate modes PX4 flies on its own estimate, so nothing is set there."""
-    if not any(e.commanded and e.nav_state in MANUAL_THRUST_MODES for e in events):
-        return {}
+    In the climb-rate modes PX4 flies on its own estimate, so nothing is set there.
+
+    Where it flew Mission and its PX4 limited the yaw acceleration in auto modes
+    (MPC_YAWRAUTO_ACC, 20°/s² in the X500's v1.17) but this build has no such limit:
+
+    - MPC_YAWRAUTO_MAX = the peak yaw rate the real vehicle reached in Mission (the X500's
+      33.6°/s against its MPC_YAWRAUTO_MAX of 60). v1.14 turns at MPC_YAWRAUTO_MAX from
+      the turn's start: it handed the X500's pilot a heading 73° from the real one at the
+      take-over, 33° with the real peak rate as its limit."""
     learned = {}
-    estimate = log.hover_thrust()
-    if "MPC_THR_HOVER" in applied and log.parameters.get("MPC_USE_HTE") and estimate is not None:
-        learned["MPC_THR_HOVER"] = estimate
-    bottom = log.thrust_at_bottom_stick()
-    if "MPC_MANTHR_MIN" in applied and bottom is not None:
-        learned["MPC_MANTHR_MIN"] = bottom
+    if any(e.commanded and e.nav_state in MANUAL_THRUST_MODES for e in events):
+        estimate = log.hover_thrust()
+        if (
+            "MPC_THR_HOVER" in applied
+            and log.parameters.get("MPC_USE_HTE")
+            and estimate is not None
+        ):
+            learned["MPC_THR_HOVER"] = estimate
+        bottom = log.thrust_at_bottom_stick()
+        if "MPC_MANTHR_MIN" in applied and bottom is not None:
+            learned["MPC_MANTHR_MIN"] = bottom
+    limited_yaw = "MPC_YAWRAUTO_ACC" in log.parameters and "MPC_YAWRAUTO_ACC" not in applied
+    if limited_yaw and "MPC_YAWRAUTO_MAX" in applied:
+        peak = log.peak_yaw_rate_deg_s(NAV_STATE_MISSION)
+        if peak is not None and 0.0 < peak < applied["MPC_YAWRAUTO_MAX"]:
+            learned["MPC_YAWRAUTO_MAX"] = round(peak, 1)
     return learned
 
 
@@ -913,6 +936,19 @@ class _FlightLog:
         rho = data["rho"][(time_s >= start_s) & (time_s <= end_s)]
         rho = rho[np.isfinite(rho) & (rho > 0.5) & (rho < 1.5)]  # air from sea level to 5 km
         return float(rho.mean()) if rho.size else None
+
+    def peak_yaw_rate_deg_s(self, nav_state: int) -> float | None:
+        """The largest |body z rate| (°/s, ``vehicle_angular_velocity``) while PX4 flew
+        ``nav_state`` (``vehicle_status``); None without either topic or such a stretch."""
+        status = self.topics.get("vehicle_status")
+        rates = self.topics.get("vehicle_angular_velocity")
+        if status is None or rates is None or "nav_state" not in status or "xyz[2]" not in rates:
+            return None
+        index = np.searchsorted(status["timestamp"], rates["timestamp"], "right") - 1
+        flown = (index >= 0) & (status["nav_state"][np.clip(index, 0, None)] == nav_state)
+        yaw_rate = np.abs(rates["xyz[2]"][flown].astype(float))
+        yaw_rate = yaw_rate[np.isfinite(yaw_rate)]
+        return float(np.degrees(yaw_rate.max())) if yaw_rate.size else None
 
     def hover_thrust(self) -> float | None:
         """Median of the valid hover_thrust_estimate.hover_thrust (None: none logged)."""

@@ -434,8 +434,23 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
 
 
 def test_a_climb_rate_flight_learns_nothing(plan):
-    """The X500 flew POSCTL, ALTCTL, Mission and Land, where PX4 runs on its own estimate."""
+    """The X500 flew POSCTL, ALTCTL, Mission and Land, where PX4 runs on its own estimate;
+    this stand-in build has every parameter of the log, MPC_YAWRAUTO_ACC too."""
     assert plan.learned == {}
+
+
+def test_a_build_without_the_yaw_acceleration_limit_turns_at_the_real_peak_rate(
+    tmp_path, log_parameters
+):
+    """PX4 v1.14 has no MPC_YAWRAUTO_ACC (the X500's v1.17: 20°/s²) and turns in Mission at
+    MPC_YAWRAUTO_MAX (60°/s) from the start: the replay sets that to the real vehicle's
+    peak yaw rate in Mission, 33.6°/s (vehicle_angular_velocity, 437.9-455.4 s)."""
+    without = {k: v for k, v in log_parameters.items() if k != "MPC_YAWRAUTO_ACC"}
+    build = _stand_in_build(tmp_path, without)
+    x500 = plan_replay(X500, ReplayOptions(autopilot="px4", px4_dir=build))
+    assert x500.learned == {"MPC_YAWRAUTO_MAX": 33.6}
+    assert "MPC_YAWRAUTO_MAX=33.6" in x500.autopilot_params
+    assert x500.summary()["parameters_learned_in_the_flight"] == {"MPC_YAWRAUTO_MAX": 33.6}
 
 
 @pytest.mark.closed_loop
