@@ -1164,7 +1164,7 @@ class _FlightLog:
             )
         for index, k in enumerate(rows):
             altitudes[index] += home_moves.get(k, 0.0)
-            following = np.nonzero(sequence > sequence[k])[0]
+            following = k + 1 + np.nonzero(sequence[k + 1 :] > sequence[k])[0]
             if index == len(rows) - 1 or not len(following):
                 continue
             current_s = float(times_s[following[0]] - times_s[k])

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import pyulog
 
+from quad_model.environment import GeoPoint
 from quad_model.frames import geodetic_to_ned
 from rig.apps.cli import main
 from rig.apps.replay import (
@@ -23,6 +24,7 @@ from rig.apps.replay import (
     PX4_SETUP_S,
     ReplayError,
     ReplayOptions,
+    _FlightLog,
     plan_replay,
     run_replay,
 )
@@ -224,6 +226,41 @@ def test_the_mission_is_uploaded_as_it_was_flown(plan):
         "instead of flying to it first",
     )
     assert plan.summary()["mission"][0]["param4"] is None
+
+
+def _mission_log(sequence, times_s):
+    """A flight log holding only a mission flown at ``times_s`` (items 10 m apart, 5 m above
+    a home at 100 m AMSL, the vehicle hovering at 106 m)."""
+    count = len(sequence)
+    log = object.__new__(_FlightLog)
+    log.path = Path("synthetic.ulg")
+    log.topics = {
+        "navigator_mission_item": {
+            "timestamp": np.array(times_s) * 1e6,
+            "sequence_current": np.array(sequence),
+            "frame": np.full(count, 6), "nav_cmd": np.full(count, 16),
+            "latitude": 47.0 + np.array(sequence) * 1e-4, "longitude": np.full(count, 8.0),
+            "altitude": np.full(count, 5.0), "altitude_is_relative": np.ones(count, bool),
+            "time_inside": np.zeros(count), "acceptance_radius": np.zeros(count),
+            "loiter_radius": np.zeros(count), "yaw": np.zeros(count),
+        },
+        "vehicle_global_position": {"timestamp": np.array([0.0]), "alt": np.array([106.0])},
+        "home_position": {"timestamp": np.array([0.0]), "alt": np.array([100.0])},
+    }  # fmt: skip
+    return log
+
+
+def test_only_an_item_left_at_once_is_put_where_it_was_passed():
+    """Item 0 left 0.1 s after it became current goes up at the vehicle's 6 m; a mission
+    flown twice (the second item 0 held 5 s) does not count the first run's item 1 as
+    following the second run's item 0."""
+    home = GeoPoint(47.0, 8.0, 100.0)
+    items, notes = _mission_log([0, 1, 2], [10.0, 10.1, 20.0]).flown_mission(home)
+    assert [i.alt_m for i in items] == [6.0, 5.0, 5.0]
+    assert any("mission item 0 was current for 0.10 s" in n for n in notes)
+    items, notes = _mission_log([0, 1, 0, 1], [10.0, 20.0, 30.0, 35.0]).flown_mission(home)
+    assert [i.alt_m for i in items] == [5.0, 5.0]
+    assert not any("passed" in n for n in notes)
 
 
 def test_the_pilots_sticks_are_the_logs(plan):
