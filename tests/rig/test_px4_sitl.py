@@ -368,9 +368,19 @@ def test_px4_takes_the_lidarlite_as_its_distance_sensor_and_lands_on_it(
     assert np.abs(est["dist_bottom"][hovering] - truth_below).max() < 0.1
     flags_t, flags = _topic(px4_log, "estimator_status_flags")
     assert flags["cs_rng_hgt"][_inside(flags_t, (16.0, 25.0))].all()
-    landing = truth_t > 26.0
-    last_half_metre = landing & (-truth["z"] < 0.5) & (-truth["z"] > 0.1)
-    assert truth["vz"][last_half_metre].mean() == pytest.approx(0.3, abs=0.07)
+
+    # The crawl: over the last half metre PX4 commands MPC_LAND_CRWL (0.3 m/s), which it
+    # does only on a distance sensor (without one it lands at MPC_LAND_SPEED, 0.7 m/s). The
+    # truth follows it within EKF2's vertical-velocity error near the ground, which changed
+    # from run to run by up to 0.1 m/s (CI once saw the truth crawl at 0.21 m/s under a
+    # 0.34 m/s set-point): the set-point is held to the crawl, the truth to a crawl.
+    def last_half_metre(times_s):
+        height = -np.interp(times_s, truth_t, truth["z"])
+        return (times_s > 26.0) & (height < 0.5) & (height > 0.1)
+
+    sp_t, setpoint = _topic(px4_log, "vehicle_local_position_setpoint")
+    assert np.nanmean(setpoint["vz"][last_half_metre(sp_t)]) == pytest.approx(0.3, abs=0.1)
+    assert 0.15 < truth["vz"][last_half_metre(truth_t)].mean() < 0.45
     messages = [m.message for m in px4_log.logged_messages]
     assert any("Landing detected" in m for m in messages)
     _, armed = _topic(px4_log, "actuator_armed")
