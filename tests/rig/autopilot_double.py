@@ -82,17 +82,36 @@ def main() -> None:
             mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, 5000, 0, 0, 0, 0, 0,
         ).pack(mav)
     )  # fmt: skip
+    try:
+        answer_frames(sock, mav, record, args)
+    except KeyboardInterrupt:
+        # The rig sends SIGINT before it closes the link, so the last frame may still be
+        # unread in the socket: record it too, as a test compares every frame sent.
+        sock.setblocking(False)
+        try:
+            while data := sock.recv(65536):
+                parse_and_record(mav, data, record)
+        except OSError:
+            pass
+
+
+def parse_and_record(mav: mavlink.MAVLink, data: bytes, record) -> list:
+    messages = mav.parse_buffer(data) or []
+    if record is not None:
+        for message in messages:
+            record.write(json.dumps(message.to_dict()) + "\n")
+        record.flush()
+    return messages
+
+
+def answer_frames(sock: socket.socket, mav: mavlink.MAVLink, record, args) -> None:
     frames = 0
     rng_bytes = bytes(range(7, 256, 13)) * 4  # deterministic "garbage"
     while True:
         data = sock.recv(65536)
         if not data:
             return
-        for message in mav.parse_buffer(data) or ():
-            if record is not None:
-                fields = message.to_dict()
-                record.write(json.dumps(fields) + "\n")
-                record.flush()
+        for message in parse_and_record(mav, data, record):
             if message.get_type() != "HIL_SENSOR" or message.id != 0:
                 continue
             frames += 1
