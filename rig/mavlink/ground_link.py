@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import select
 import socket
+import struct
 import time
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
@@ -145,6 +146,8 @@ class GroundLink:
             ) from None
         self._target = ("127.0.0.1", self.ports.onboard_local_udp)
         self._pending: _Pending | None = None
+        #: Per parameter, the values set earlier in this run (:meth:`set_param`).
+        self._params_set: dict[str, set[float]] = {}
 
     # -- drivers ---------------------------------------------------------------------------
 
@@ -443,20 +446,34 @@ class GroundLink:
         return f"mission of {len(encoded)} items uploaded"
 
     def set_param(self, name: str, value: float) -> Conversation:
-        """PARAM_SET → PARAM_VALUE echo; PX4 answers with the value it actually took."""
+        """PARAM_SET → PARAM_VALUE echo; PX4 answers with the value it actually took.
+
+        PX4 announces a changed parameter a second time, so a PARAM_VALUE carrying a value
+        set earlier in this run may be that announcement, not the answer: it is passed over
+        (if PX4 did keep the old value, the wait for the new one times out)."""
         encoded = name.encode()
         message = self.mav.param_set_encode(
             self.ports.system_id, 1, encoded, float(value), mavlink.MAV_PARAM_TYPE_REAL32
         )
+        sent = _float32(value)  # as PARAM_VALUE carries it
+        earlier = self._params_set.setdefault(name, set()) - {sent}
         answer = yield Expect(
             (message,),
             lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == name,
             f"PARAM_VALUE for {name}",
         )
+        while answer.param_value in earlier:
+            answer = yield Expect(
+                (),
+                lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == name,
+                f"PARAM_VALUE for {name} = {value:g} (it announced an earlier value "
+                f"{answer.param_value:g})",
+            )
         if not math.isclose(answer.param_value, value, rel_tol=1e-6, abs_tol=1e-9):
             raise GroundLinkError(
                 f"the autopilot kept {name} = {answer.param_value:g} instead of {value:g}"
             )
+        self._params_set[name].add(sent)
         return f"{name} = {value:g}"
 
     # -- socket ----------------------------------------------------------------------------
@@ -506,3 +523,8 @@ def sweep_pitch_rad(time_s: float, duration_s: float, amplitude_rad: float,
     ratio = f_max_radps / f_min_radps
     phase = f_min_radps * duration_s * (ratio ** (time_s / duration_s) - 1.0) / math.log(ratio)
     return amplitude_rad * math.sin(phase)
+
+
+def _float32(value: float) -> float:
+    """``value`` rounded to MAVLink's float as a PARAM_VALUE carries it."""
+    return struct.unpack("<f", struct.pack("<f", value))[0]

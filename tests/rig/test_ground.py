@@ -22,9 +22,11 @@ from tests.instances import worker_instances
 class ScriptedAutopilot(threading.Thread):
     """Answers COMMAND_LONG, the mission protocol and PARAM_SET like PX4; records all."""
 
-    def __init__(self, ports, refuse=(), statustext=""):
+    def __init__(self, ports, refuse=(), statustext="", announce_late=False):
         super().__init__(daemon=True)
         self.ports = ports
+        self.announce_late = announce_late  # PX4's second PARAM_VALUE of a change, late
+        self.announced = {}
         self.refuse = set(refuse)
         self.statustext = statustext
         self.received = []
@@ -73,6 +75,13 @@ class ScriptedAutopilot(threading.Thread):
                 self.reply(self.mav.mission_ack_encode(245, 190, accepted), to=sender)
         elif kind == "PARAM_SET":
             value = min(m.param_value, 10.0)  # a parameter with a maximum, as PX4 clamps
+            if self.announce_late and m.param_id in self.announced:
+                earlier = self.announced[m.param_id]
+                announcement = self.mav.param_value_encode(
+                    m.param_id.encode(), earlier, m.param_type, 100, 1
+                )
+                self.reply(announcement, to=sender)
+            self.announced[m.param_id] = value
             self.reply(
                 self.mav.param_value_encode(m.param_id.encode(), value, m.param_type, 100, 1),
                 to=sender,
@@ -217,6 +226,17 @@ def test_param_set_checks_the_echoed_value(pair):
     )
     with pytest.raises(GroundLinkError, match=r"kept MPC_XY_VEL_MAX = 10 instead of 12"):
         link.converse_now("set_param", link.set_param("MPC_XY_VEL_MAX", 12.0))
+
+
+def test_param_set_passes_over_the_late_announcement_of_an_earlier_value(pair):
+    """PX4 announces a changed parameter once more after its answer: a replay setting
+    MPC_YAWRAUTO_MAX every 0.2 s read 29.9 while it set 26 and stopped the run."""
+    link, _ = pair(announce_late=True)
+    for value in (9.9, 2.6, 9.9):
+        result = link.converse_now("set_param", link.set_param("MPC_YAWRAUTO_MAX", value))
+        assert result == f"MPC_YAWRAUTO_MAX = {value:g}"
+    with pytest.raises(GroundLinkError, match=r"kept MPC_YAWRAUTO_MAX = 10 instead of 12"):
+        link.converse_now("set_param", link.set_param("MPC_YAWRAUTO_MAX", 12.0))
 
 
 def test_motor_test_uses_one_based_motor_and_percent(pair):
