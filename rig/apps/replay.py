@@ -98,6 +98,7 @@ from rig.scenarios.scenario import (
     ScriptCommand,
     SensorLayer,
     SetMode,
+    SetParam,
     SetpointTrack,
     StartPose,
     Takeoff,
@@ -151,6 +152,14 @@ PILOT_DISARM_REASONS = frozenset({1, 2, 4})
 #: nav_states flown on the pilot's sticks: PX4 needs manual control input in them.
 STICK_MODES = frozenset({0, 1, 2, 10, 15})
 NAV_STATE_MISSION, NAV_STATE_OFFBOARD = 3, 14
+#: nav_states whose heading PX4's auto planner sets (MPC_YAWRAUTO_*): Mission, Loiter,
+#: Return, Takeoff, Land, Precision land.
+AUTO_YAW_MODES = frozenset({3, 4, 5, 17, 18, 20})
+#: The least yaw rate (°/s) a replay's schedule of MPC_YAWRAUTO_MAX allows, so that a
+#: heading that differs from the real one at a turn's start can still converge.
+YAW_RATE_LIMIT_FLOOR_DEG_S = 5.0
+#: A schedule's new MPC_YAWRAUTO_MAX is sent when it differs from the last by this much (°/s).
+YAW_RATE_LIMIT_STEP_DEG_S = 2.0
 #: nav_states whose throttle is the pilot's stick, not a climb rate: Manual, Acro, Stabilized.
 MANUAL_THRUST_MODES = frozenset({0, 10, 15})
 #: What a PX4 replay takes from the flight where PX4 changed between versions, and why
@@ -162,8 +171,9 @@ LEARNED = {
     "MPC_MANTHR_MIN": f"its thrust set-point with the throttle stick at the bottom: "
     f"{_STICK_THRUST}",
     "MPC_YAWRAUTO_MAX": "its peak yaw rate in Mission, where its PX4 limited the yaw "
-    "acceleration (MPC_YAWRAUTO_ACC, not in this build): this SITL's mission turns last "
-    "about as long",
+    "acceleration (MPC_YAWRAUTO_ACC, not in this build); in auto modes it then follows the "
+    "yaw rate the real planner allowed itself (yaw_rate_limits in replay.json), so this "
+    "SITL's turns start and end as the real ones did",
 }
 #: A mission item the real PX4 left within this long of making it current was passed where
 #: the vehicle stood, not flown to: the X500's first waypoint, 0.8 m above the hovering
@@ -292,6 +302,9 @@ class Replay:
     #: A PX4 replay's parameters the log's firmware learned in flight rather than read from
     #: its parameters (:func:`_learned_parameters`), set after the log's own.
     learned: dict[str, float] = field(default_factory=dict)
+    #: (log s, °/s): MPC_YAWRAUTO_MAX set in flight, the real planner's yaw rate in auto
+    #: modes (:func:`_yaw_rate_limits`); empty where the log's PX4 had no acceleration limit.
+    yaw_rate_limits: tuple[tuple[float, float], ...] = ()
 
     @property
     def px4(self) -> bool:
@@ -359,6 +372,10 @@ class Replay:
             else:  # the mode it armed in is selected before the arm
                 at_s -= ARM_MODE_LEAD_S if event.time_s in arms else 0.0
                 commands.append(SetMode(at_s=at_s, nav_state=event.nav_state))
+        commands += [
+            SetParam(at_s=time_s - origin, name="MPC_YAWRAUTO_MAX", value=limit)
+            for time_s, limit in self.yaw_rate_limits
+        ]
         return tuple(sorted(commands, key=lambda c: c.at_s))
 
     def _lead_in_sticks(self) -> SetpointTrack:
@@ -528,6 +545,7 @@ class Replay:
             "parameters_unknown_count": self.unknown_parameter_count,
             "parameters_set_by_the_rig": self.rig_parameters,
             "parameters_learned_in_the_flight": self.learned,
+            "yaw_rate_limits": [list(pair) for pair in self.yaw_rate_limits],
             "log_warnings": list(self.log_warnings),
             "start_yaw_deg": math.degrees(self.yaw_rad),
             "home": None
@@ -664,6 +682,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         sticks=sticks,
         firmware=log.firmware,
         learned=_learned_parameters(log, parameters, events),
+        yaw_rate_limits=_yaw_rate_limits(log, parameters, start_s, end_s) if px4 else (),
         **_wind(path, vehicle_document, vehicle),
         **_air(log, home, start_s, end_s),
     )
@@ -709,12 +728,45 @@ def _learned_parameters(
         bottom = log.thrust_at_bottom_stick()
         if "MPC_MANTHR_MIN" in applied and bottom is not None:
             learned["MPC_MANTHR_MIN"] = bottom
-    limited_yaw = "MPC_YAWRAUTO_ACC" in log.parameters and "MPC_YAWRAUTO_ACC" not in applied
-    if limited_yaw and "MPC_YAWRAUTO_MAX" in applied:
+    if _yaw_acceleration_limited(log, applied):
         peak = log.peak_yaw_rate_deg_s(NAV_STATE_MISSION)
         if peak is not None and 0.0 < peak < applied["MPC_YAWRAUTO_MAX"]:
             learned["MPC_YAWRAUTO_MAX"] = round(peak, 1)
     return learned
+
+
+def _yaw_acceleration_limited(log: _FlightLog, applied: Mapping[str, float]) -> bool:
+    """The log's PX4 limited the yaw acceleration in auto modes, this SITL cannot."""
+    return (
+        "MPC_YAWRAUTO_ACC" in log.parameters
+        and "MPC_YAWRAUTO_ACC" not in applied
+        and "MPC_YAWRAUTO_MAX" in applied
+    )
+
+
+def _yaw_rate_limits(
+    log: _FlightLog, applied: Mapping[str, float], start_s: float, end_s: float
+) -> tuple[tuple[float, float], ...]:
+    """MPC_YAWRAUTO_MAX over the flight (log s, °/s) for a SITL without the log's yaw
+    acceleration limit: in auto modes, the rate the real planner allowed itself.
+
+    The log's PX4 (v1.17 on the X500) ramps a turn's yaw rate at MPC_YAWRAUTO_ACC (20°/s²);
+    v1.14 turns at MPC_YAWRAUTO_MAX from the turn's first step. Its limit set to the real
+    ``trajectory_setpoint.yawspeed`` (the larger of each sample and the next, so it never
+    lags the real ramp) gives it the real turn. The real rate is followed only down to
+    :data:`YAW_RATE_LIMIT_FLOOR_DEG_S`, and a new value is sent when it moved by
+    :data:`YAW_RATE_LIMIT_STEP_DEG_S` (each is a PARAM_SET conversation)."""
+    if not _yaw_acceleration_limited(log, applied):
+        return ()
+    limits: list[tuple[float, float]] = []
+    for time_s, rates in log.auto_yaw_rates_deg_s(AUTO_YAW_MODES, start_s, end_s):
+        envelope = np.maximum(rates, np.append(rates[1:], rates[-1]))
+        for sample_s, rate in zip(time_s, envelope, strict=True):
+            limit = round(max(float(rate), YAW_RATE_LIMIT_FLOOR_DEG_S), 1)
+            stretch_start = sample_s == time_s[0]
+            if stretch_start or abs(limit - limits[-1][1]) >= YAW_RATE_LIMIT_STEP_DEG_S:
+                limits.append((float(sample_s), limit))
+    return tuple(limits)
 
 
 def _wind(path: Path, vehicle_document: dict[str, Any], vehicle: str) -> dict[str, Any]:
@@ -949,6 +1001,32 @@ class _FlightLog:
         yaw_rate = np.abs(rates["xyz[2]"][flown].astype(float))
         yaw_rate = yaw_rate[np.isfinite(yaw_rate)]
         return float(np.degrees(yaw_rate.max())) if yaw_rate.size else None
+
+    def auto_yaw_rates_deg_s(
+        self, nav_states: frozenset[int], start_s: float, end_s: float
+    ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Per stretch flown in ``nav_states`` inside ``[start_s, end_s)``: the log
+        seconds and |``trajectory_setpoint.yawspeed``| (°/s, NaN as 0: no yaw rate set),
+        the first sample moved back to the mode switch; none without either topic."""
+        status = self.topics.get("vehicle_status")
+        setpoints = self.topics.get("trajectory_setpoint")
+        if status is None or setpoints is None or "yawspeed" not in setpoints:
+            return []
+        nav = status["nav_state"]
+        switched = np.maximum.accumulate(np.where(np.diff(nav, prepend=-1) != 0,
+                                                  np.arange(len(nav)), 0))  # fmt: skip
+        index = np.clip(np.searchsorted(status["timestamp"], setpoints["timestamp"], "right") - 1,
+                        0, None)  # fmt: skip
+        time_s = setpoints["timestamp"] / 1e6
+        inside = np.isin(nav[index], list(nav_states)) & (time_s >= start_s) & (time_s < end_s)
+        rates = np.nan_to_num(np.degrees(np.abs(setpoints["yawspeed"].astype(float))))
+        edges = np.flatnonzero(np.diff(np.r_[0, inside.astype(int), 0]))
+        stretches = []
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            times = time_s[a:b].copy()
+            times[0] = max(status["timestamp"][switched[index[a]]] / 1e6, start_s)
+            stretches.append((times, rates[a:b]))
+        return stretches
 
     def hover_thrust(self) -> float | None:
         """Median of the valid hover_thrust_estimate.hover_thrust (None: none logged)."""

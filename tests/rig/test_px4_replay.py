@@ -22,6 +22,7 @@ from rig.apps.replay import (
     ARM_MODE_LEAD_S,
     PX4_BOOT_S,
     PX4_SETUP_S,
+    YAW_RATE_LIMIT_FLOOR_DEG_S,
     ReplayError,
     ReplayOptions,
     _FlightLog,
@@ -33,7 +34,7 @@ from rig.lockstep.loop import RunOptions
 from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import SetMode, SetpointTrack, Track, UploadMission
+from rig.scenarios.scenario import SetMode, SetParam, SetpointTrack, Track, UploadMission
 from rig.scenarios.script import HEARTBEAT_PERIOD_US, STICKS_PERIOD_US, CommandScript
 from tests.instances import free_test_instance
 
@@ -395,6 +396,14 @@ def _armed_modes(log, until_s):
     return changes
 
 
+def _heading_deg(log, time_s):
+    """The estimate's heading (°) at ``time_s``."""
+    data = log.get_dataset("vehicle_attitude").data
+    k = np.searchsorted(data["timestamp"] / 1e6, time_s)
+    w, x, y, z = (data[f"q[{i}]"][k] for i in range(4))
+    return math.degrees(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
 def _height_gain_m(log, time_s, ground_s=411.0):
     """Climb since ``ground_s`` by the autopilot's estimate (its origin is not the ground)."""
     data = log.get_dataset("vehicle_local_position").data
@@ -425,6 +434,10 @@ def test_px4_arms_switches_modes_and_climbs_as_the_real_flight(flown):
     assert mission["seq_reached"].max() >= 1
     summary = json.loads((out / "replay.json").read_text())
     assert summary["autopilot"] == "px4"
+    # Its mission turns follow the real planner's yaw rate (this build has no yaw
+    # acceleration limit): the pilot takes over at the real heading (measured 2°; 33° with
+    # the peak rate alone, 73° at v1.14's own 60°/s).
+    assert _heading_deg(px4, TAKEOVER_S) == pytest.approx(_heading_deg(real, TAKEOVER_S), abs=8)
 
 
 @pytest.mark.closed_loop
@@ -474,20 +487,42 @@ def test_a_climb_rate_flight_learns_nothing(plan):
     """The X500 flew POSCTL, ALTCTL, Mission and Land, where PX4 runs on its own estimate;
     this stand-in build has every parameter of the log, MPC_YAWRAUTO_ACC too."""
     assert plan.learned == {}
+    assert plan.yaw_rate_limits == ()
+    assert not any(isinstance(c, SetParam) for c in plan.commands)
 
 
-def test_a_build_without_the_yaw_acceleration_limit_turns_at_the_real_peak_rate(
+def test_a_build_without_the_yaw_acceleration_limit_turns_as_the_real_planner_did(
     tmp_path, log_parameters
 ):
     """PX4 v1.14 has no MPC_YAWRAUTO_ACC (the X500's v1.17: 20°/s²) and turns in Mission at
     MPC_YAWRAUTO_MAX (60°/s) from the start: the replay sets that to the real vehicle's
-    peak yaw rate in Mission, 33.6°/s (vehicle_angular_velocity, 437.9-455.4 s)."""
+    peak yaw rate in Mission, 33.6°/s (vehicle_angular_velocity, 437.9-455.4 s), and in
+    flight to the yaw rate the real planner allowed itself."""
     without = {k: v for k, v in log_parameters.items() if k != "MPC_YAWRAUTO_ACC"}
     build = _stand_in_build(tmp_path, without)
     x500 = plan_replay(X500, ReplayOptions(autopilot="px4", px4_dir=build))
     assert x500.learned == {"MPC_YAWRAUTO_MAX": 33.6}
     assert "MPC_YAWRAUTO_MAX=33.6" in x500.autopilot_params
     assert x500.summary()["parameters_learned_in_the_flight"] == {"MPC_YAWRAUTO_MAX": 33.6}
+
+    # In auto modes the limit follows the real planner's yaw rate (trajectory_setpoint,
+    # 5 Hz): it ramps at MPC_YAWRAUTO_ACC (20°/s² = 4°/s a sample) through each turn.
+    limits = x500.yaw_rate_limits
+    times_s, values = np.array(limits).T
+    assert times_s[0] == pytest.approx(MISSION_S, abs=1e-3)  # from the switch to Mission on
+    assert values[0] == YAW_RATE_LIMIT_FLOOR_DEG_S  # not turning there
+    assert np.all((times_s >= MISSION_S) & (times_s < TAKEOVER_S) | (times_s >= LAND_S))
+    assert np.all(np.abs(np.diff(values)) >= 2.0)  # a PARAM_SET only for a change of 2°/s
+    ramp = (times_s > 453.9) & (times_s < TAKEOVER_S)  # the last turn, cut by the take-over
+    assert np.diff(values[ramp]) == pytest.approx(4.0, abs=0.3)
+    assert values[ramp][-1] == pytest.approx(32.7, abs=0.1)  # its yawspeed at 455.2 s
+    assert max(values) < 33.6  # the 5 Hz samples miss the peak between them
+    sets = [c for c in x500.commands if isinstance(c, SetParam)]
+    origin = x500.start_s - x500.lead_in_s
+    assert [(c.name, c.at_s + origin, c.value) for c in sets] == [
+        ("MPC_YAWRAUTO_MAX", pytest.approx(t), v) for t, v in limits
+    ]
+    assert x500.summary()["yaw_rate_limits"] == [list(limit) for limit in limits]
 
 
 @pytest.mark.closed_loop
