@@ -332,10 +332,41 @@ def _windowed(log: LogFile, spec: SignalSpec, segment_s, plan: Plan) -> signals.
     return signals.window(log.signal(spec), segment_s, plan.max_gap_s, spec.drop_nan)
 
 
+#: ``vehicle_status.arming_state`` of an armed vehicle (PX4 msg/VehicleStatus.msg).
+ARMING_STATE_ARMED = 2
+_ARMING_STATE = SignalSpec(path="vehicle_status.arming_state")
+
+
+def check_arming(log: LogFile, segment_s: tuple[float, float], armed: bool) -> None:
+    """Raise ``state_mismatch`` unless ``log``'s vehicle is ``armed`` (or disarmed) over the
+    whole of ``segment_s``: the state in force at its start and every change inside it."""
+    status = log.signal(_ARMING_STATE)
+    start_s, end_s = segment_s
+    first = max(int(np.searchsorted(status.time_s, start_s, "right")) - 1, 0)
+    last = int(np.searchsorted(status.time_s, end_s, "right"))
+    held = (status.values[first:last] == ARMING_STATE_ARMED) == armed
+    wanted = "armed" if armed else "disarmed"
+    if status.time_s[0] > start_s:
+        found = f"its arming state is not logged before {status.time_s[0]:g} s"
+    elif not held.all():
+        when = max(start_s, float(status.time_s[first + int(np.argmin(held))]))
+        found = f"the vehicle is {'disarmed' if armed else 'armed'} at {when:g} s"
+    else:
+        return
+    raise NotScorable(
+        "state_mismatch",
+        f"{log.path}: {found} (vehicle_status.arming_state), inside {start_s:g}-{end_s:g} s "
+        f"where this test compares {'an' if armed else 'a'} {wanted} vehicle",
+    )
+
+
 def _performance_signal(
     test: PerformanceTest, log: LogFile, spec: SignalSpec, segment_s, plan: Plan
 ) -> signals.Signal:
-    """The test's window of one log, averaged to the test's ``average_hz`` when it has one."""
+    """The test's window of one log, averaged to the test's ``average_hz`` when it has one
+    (after the check that it holds the test's arming state, if the test names one)."""
+    if test.armed is not None:
+        check_arming(log, segment_s, test.armed)
     sig = _windowed(log, spec, segment_s, plan)
     if test.average_hz is None:
         return sig

@@ -4,8 +4,11 @@ from typing import Literal
 
 #: Why a test got no score although every file could be read: a topic or field the log
 #: lacks, a log that does not cover the segment, a signal the method cannot use (NaNs,
-#: dropouts, no step, no coherence), or an error threshold ε of 0 (η undefined).
-Reason = Literal["missing_topic", "short_signal", "unusable_signal", "unscorable_epsilon"]
+#: dropouts, no step, no coherence), an error threshold ε of 0 (η undefined), or a vehicle
+#: not in the state the test compares (armed or disarmed) over the segment.
+Reason = Literal[
+    "missing_topic", "short_signal", "unusable_signal", "unscorable_epsilon", "state_mismatch"
+]
 
 
 class CredibilityError(ValueError):

@@ -140,6 +140,10 @@ class PerformanceTest(_Test):
     steady_window_s: Positive | None = None
     values: Mapping[str, Number] = field(default_factory=dict)
     unit: str | None = None
+    #: The arming state the segment compares (True: armed, False: disarmed), checked in
+    #: every log over its segment (``vehicle_status.arming_state``): a sim still flying when
+    #: the real vehicle had disarmed is not compared (None: not checked).
+    armed: bool | None = None
 
     def __post_init__(self) -> None:
         self._default("unit", PARAMETER_UNITS.get(self.parameter, ""))

@@ -300,3 +300,76 @@ segment_s = [1.0, 29.0]
     assert raw.p_s == pytest.approx(1.0, rel=0.03)
     assert averaged.p_e == raw.p_e  # already 200 Hz means: left as logged
     assert averaged.p_s == pytest.approx(0.5, rel=0.03)
+
+
+def test_a_log_not_in_the_tests_arming_state_is_not_compared(tmp_path, capsys):
+    """σ at rest after the landing compares a disarmed vehicle with a disarmed one: a sim
+    still armed there (a replay that landed late) is listed as not scored, with the time
+    its state differed; a compared sim in the right state keeps its row."""
+    t = np.arange(0.0, 30.0, 0.01)
+    noise = np.random.default_rng(5).standard_normal(t.size)
+
+    def log(name, armed_until_s):
+        state = np.where(t < armed_until_s, 2, 1)  # vehicle_status ARMED, STANDBY
+        pd.DataFrame({"time_s": t, "imu.x": noise, "vehicle_status.arming_state": state}).to_csv(
+            tmp_path / name, index=False
+        )
+
+    log("real.csv", 5.0)
+    log("sim.csv", 15.5)
+    log("sim_low.csv", 8.0)
+    plan = _write_plan(tmp_path, """
+[plan]
+name = "arming"
+k_p = 0.1
+
+[logs]
+real = "real.csv"
+sim = "sim.csv"
+sim_low = "sim_low.csv"
+
+[[tests]]
+name = "sigma_disarmed"
+kind = "performance"
+parameter = "std"
+signal = "imu.x"
+segment_s = [10.0, 20.0]
+armed = false
+compare = ["sim_low"]
+
+[[tests]]
+name = "sigma_disarmed_early"
+kind = "performance"
+parameter = "std"
+signal = "imu.x"
+segment_s = [20.0, 29.0]
+armed = false
+compare = ["sim_low"]
+
+[[tests]]
+name = "sigma_armed"
+kind = "performance"
+parameter = "std"
+signal = "imu.x"
+segment_s = [1.0, 4.0]
+armed = true
+""")  # fmt: skip
+    result = assess(load_plan(plan), strict=False)
+    (late,) = result.not_scored
+    assert late.test.name == "sigma_disarmed"
+    assert late.reason.kind == "state_mismatch"
+    assert late.detail == (
+        f"{tmp_path / 'sim.csv'}: the vehicle is armed at 10 s (vehicle_status.arming_state), "
+        "inside 10-20 s where this test compares a disarmed vehicle"
+    )
+    early, armed = result.results
+    assert [row.role for row in early.rows] == ["sim", "sim_low"]
+    assert early.eta == pytest.approx(1.0, abs=1e-6)  # the same noise: σ equal
+    assert armed.test.name == "sigma_armed"
+    # a late disarm inside the segment names its time; the real log is checked too
+    late_inside = plan.read_text().replace("[20.0, 29.0]", "[14.0, 29.0]")
+    late_inside = late_inside.replace("[1.0, 4.0]", "[1.0, 6.0]")
+    result = assess(load_plan(_write_plan(tmp_path, late_inside)), strict=False)
+    details = [item.detail for item in result.not_scored]
+    assert any("the vehicle is armed at 14 s" in d and "sim.csv" in d for d in details)
+    assert any("the vehicle is disarmed at 5 s" in d and "real.csv" in d for d in details)
