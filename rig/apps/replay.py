@@ -97,6 +97,7 @@ from rig.scenarios.scenario import (
     Scenario,
     ScriptCommand,
     SensorLayer,
+    SetHome,
     SetMode,
     SetParam,
     SetpointTrack,
@@ -183,6 +184,8 @@ LEARNED = {
 #: take-off step), 3.3 s late. Uploaded at the height it was passed, it is passed too.
 #: No multicopter reaches a waypoint outside its acceptance radius this fast.
 PASSED_AT_ONCE_S = 0.25
+#: A home_position sample this far (m, any axis) from the one before is a home moved.
+HOME_MOVED_M = 0.05
 #: navigator_mission_item frames with a global position (MAV_FRAME GLOBAL*, PX4 stores 0).
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6})
 #: Each drive's topic and fields, in SetpointTrack order (thrust is −thrust_body[2]).
@@ -305,6 +308,9 @@ class Replay:
     #: (log s, °/s): MPC_YAWRAUTO_MAX set in flight, the real planner's yaw rate in auto
     #: modes (:func:`_yaw_rate_limits`); empty where the log's PX4 had no acceleration limit.
     yaw_rate_limits: tuple[tuple[float, float], ...] = ()
+    #: (log s, home): where and when the real PX4 moved its home while armed
+    #: (:meth:`_FlightLog.home_moves`); a PX4 replay sets each with DO_SET_HOME.
+    home_moves: tuple[tuple[float, GeoPoint], ...] = ()
 
     @property
     def px4(self) -> bool:
@@ -376,6 +382,7 @@ class Replay:
             SetParam(at_s=time_s - origin, name="MPC_YAWRAUTO_MAX", value=limit)
             for time_s, limit in self.yaw_rate_limits
         ]
+        commands += [SetHome(at_s=time_s - origin, home=home) for time_s, home in self.home_moves]
         return tuple(sorted(commands, key=lambda c: c.at_s))
 
     def _lead_in_sticks(self) -> SetpointTrack:
@@ -481,6 +488,11 @@ class Replay:
             f"({self.start_s - self.lead_in_s:.3f} s on the log's clock) to be ready to arm",
         ))  # fmt: skip
         notes += [("info", f"replay: {note}") for note in self.mission_notes]
+        notes += [
+            ("info", f"replay: the real PX4 moved its home at {time_s:.3f} s to "
+                     f"{home.alt_amsl_m:.2f} m AMSL: set then with DO_SET_HOME")
+            for time_s, home in self.home_moves
+        ]  # fmt: skip
         notes += [("info", f"replay: log event {event.describe()}") for event in self.events]
         return notes
 
@@ -546,6 +558,15 @@ class Replay:
             "parameters_set_by_the_rig": self.rig_parameters,
             "parameters_learned_in_the_flight": self.learned,
             "yaw_rate_limits": [list(pair) for pair in self.yaw_rate_limits],
+            "home_moves": [
+                {
+                    "time_s": time_s,
+                    "lat_deg": home.lat_deg,
+                    "lon_deg": home.lon_deg,
+                    "alt_amsl_m": home.alt_amsl_m,
+                }
+                for time_s, home in self.home_moves
+            ],
             "log_warnings": list(self.log_warnings),
             "start_yaw_deg": math.degrees(self.yaw_rad),
             "home": None
@@ -640,8 +661,9 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
     home = log.home()
     mission: tuple[MissionItem, ...] = ()
     mission_notes: tuple[str, ...] = ()
+    home_moves = log.home_moves(home, real_arm_s, disarm_s or end_s) if px4 else ()
     if any(e.commanded and e.nav_state == NAV_STATE_MISSION for e in events):
-        mission, mission_notes = log.flown_mission(home)
+        mission, mission_notes = log.flown_mission(home, bool(home_moves))
     sticks = None
     if px4:
         sticks = log.sticks(start_s, end_s)
@@ -683,6 +705,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         firmware=log.firmware,
         learned=_learned_parameters(log, parameters, events),
         yaw_rate_limits=_yaw_rate_limits(log, parameters, start_s, end_s) if px4 else (),
+        home_moves=home_moves,
         **_wind(path, vehicle_document, vehicle),
         **_air(log, home, start_s, end_s),
     )
@@ -1059,6 +1082,32 @@ class _FlightLog:
             return None
         return GeoPoint(lat, lon, alt)
 
+    def home_moves(
+        self, home: GeoPoint | None, armed_s: float | None, disarmed_s: float
+    ) -> tuple[tuple[float, GeoPoint], ...]:
+        """Where and when the real PX4 moved its home while armed (``armed_s`` to
+        ``disarmed_s``, log seconds): PX4 sets it again at take-off, on its estimate then
+        (the X500's EKF2 had just put its height 1.7 m up: home 1.82 m above the one it
+        armed at), and Land and Return descend, slow down and land by the height above it.
+        Moves of less than :data:`HOME_MOVED_M` are left out."""
+        data = self.topics.get("home_position")
+        if home is None or armed_s is None or data is None:
+            return ()
+        moves: list[tuple[float, GeoPoint]] = []
+        previous = home
+        for k in range(1, len(data["timestamp"])):
+            time_s = float(data["timestamp"][k]) / 1e6
+            point = GeoPoint(*(float(data[f][k]) for f in ("lat", "lon", "alt")))
+            if not (armed_s < time_s < disarmed_s and math.isfinite(point.alt_amsl_m)):
+                continue
+            north, east, down = geodetic_to_ned(point.lat_deg, point.lon_deg, point.alt_amsl_m,
+                                                previous.lat_deg, previous.lon_deg,
+                                                previous.alt_amsl_m)  # fmt: skip
+            if max(abs(north), abs(east), abs(down)) >= HOME_MOVED_M:
+                moves.append((time_s, point))
+                previous = point
+        return tuple(moves)
+
     def arming(self, start_s: float, end_s: float) -> tuple[float | None, float | None]:
         """The real arm and disarm times clipped to ``[start_s, end_s)`` (None: not in it).
 
@@ -1155,7 +1204,7 @@ class _FlightLog:
         )
 
     def flown_mission(
-        self, home: GeoPoint | None
+        self, home: GeoPoint | None, home_replayed: bool = False
     ) -> tuple[tuple[MissionItem, ...], tuple[str, ...]]:
         """The mission as PX4 flew it, uploadable as MISSION_ITEM_INT, and what the log
         could not say about it. ``navigator_mission_item`` holds for each sequence number
@@ -1200,7 +1249,7 @@ class _FlightLog:
                 "global positions: no mission to upload",
             )
         positions, position_notes = _mission_positions(data, rows, home)
-        altitudes, altitude_notes = self._mission_altitudes(data, rows, home)
+        altitudes, altitude_notes = self._mission_altitudes(data, rows, home, home_replayed)
         notes += [*position_notes, *altitude_notes]
         items = tuple(
             MissionItem(
@@ -1216,22 +1265,29 @@ class _FlightLog:
         return items, tuple(notes)
 
     def _mission_altitudes(
-        self, data: dict[str, NDArray[Any]], rows: list[int], home: GeoPoint | None
+        self,
+        data: dict[str, NDArray[Any]],
+        rows: list[int],
+        home: GeoPoint | None,
+        home_replayed: bool,
     ) -> tuple[list[float], list[str]]:
-        """Each item's altitude for this replay, whose home is the log's first (where it
-        armed, on the ground): a relative one is moved by the home the real PX4 held when
-        it flew the item (PX4 sets home again at take-off, on its estimate then), and one
-        passed at once (:data:`PASSED_AT_ONCE_S`) is put where the vehicle passed it."""
+        """Each item's altitude for this replay. A relative one is above the home the real
+        PX4 held when it flew the item (PX4 sets home again at take-off, on its estimate
+        then): as logged where the replay moves its home as the real one did
+        (``home_replayed``), else moved onto this replay's home, the log's first. One passed
+        at once (:data:`PASSED_AT_ONCE_S`) is put where the vehicle passed it."""
         times_s = data["timestamp"] / 1e6
         sequence = data["sequence_current"].astype(int)
         altitudes, notes = [float(data["altitude"][k]) for k in rows], []
         if home is None:
             return altitudes, notes
         relative = [bool(data["altitude_is_relative"][k]) for k in rows]
+        homes_then = {k: self.home_altitude_at(times_s[k]) or home.alt_amsl_m for k in rows}
+        references = homes_then if home_replayed else dict.fromkeys(rows, home.alt_amsl_m)
         home_moves = {
-            k: home_then - home.alt_amsl_m
+            k: homes_then[k] - references[k]
             for k, is_relative in zip(rows, relative, strict=True)
-            if is_relative and (home_then := self.home_altitude_at(times_s[k])) is not None
+            if is_relative
         }
         moved = sorted({round(m, 2) for m in home_moves.values() if abs(m) >= 0.01})
         if moved:
@@ -1249,7 +1305,7 @@ class _FlightLog:
             standing = self.altitude_at(float(times_s[k]))
             if current_s >= PASSED_AT_ONCE_S or standing is None:
                 continue
-            passed_at = standing - (home.alt_amsl_m if relative[index] else 0.0)
+            passed_at = standing - (references[k] if relative[index] else 0.0)
             notes.append(
                 f"mission item {sequence[k]} was current for {current_s:.2f} s: the real PX4 "
                 f"passed it where the vehicle stood, {passed_at:.1f} m against its "

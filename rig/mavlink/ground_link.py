@@ -286,6 +286,23 @@ class GroundLink:
             )
         )  # fmt: skip
 
+    def set_home(self, home: GeoPoint) -> Conversation:
+        """DO_SET_HOME to ``home`` as a COMMAND_INT (whole-degE7 latitude and longitude: a
+        COMMAND_LONG's float params would move it by up to 0.5 m), as QGroundControl's "Set
+        Home here" does."""
+        command = mavlink.MAV_CMD_DO_SET_HOME
+        message = self.mav.command_int_encode(
+            self.ports.system_id, 1, mavlink.MAV_FRAME_GLOBAL, command, 0, 0,
+            0.0, 0.0, 0.0, math.nan, round(home.lat_deg * 1e7), round(home.lon_deg * 1e7),
+            home.alt_amsl_m,
+        )  # fmt: skip
+        ack = yield Expect(
+            (message,),
+            lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
+            f"COMMAND_ACK for {_enum_name('MAV_CMD', command)}",
+        )
+        return self._accepted(ack, f"home at {home.alt_amsl_m:.2f} m AMSL")
+
     def land(self) -> Conversation:
         return self.command(mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan, math.nan, math.nan,
                             math.nan, what="land")  # fmt: skip

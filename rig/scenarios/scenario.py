@@ -41,7 +41,7 @@ from hil_config import (
     read_toml,
     table,
 )
-from quad_model.environment import Environment
+from quad_model.environment import Environment, GeoPoint
 from rig.chips.layer import Chip
 from rig.chips.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PWM_TICK_HZ
 from rig.errors import ScenarioError
@@ -325,8 +325,18 @@ class UploadMission(_Timed):
     action: Literal["upload_mission"] = "upload_mission"
 
 
-#: A command that only code sets (a replay): recorded streams, mode switches, a flown mission.
-CodeCommand = Track | SetMode | UploadMission
+@table(kw_only=True)
+class SetHome(_Timed):
+    """Set PX4's home position (DO_SET_HOME): set by code (a PX4 replay moves it where
+    the real PX4 moved its own in flight)."""
+
+    home: InstanceOf[GeoPoint]
+    action: Literal["set_home"] = "set_home"
+
+
+#: A command that only code sets (a replay): recorded streams, mode switches, a flown
+#: mission, a home moved in flight.
+CodeCommand = Track | SetMode | UploadMission | SetHome
 #: What a command script walks: the file's commands and the code's.
 ScriptCommand = _FileCommand | CodeCommand
 

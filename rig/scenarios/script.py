@@ -7,7 +7,7 @@ position setpoint every 0.1 s, a ``pitch_sweep`` streams attitude setpoints at `
 a ``track`` sends a :class:`~rig.scenarios.scenario.SetpointTrack`'s recorded setpoints at
 their times and holds the last one (re-sent every 0.1 s) between them. A mode command
 (takeoff, land, mission, mode, motor test, another stream) ends the running stream; arm,
-disarm, set_param and a mission upload do not change the mode, so the stream goes on as
+disarm, set_param, a mission upload and a home do not change the mode, so the stream goes on as
 MAVSDK's does (a replay arms and disarms mid-stream).
 
 A ``manual`` track is a pilot's sticks, played as QGroundControl plays a joystick: MANUAL_CONTROL
@@ -79,7 +79,7 @@ _KEEPALIVE_US = _us(OFFBOARD_KEEPALIVE_S)
 
 
 #: Commands that leave the flight mode, and so a running setpoint stream, as they are.
-_KEEP_STREAM = frozenset({"arm", "disarm", "set_param", "upload_mission"})
+_KEEP_STREAM = frozenset({"arm", "disarm", "set_param", "upload_mission", "set_home"})
 
 
 @dataclass
@@ -168,6 +168,7 @@ class CommandScript:
             "mode": lambda: g.attempt(g.set_mode(c.nav_state)),
             "mission": lambda: g.mission(c.waypoints_ned_m),
             "upload_mission": lambda: g.upload_mission(c.items),
+            "set_home": lambda: g.set_home(c.home),
             "motor_test": lambda: g.motor_test(c.motor, c.throttle, c.duration_s),
             "set_param": lambda: g.set_param(c.name, c.value),
         }

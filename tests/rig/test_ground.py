@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from quad_model.environment import PX4_DEFAULT_HOME
+from quad_model.environment import PX4_DEFAULT_HOME, GeoPoint
 from quad_model.frames import euler_from_quat, geodetic_to_ned
 from rig.errors import GroundLinkError
 from rig.mavlink.ground_link import PX4_MAIN_MODE_OFFBOARD, GroundLink, sweep_pitch_rad
@@ -58,7 +58,7 @@ class ScriptedAutopilot(threading.Thread):
 
     def handle(self, m, sender):
         kind = m.get_type()
-        if kind == "COMMAND_LONG":
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
             refused = m.command in self.refuse
             if refused and self.statustext:
                 self.reply(self.mav.statustext_encode(3, self.statustext.encode()), to=sender)
@@ -237,6 +237,21 @@ def test_param_set_passes_over_the_late_announcement_of_an_earlier_value(pair):
         assert result == f"MPC_YAWRAUTO_MAX = {value:g}"
     with pytest.raises(GroundLinkError, match=r"kept MPC_YAWRAUTO_MAX = 10 instead of 12"):
         link.converse_now("set_param", link.set_param("MPC_YAWRAUTO_MAX", 12.0))
+
+
+def test_set_home_sends_the_position_in_whole_dege7(pair):
+    """DO_SET_HOME as a COMMAND_INT (MAV_FRAME_GLOBAL: AMSL altitude): a float32 param of a
+    COMMAND_LONG holds 51.9° only to 4e-6° (0.4 m)."""
+    link, peer = pair()
+    home = GeoPoint(51.90101147, -85.70567538, 185.8384)
+    assert link.converse_now("home", link.set_home(home)) == "home at 185.84 m AMSL: accepted"
+    (command,) = peer.received
+    assert command.get_type() == "COMMAND_INT"
+    assert command.command == mavlink.MAV_CMD_DO_SET_HOME
+    assert command.frame == mavlink.MAV_FRAME_GLOBAL
+    assert command.param1 == 0.0  # the position given, not the vehicle's
+    assert (command.x, command.y) == (519010115, -857056754)
+    assert command.z == pytest.approx(185.8384, abs=1e-4)
 
 
 def test_motor_test_uses_one_based_motor_and_percent(pair):

@@ -34,7 +34,14 @@ from rig.lockstep.loop import RunOptions
 from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import SetMode, SetParam, SetpointTrack, Track, UploadMission
+from rig.scenarios.scenario import (
+    SetHome,
+    SetMode,
+    SetParam,
+    SetpointTrack,
+    Track,
+    UploadMission,
+)
 from rig.scenarios.script import HEARTBEAT_PERIOD_US, STICKS_PERIOD_US, CommandScript
 from tests.instances import free_test_instance
 
@@ -170,6 +177,8 @@ def test_the_replay_follows_the_logs_events(plan):
         ("UploadMission", round(origin + PX4_SETUP_S, 3), None),
         ("SetMode", round(ARMED_S - ARM_MODE_LEAD_S, 3), POSCTL),
         ("Arm", round(ARMED_S, 3), None),
+        ("SetHome", 411.979, None),  # where the real PX4 moved its home at the take-off
+        ("SetHome", 412.221, None),
         ("SetMode", MISSION_S, MISSION),
         ("SetMode", TAKEOVER_S, POSCTL),
         ("SetMode", 474.362, ALTCTL),  # the pilot's sticks act in Altitude as they did
@@ -182,7 +191,7 @@ def test_the_replay_follows_the_logs_events(plan):
     assert scenario.start.clock_s == pytest.approx(origin)
     assert scenario.duration_s == pytest.approx(plan.end_s - FIRST_S + PX4_BOOT_S)
     assert scenario.rates.imu_hz == 800  # the log's IMU_GYRO_RATEMAX: its rate loop's rate
-    assert {type(c) for c in scenario.tracks} == {Track, SetMode, UploadMission}
+    assert {type(c) for c in scenario.tracks} == {Track, SetMode, UploadMission, SetHome}
     notes = [text for _, text in plan.notes]
     assert (
         "replay: log event 474.362 s PX4 switched to Altitude by itself (failsafe: commanded, "
@@ -195,14 +204,15 @@ def test_the_mission_is_uploaded_as_it_was_flown(plan):
     one of them; the log's fifth item never flew, so it is not known), put where the real
     vehicle flew them: each at its distance and bearing from home (the uploader moved the
     home by whole degrees, not the mission), each height above the home the real PX4 held
-    then (it set home again at take-off, 1.82 m higher), and item 0, which PX4 passed 50 ms
-    after making it current, at the height the vehicle hovered at then."""
+    then, as logged (the replay moves its home where the real PX4 moved its own: 1.82 m up
+    at the take-off), and item 0, which PX4 passed 50 ms after making it current, at the
+    height the vehicle hovered at then."""
     assert [(i.frame, i.command) for i in plan.mission] == [
         (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_CMD_NAV_WAYPOINT)
     ] * 4
-    # home_position.alt 184.01 m at arming, 185.84 m from the take-off (412.2 s); the
-    # vehicle at 190.00 m when item 0 (logged 5 m) was passed at 438.27 s
-    assert [i.alt_m for i in plan.mission] == pytest.approx([5.98, 11.82, 6.82, 11.82], abs=0.01)
+    # home_position.alt 185.84 m from the take-off (412.2 s) on; the vehicle at 190.00 m
+    # when item 0 (logged 5 m) was passed at 438.27 s
+    assert [i.alt_m for i in plan.mission] == pytest.approx([4.16, 10.0, 5.0, 10.0], abs=0.01)
     home = plan.home
     offsets = [
         geodetic_to_ned(i.lat_deg, i.lon_deg, 0.0, home.lat_deg, home.lon_deg, 0.0)[:2]
@@ -220,13 +230,31 @@ def test_the_mission_is_uploaded_as_it_was_flown(plan):
         "the mission items lie 10° N, 2° E from the log's home: whole degrees, the uploader's "
         "offset of the log's positions, taken out; each item keeps its distance and bearing "
         "from home (moved in degrees, the east-west legs would scale by 0.83)",
-        "relative mission altitudes moved by +1.82 m: the real PX4 flew them above a home it "
-        "set again at take-off, not the log's first (184.01 m), this replay's",
         "mission item 0 was current for 0.05 s: the real PX4 passed it where the vehicle "
-        "stood, 6.0 m against its 6.8 m; uploaded at that height, so this PX4 passes it too "
+        "stood, 4.2 m against its 5.0 m; uploaded at that height, so this PX4 passes it too "
         "instead of flying to it first",
     )
     assert plan.summary()["mission"][0]["param4"] is None
+
+
+def test_the_home_moves_where_the_real_px4_moved_it(plan):
+    """home_position: set at arming (184.01 m), again at the take-off detection (184.11 m,
+    411.98 s) and 0.24 s later 1.73 m higher (185.84 m: EKF2 had just put its height up), and
+    after the disarm at the real site (the uploader's offset missed it): the replay sets the
+    two in flight with DO_SET_HOME at their times; Land descends and slows by the height
+    above it."""
+    moves = plan.home_moves
+    assert [round(t, 3) for t, _ in moves] == [411.979, 412.221]
+    assert [round(h.alt_amsl_m, 2) for _, h in moves] == [184.11, 185.84]
+    for _, home in moves:  # the log's (moved) site, within centimetres of the first home
+        north, east, _ = geodetic_to_ned(home.lat_deg, home.lon_deg, 0.0, plan.home.lat_deg,
+                                         plan.home.lon_deg, 0.0)  # fmt: skip
+        assert math.hypot(north, east) < 0.2
+    origin = plan.start_s - plan.lead_in_s
+    sets = [(c.at_s + origin, c.home) for c in plan.commands if isinstance(c, SetHome)]
+    assert sets == [(pytest.approx(t), home) for t, home in moves]
+    assert plan.summary()["home_moves"][1]["alt_amsl_m"] == pytest.approx(185.84, abs=0.01)
+    assert any("moved its home at 412.221 s to 185.84 m AMSL" in text for _, text in plan.notes)
 
 
 def _mission_log(sequence, times_s):
@@ -438,6 +466,10 @@ def test_px4_arms_switches_modes_and_climbs_as_the_real_flight(flown):
     # acceleration limit): the pilot takes over at the real heading (measured 2°; 33° with
     # the peak rate alone, 73° at v1.14's own 60°/s).
     assert _heading_deg(px4, TAKEOVER_S) == pytest.approx(_heading_deg(real, TAKEOVER_S), abs=8)
+    # PX4 took the home where the real one moved its own (DO_SET_HOME at 412.22 s)
+    home = px4.get_dataset("home_position").data
+    after = home["timestamp"] / 1e6 > 412.3
+    assert home["alt"][after] == pytest.approx(185.84, abs=0.01)
 
 
 @pytest.mark.closed_loop
