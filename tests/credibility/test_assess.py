@@ -302,7 +302,7 @@ segment_s = [1.0, 29.0]
     assert averaged.p_s == pytest.approx(0.5, rel=0.03)
 
 
-def test_a_log_not_in_the_tests_arming_state_is_not_compared(tmp_path, capsys):
+def test_a_log_not_in_the_tests_arming_state_is_not_compared(tmp_path):
     """σ at rest after the landing compares a disarmed vehicle with a disarmed one: a sim
     still armed there (a replay that landed late) is listed as not scored, with the time
     its state differed; a compared sim in the right state keeps its row."""
@@ -318,6 +318,23 @@ def test_a_log_not_in_the_tests_arming_state_is_not_compared(tmp_path, capsys):
     log("real.csv", 5.0)
     log("sim.csv", 15.5)
     log("sim_low.csv", 8.0)
+    tests = "".join(
+        f"""
+[[tests]]
+name = "{name}"
+kind = "performance"
+parameter = "std"
+signal = "imu.x"
+segment_s = {list(segment)}
+armed = {str(armed).lower()}
+compare = {list(compare)}
+"""
+        for name, segment, armed, compare in (
+            ("sigma_disarmed", (10.0, 20.0), False, ["sim_low"]),
+            ("sigma_disarmed_early", (20.0, 29.0), False, ["sim_low"]),
+            ("sigma_armed", (1.0, 4.0), True, []),
+        )
+    ).replace("'", '"')
     plan = _write_plan(tmp_path, """
 [plan]
 name = "arming"
@@ -327,33 +344,7 @@ k_p = 0.1
 real = "real.csv"
 sim = "sim.csv"
 sim_low = "sim_low.csv"
-
-[[tests]]
-name = "sigma_disarmed"
-kind = "performance"
-parameter = "std"
-signal = "imu.x"
-segment_s = [10.0, 20.0]
-armed = false
-compare = ["sim_low"]
-
-[[tests]]
-name = "sigma_disarmed_early"
-kind = "performance"
-parameter = "std"
-signal = "imu.x"
-segment_s = [20.0, 29.0]
-armed = false
-compare = ["sim_low"]
-
-[[tests]]
-name = "sigma_armed"
-kind = "performance"
-parameter = "std"
-signal = "imu.x"
-segment_s = [1.0, 4.0]
-armed = true
-""")  # fmt: skip
+""" + tests)  # fmt: skip
     result = assess(load_plan(plan), strict=False)
     (late,) = result.not_scored
     assert late.test.name == "sigma_disarmed"
