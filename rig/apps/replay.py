@@ -1282,14 +1282,15 @@ class _FlightLog:
         if home is None:
             return altitudes, notes
         relative = [bool(data["altitude_is_relative"][k]) for k in rows]
-        homes_then = {k: self.home_altitude_at(times_s[k]) or home.alt_amsl_m for k in rows}
+        homes_then = {k: self.home_altitude_at(times_s[k]) for k in rows}
+        homes_then = {k: home.alt_amsl_m if h is None else h for k, h in homes_then.items()}
         references = homes_then if home_replayed else dict.fromkeys(rows, home.alt_amsl_m)
-        home_moves = {
+        moves_m = {
             k: homes_then[k] - references[k]
             for k, is_relative in zip(rows, relative, strict=True)
             if is_relative
         }
-        moved = sorted({round(m, 2) for m in home_moves.values() if abs(m) >= 0.01})
+        moved = sorted({round(m, 2) for m in moves_m.values() if abs(m) >= 0.01})
         if moved:
             notes.append(
                 f"relative mission altitudes moved by {', '.join(f'{m:+g}' for m in moved)} m: "
@@ -1297,7 +1298,7 @@ class _FlightLog:
                 f"first ({home.alt_amsl_m:.2f} m), this replay's"
             )
         for index, k in enumerate(rows):
-            altitudes[index] += home_moves.get(k, 0.0)
+            altitudes[index] += moves_m.get(k, 0.0)
             following = k + 1 + np.nonzero(sequence[k + 1 :] > sequence[k])[0]
             if index == len(rows) - 1 or not len(following):
                 continue
