@@ -10,17 +10,19 @@ every slot once; :mod:`quad_model.model` wraps them in named fields for users.
 
 Why vehicles innermost: QuadBatch steps thousands of vehicles, and one vehicle's step is a
 long chain of dependent operations. With every array [slot, vehicle] and the loop over
-vehicles innermost, LLVM runs LANES vehicles per SIMD instruction. A lone vehicle
-(QuadModel is a batch of one) runs the same loops' scalar remainder: the same code, and,
-without fastmath, the same numbers bit for bit.
+vehicles innermost, LLVM runs LANES vehicles per SIMD instruction. A whole chunk runs
+loops of a compile-time LANES lanes, straight SIMD code; a lone vehicle (QuadModel is a
+batch of one) or a part chunk runs the same source with a run-time count, mostly scalar:
+the same IEEE operations and, without fastmath, the same numbers bit for bit.
 
-Where a vehicle-step goes (measured, one core, a chunk of 8): four derivative evaluations
-of about 20 ns each (some 500 AVX-512 instructions per 8 lanes, 14 of them divisions, plus
-the overlap checks LLVM runs before each loop), the ISA pressure's pow (a scalar libm call
-per vehicle, about 18 ns) and the RK4 stage updates (about 15 ns): 150-180 ns. The issue's
-goal, 10,000 vehicle-s/s on two cores, needs 40 ns: fewer operations per derivative (the
-parameter divisions as products, a vectorizable pow) and one fused loop per substep are
-what remains, and each changes the numbers in the last bits.
+Where a vehicle-step goes (measured, one core, chunks of 8, 1 ms frames of 5 steps): four
+derivative evaluations (some 500 AVX-512 instructions per 8 lanes each, 14 of them
+divisions), the ISA pressure's pow (a scalar libm call per vehicle, about 20 ns), the RK4
+stage updates and the per-call copies in and out of the chunk's scratch: 130-155 ns
+(was 185-200 before the single-scratch kernels). The issue's goal, 10,000 vehicle-s/s on
+two cores, needs 40 ns: fewer operations per derivative (the parameter divisions as
+products, a vectorizable pow) are what remains, and each changes the numbers in the last
+bits.
 
 Why RK4: the stiffest mode is the motor lag (τ ≥ 10 ms); at dt = 0.2 ms RK4's error is far
 below the parameter uncertainty, it conserves energy and angular momentum of a torque-free
@@ -151,19 +153,22 @@ LANES = 8
 _w = _Layout()
 W_STATE = _w.add(X_SIZE)
 W_STAGE = _w.add(X_DYN)  # the state an RK4 stage evaluates the derivative at
-W_K = _w.add(4 * X_DYN)  # the four RK4 slopes
+W_SLOPE = _w.add(X_DYN)  # that stage's slope
+W_SLOPE_SUM = _w.add(X_DYN)  # k1 + 2·k2 + 2·k3 so far
 W_INPUT = _w.add(U_SIZE)
 W_OUTPUT = _w.add(A_SIZE)
 W_PARAMS = _w.add(P_SIZE)
 W_SIZE = _w.size
 
-# The kernels below index a chunk's scratch as [slot·LANES + lane] and loop over lanes
-# innermost. No fastmath: lane k computes exactly what a lone vehicle computes, in any
-# chunk, on any core. error_model="numpy" drops the division-by-zero checks that would keep
-# the loops scalar. Helpers that take a lane ``v`` are plain calls, which LLVM inlines
-# before it vectorizes; numba's inline="always" would leave array reference counting in
-# the loop, which keeps it scalar.
+# The kernels below take a chunk's whole scratch ``w`` and index it as [slot·LANES + lane]
+# at fixed region offsets (W_*), looping over lanes innermost: one array, so LLVM sees that
+# the slots never overlap and needs no overlap checks. No fastmath: lane k computes exactly
+# what a lone vehicle computes, in any chunk, on any core. error_model="numpy" drops the
+# division-by-zero checks that would keep the loops scalar.
 _kernel = njit(cache=True, error_model="numpy")
+# The derivative's per-lane helpers are inlined by numba: with a single scratch array as
+# argument LLVM's own inliner keeps them as calls, and a call keeps the lane loop scalar.
+_inlined = njit(cache=True, error_model="numpy", inline="always")
 
 
 def lane_block(row: np.ndarray) -> np.ndarray:
@@ -194,7 +199,7 @@ def open_circuit_voltage(p: np.ndarray, v: int, charge_used_c: float) -> float:
     return p[P_CELLS * LANES + v] * cell
 
 
-@_kernel
+@_inlined
 def battery_terminal(p: np.ndarray, v: int, charge_used_c: float, load_w: float) -> tuple:
     """Terminal voltage and current of the pack delivering ``load_w``.
 
@@ -207,34 +212,40 @@ def battery_terminal(p: np.ndarray, v: int, charge_used_c: float, load_w: float)
     return voltage, load_w / voltage
 
 
-@_kernel
-def _add_rotor(x, p, u, xdot, aux, v, i, ct, cq, voltage_ratio, vb0, vb1, fm):
-    """Rotor ``i`` of lane ``v``: its spin-up into ``xdot``, thrust and torque into ``aux``,
-    and its force, moment and angular momentum added to ``fm`` = (f FRD, M FRD, h_z)."""
+@_inlined
+def _add_rotor(w, v, i, ct, cq, voltage_ratio, vb0, vb1, fm):
+    """Rotor ``i`` of lane ``v`` in :func:`derivative`: its spin-up into the slopes, thrust
+    and torque into the outputs, and its force, moment and angular momentum added to ``fm``
+    = (f FRD, M FRD, h_z)."""
+    xv = W_STAGE * LANES + v
+    pv = W_PARAMS * LANES + v
+    uv = W_INPUT * LANES + v
+    dv = W_SLOPE * LANES + v
+    av = W_OUTPUT * LANES + v
     fx, fy, fz, mx, my, mz, rotor_momentum_z = fm
-    w = x[(X_ROTOR_SPEED + i) * LANES + v]
-    spin = p[(P_SPIN + i) * LANES + v]
-    jr = p[P_ROTOR_INERTIA * LANES + v]
-    sigma = min(1.0, max(0.0, u[(U_THROTTLE + i) * LANES + v]))
+    omega = w[(X_ROTOR_SPEED + i) * LANES + xv]
+    spin = w[(P_SPIN + i) * LANES + pv]
+    jr = w[P_ROTOR_INERTIA * LANES + pv]
+    sigma = min(1.0, max(0.0, w[(U_THROTTLE + i) * LANES + uv]))
     target = 0.0
-    if sigma >= p[P_MIN_THROTTLE * LANES + v] and sigma > 0.0:
-        target = max(p[P_SPEED_SLOPE * LANES + v] * sigma + p[P_SPEED_OFFSET * LANES + v], 0.0)
-        target *= voltage_ratio * p[(P_SPEED_SCALE + i) * LANES + v]
-    w_dot = (target - w) / p[P_MOTOR_TAU * LANES + v]
-    xdot[(X_ROTOR_SPEED + i) * LANES + v] = w_dot
-    xdot[(X_ROTOR_ANGLE + i) * LANES + v] = w
-    thrust = ct * w * w
-    torque = cq * w * w
-    aux[(A_THRUST + i) * LANES + v] = thrust
-    aux[(A_TORQUE + i) * LANES + v] = torque
+    if sigma >= w[P_MIN_THROTTLE * LANES + pv] and sigma > 0.0:
+        target = max(w[P_SPEED_SLOPE * LANES + pv] * sigma + w[P_SPEED_OFFSET * LANES + pv], 0.0)
+        target *= voltage_ratio * w[(P_SPEED_SCALE + i) * LANES + pv]
+    w_dot = (target - omega) / w[P_MOTOR_TAU * LANES + pv]
+    w[(X_ROTOR_SPEED + i) * LANES + dv] = w_dot
+    w[(X_ROTOR_ANGLE + i) * LANES + dv] = omega
+    thrust = ct * omega * omega
+    torque = cq * omega * omega
+    w[(A_THRUST + i) * LANES + av] = thrust
+    w[(A_TORQUE + i) * LANES + av] = torque
     # Thrust along -z FRD plus induced drag against the in-plane air velocity.
-    k_drag = p[P_ROTOR_DRAG * LANES + v]
-    rfx = -k_drag * w * vb0
-    rfy = -k_drag * w * vb1
+    k_drag = w[P_ROTOR_DRAG * LANES + pv]
+    rfx = -k_drag * omega * vb0
+    rfy = -k_drag * omega * vb1
     rfz = -thrust
-    px = p[(P_ROTOR_POS + 3 * i) * LANES + v]
-    py = p[(P_ROTOR_POS + 3 * i + 1) * LANES + v]
-    pz = p[(P_ROTOR_POS + 3 * i + 2) * LANES + v]
+    px = w[(P_ROTOR_POS + 3 * i) * LANES + pv]
+    py = w[(P_ROTOR_POS + 3 * i + 1) * LANES + pv]
+    pz = w[(P_ROTOR_POS + 3 * i + 2) * LANES + pv]
     # Reaction of the motor torque (drag + spin-up) on the body: a CCW rotor (spin +1) turns
     # the body CW seen from above, i.e. +z in FRD (PX4 ActuatorEffectivenessRotors: moment =
     # ct·(r × axis) - ct·km·axis with axis (0,0,-1), km > 0 for CCW). Its angular momentum:
@@ -246,51 +257,46 @@ def _add_rotor(x, p, u, xdot, aux, v, i, ct, cq, voltage_ratio, vb0, vb1, fm):
         mx + (py * rfz - pz * rfy),
         my + (pz * rfx - px * rfz),
         mz + (px * rfy - py * rfx + spin * (torque + jr * w_dot)),
-        rotor_momentum_z - spin * jr * w,
+        rotor_momentum_z - spin * jr * omega,
     )
 
 
 @_kernel
-def derivative(
-    x: np.ndarray,
-    p: np.ndarray,
-    u: np.ndarray,
-    xdot: np.ndarray,
-    aux: np.ndarray,
-    mount: int,
-    lanes: int,
-) -> None:
-    """Time derivative of the integrated state ``x[:X_DYN]`` of lanes ``0..lanes-1``.
-
-    Pure: reads only its inputs (state ``x``, parameters ``p``, held inputs ``u``). Writes
-    ``xdot[:X_DYN]`` and, as a by-product, the outputs in ``aux``. Every array is a chunk's
-    scratch block, indexed [slot·LANES + lane].
+def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
+    """Time derivative of lanes ``0..lanes-1`` of a chunk's scratch ``w`` at its RK4 stage
+    state (W_STAGE): writes the slopes (W_SLOPE) and, as a by-product, the outputs
+    (W_OUTPUT). Pure: reads only the stage state, the parameters and the held inputs.
     """
     for v in range(lanes):
+        xv = W_STAGE * LANES + v
+        pv = W_PARAMS * LANES + v
+        uv = W_INPUT * LANES + v
+        dv = W_SLOPE * LANES + v
+        av = W_OUTPUT * LANES + v
         q0, q1, q2, q3 = (
-            x[X_QUAT * LANES + v],
-            x[(X_QUAT + 1) * LANES + v],
-            x[(X_QUAT + 2) * LANES + v],
-            x[(X_QUAT + 3) * LANES + v],
+            w[X_QUAT * LANES + xv],
+            w[(X_QUAT + 1) * LANES + xv],
+            w[(X_QUAT + 2) * LANES + xv],
+            w[(X_QUAT + 3) * LANES + xv],
         )
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = _dcm_entries(q0, q1, q2, q3)
-        rho = u[U_AIR_DENSITY * LANES + v]
-        density_ratio = rho / p[P_RHO_REF * LANES + v]
+        rho = w[U_AIR_DENSITY * LANES + uv]
+        density_ratio = rho / w[P_RHO_REF * LANES + pv]
 
         # Propulsion: shaft power sets the battery load, the battery voltage sets motor speed.
-        ct = p[P_CT * LANES + v] * density_ratio
-        cq = p[P_CQ * LANES + v] * density_ratio
-        w0, w1 = x[X_ROTOR_SPEED * LANES + v], x[(X_ROTOR_SPEED + 1) * LANES + v]
-        w2, w3 = x[(X_ROTOR_SPEED + 2) * LANES + v], x[(X_ROTOR_SPEED + 3) * LANES + v]
+        ct = w[P_CT * LANES + pv] * density_ratio
+        cq = w[P_CQ * LANES + pv] * density_ratio
+        w0, w1 = w[X_ROTOR_SPEED * LANES + xv], w[(X_ROTOR_SPEED + 1) * LANES + xv]
+        w2, w3 = w[(X_ROTOR_SPEED + 2) * LANES + xv], w[(X_ROTOR_SPEED + 3) * LANES + xv]
         shaft_w = cq * w0 * w0 * w0 + cq * w1 * w1 * w1 + cq * w2 * w2 * w2 + cq * w3 * w3 * w3
-        load_w = shaft_w / p[P_EFFICIENCY * LANES + v] + p[P_AVIONICS_W * LANES + v]
-        voltage, current = battery_terminal(p, v, x[X_CHARGE_USED * LANES + v], load_w)
-        voltage_ratio = voltage / p[P_CURVE_VOLTAGE * LANES + v]
+        load_w = shaft_w / w[P_EFFICIENCY * LANES + pv] + w[P_AVIONICS_W * LANES + pv]
+        voltage, current = battery_terminal(w, pv, w[X_CHARGE_USED * LANES + xv], load_w)
+        voltage_ratio = voltage / w[P_CURVE_VOLTAGE * LANES + pv]
 
         # Air-relative velocity in the body frame.
-        va_n = x[X_VEL * LANES + v] - u[U_WIND * LANES + v]
-        va_e = x[(X_VEL + 1) * LANES + v] - u[(U_WIND + 1) * LANES + v]
-        va_d = x[(X_VEL + 2) * LANES + v] - u[(U_WIND + 2) * LANES + v]
+        va_n = w[X_VEL * LANES + xv] - w[U_WIND * LANES + uv]
+        va_e = w[(X_VEL + 1) * LANES + xv] - w[(U_WIND + 1) * LANES + uv]
+        va_d = w[(X_VEL + 2) * LANES + xv] - w[(U_WIND + 2) * LANES + uv]
         vb0 = r00 * va_n + r10 * va_e + r20 * va_d
         vb1 = r01 * va_n + r11 * va_e + r21 * va_d
         vb2 = r02 * va_n + r12 * va_e + r22 * va_d
@@ -298,9 +304,9 @@ def derivative(
         # Body drag, quadratic per axis, then each rotor's force and moment.
         half_rho = 0.5 * rho
         fm = (
-            -half_rho * p[P_DRAG_AREA * LANES + v] * abs(vb0) * vb0,
-            -half_rho * p[(P_DRAG_AREA + 1) * LANES + v] * abs(vb1) * vb1,
-            -half_rho * p[(P_DRAG_AREA + 2) * LANES + v] * abs(vb2) * vb2,
+            -half_rho * w[P_DRAG_AREA * LANES + pv] * abs(vb0) * vb0,
+            -half_rho * w[(P_DRAG_AREA + 1) * LANES + pv] * abs(vb1) * vb1,
+            -half_rho * w[(P_DRAG_AREA + 2) * LANES + pv] * abs(vb2) * vb2,
             0.0,
             0.0,
             0.0,
@@ -308,61 +314,63 @@ def derivative(
         )
         # Written out rotor by rotor: a loop here would be the innermost one, and LLVM
         # vectorizes only innermost loops (the lanes' loop is the one to vectorize).
-        fm = _add_rotor(x, p, u, xdot, aux, v, 0, ct, cq, voltage_ratio, vb0, vb1, fm)
-        fm = _add_rotor(x, p, u, xdot, aux, v, 1, ct, cq, voltage_ratio, vb0, vb1, fm)
-        fm = _add_rotor(x, p, u, xdot, aux, v, 2, ct, cq, voltage_ratio, vb0, vb1, fm)
-        fm = _add_rotor(x, p, u, xdot, aux, v, 3, ct, cq, voltage_ratio, vb0, vb1, fm)
+        fm = _add_rotor(w, v, 0, ct, cq, voltage_ratio, vb0, vb1, fm)
+        fm = _add_rotor(w, v, 1, ct, cq, voltage_ratio, vb0, vb1, fm)
+        fm = _add_rotor(w, v, 2, ct, cq, voltage_ratio, vb0, vb1, fm)
+        fm = _add_rotor(w, v, 3, ct, cq, voltage_ratio, vb0, vb1, fm)
         fx, fy, fz, mx, my, mz, rotor_momentum_z = fm
 
-        p_ = x[X_RATE * LANES + v]
-        q_ = x[(X_RATE + 1) * LANES + v]
-        r_ = x[(X_RATE + 2) * LANES + v]
-        mx -= p[P_ANGULAR_DRAG * LANES + v] * abs(p_) * p_
-        my -= p[(P_ANGULAR_DRAG + 1) * LANES + v] * abs(q_) * q_
-        mz -= p[(P_ANGULAR_DRAG + 2) * LANES + v] * abs(r_) * r_
-        aux[A_FORCE_FRD * LANES + v] = fx
-        aux[(A_FORCE_FRD + 1) * LANES + v] = fy
-        aux[(A_FORCE_FRD + 2) * LANES + v] = fz
-        aux[A_MOMENT_FRD * LANES + v] = mx
-        aux[(A_MOMENT_FRD + 1) * LANES + v] = my
-        aux[(A_MOMENT_FRD + 2) * LANES + v] = mz
-        aux[A_VOLTAGE * LANES + v] = voltage
-        aux[A_CURRENT * LANES + v] = current
-        aux[A_AIR_DENSITY * LANES + v] = rho
-        xdot[X_CHARGE_USED * LANES + v] = current
+        p_ = w[X_RATE * LANES + xv]
+        q_ = w[(X_RATE + 1) * LANES + xv]
+        r_ = w[(X_RATE + 2) * LANES + xv]
+        mx -= w[P_ANGULAR_DRAG * LANES + pv] * abs(p_) * p_
+        my -= w[(P_ANGULAR_DRAG + 1) * LANES + pv] * abs(q_) * q_
+        mz -= w[(P_ANGULAR_DRAG + 2) * LANES + pv] * abs(r_) * r_
+        w[A_FORCE_FRD * LANES + av] = fx
+        w[(A_FORCE_FRD + 1) * LANES + av] = fy
+        w[(A_FORCE_FRD + 2) * LANES + av] = fz
+        w[A_MOMENT_FRD * LANES + av] = mx
+        w[(A_MOMENT_FRD + 1) * LANES + av] = my
+        w[(A_MOMENT_FRD + 2) * LANES + av] = mz
+        w[A_VOLTAGE * LANES + av] = voltage
+        w[A_CURRENT * LANES + av] = current
+        w[A_AIR_DENSITY * LANES + av] = rho
+        w[X_CHARGE_USED * LANES + dv] = current
 
         # Rigid body: I·ω̇ = M - ω × (I·ω + h_rotors).
         i_ = P_INERTIA
-        hx = p[i_ * LANES + v] * p_ + p[(i_ + 1) * LANES + v] * q_ + p[(i_ + 2) * LANES + v] * r_
+        hx = w[i_ * LANES + pv] * p_ + w[(i_ + 1) * LANES + pv] * q_ + w[(i_ + 2) * LANES + pv] * r_
         hy = (
-            p[(i_ + 3) * LANES + v] * p_
-            + p[(i_ + 4) * LANES + v] * q_
-            + p[(i_ + 5) * LANES + v] * r_
+            w[(i_ + 3) * LANES + pv] * p_
+            + w[(i_ + 4) * LANES + pv] * q_
+            + w[(i_ + 5) * LANES + pv] * r_
         )
         hz = (
-            p[(i_ + 6) * LANES + v] * p_
-            + p[(i_ + 7) * LANES + v] * q_
-            + p[(i_ + 8) * LANES + v] * r_
+            w[(i_ + 6) * LANES + pv] * p_
+            + w[(i_ + 7) * LANES + pv] * q_
+            + w[(i_ + 8) * LANES + pv] * r_
             + rotor_momentum_z
         )
         tx = mx - (q_ * hz - r_ * hy)
         ty = my - (r_ * hx - p_ * hz)
         tz = mz - (p_ * hy - q_ * hx)
         n_ = P_INERTIA_INV
-        mass = p[P_MASS * LANES + v]
+        mass = w[P_MASS * LANES + pv]
         if mount == MOUNT_FREE:
-            xdot[X_RATE * LANES + v] = (
-                p[n_ * LANES + v] * tx + p[(n_ + 1) * LANES + v] * ty + p[(n_ + 2) * LANES + v] * tz
+            w[X_RATE * LANES + dv] = (
+                w[n_ * LANES + pv] * tx
+                + w[(n_ + 1) * LANES + pv] * ty
+                + w[(n_ + 2) * LANES + pv] * tz
             )
-            xdot[(X_RATE + 1) * LANES + v] = (
-                p[(n_ + 3) * LANES + v] * tx
-                + p[(n_ + 4) * LANES + v] * ty
-                + p[(n_ + 5) * LANES + v] * tz
+            w[(X_RATE + 1) * LANES + dv] = (
+                w[(n_ + 3) * LANES + pv] * tx
+                + w[(n_ + 4) * LANES + pv] * ty
+                + w[(n_ + 5) * LANES + pv] * tz
             )
-            xdot[(X_RATE + 2) * LANES + v] = (
-                p[(n_ + 6) * LANES + v] * tx
-                + p[(n_ + 7) * LANES + v] * ty
-                + p[(n_ + 8) * LANES + v] * tz
+            w[(X_RATE + 2) * LANES + dv] = (
+                w[(n_ + 6) * LANES + pv] * tx
+                + w[(n_ + 7) * LANES + pv] * ty
+                + w[(n_ + 8) * LANES + pv] * tz
             )
             an = (r00 * fx + r01 * fy + r02 * fz) / mass
             ae = (r10 * fx + r11 * fy + r12 * fz) / mass
@@ -371,34 +379,34 @@ def derivative(
             # Benches hold the centre of mass still. A gimbal leaves one body axis free;
             # about a fixed principal-frame axis e the motion is I_ee·ω̇ = e·M (gyroscopic
             # terms of a rotation about e itself have no e component).
-            xdot[X_RATE * LANES + v] = 0.0
-            xdot[(X_RATE + 1) * LANES + v] = 0.0
-            xdot[(X_RATE + 2) * LANES + v] = 0.0
+            w[X_RATE * LANES + dv] = 0.0
+            w[(X_RATE + 1) * LANES + dv] = 0.0
+            w[(X_RATE + 2) * LANES + dv] = 0.0
             if mount == MOUNT_GIMBAL_PITCH:
-                xdot[(X_RATE + 1) * LANES + v] = ty / p[(i_ + 4) * LANES + v]
+                w[(X_RATE + 1) * LANES + dv] = ty / w[(i_ + 4) * LANES + pv]
             elif mount == MOUNT_GIMBAL_ROLL:
-                xdot[X_RATE * LANES + v] = tx / p[i_ * LANES + v]
+                w[X_RATE * LANES + dv] = tx / w[i_ * LANES + pv]
             an = 0.0
             ae = 0.0
             ad = 0.0
-        xdot[X_POS * LANES + v] = x[X_VEL * LANES + v]
-        xdot[(X_POS + 1) * LANES + v] = x[(X_VEL + 1) * LANES + v]
-        xdot[(X_POS + 2) * LANES + v] = x[(X_VEL + 2) * LANES + v]
-        xdot[X_VEL * LANES + v] = an
-        xdot[(X_VEL + 1) * LANES + v] = ae
-        xdot[(X_VEL + 2) * LANES + v] = ad
-        aux[A_ACCEL_NED * LANES + v] = an
-        aux[(A_ACCEL_NED + 1) * LANES + v] = ae
-        aux[(A_ACCEL_NED + 2) * LANES + v] = ad
+        w[X_POS * LANES + dv] = w[X_VEL * LANES + xv]
+        w[(X_POS + 1) * LANES + dv] = w[(X_VEL + 1) * LANES + xv]
+        w[(X_POS + 2) * LANES + dv] = w[(X_VEL + 2) * LANES + xv]
+        w[X_VEL * LANES + dv] = an
+        w[(X_VEL + 1) * LANES + dv] = ae
+        w[(X_VEL + 2) * LANES + dv] = ad
+        w[A_ACCEL_NED * LANES + av] = an
+        w[(A_ACCEL_NED + 1) * LANES + av] = ae
+        w[(A_ACCEL_NED + 2) * LANES + av] = ad
         # q̇ = ½ q ⊗ (0, ω)
-        xdot[X_QUAT * LANES + v] = 0.5 * (-q1 * p_ - q2 * q_ - q3 * r_)
-        xdot[(X_QUAT + 1) * LANES + v] = 0.5 * (q0 * p_ + q2 * r_ - q3 * q_)
-        xdot[(X_QUAT + 2) * LANES + v] = 0.5 * (q0 * q_ - q1 * r_ + q3 * p_)
-        xdot[(X_QUAT + 3) * LANES + v] = 0.5 * (q0 * r_ + q1 * q_ - q2 * p_)
+        w[X_QUAT * LANES + dv] = 0.5 * (-q1 * p_ - q2 * q_ - q3 * r_)
+        w[(X_QUAT + 1) * LANES + dv] = 0.5 * (q0 * p_ + q2 * r_ - q3 * q_)
+        w[(X_QUAT + 2) * LANES + dv] = 0.5 * (q0 * q_ - q1 * r_ + q3 * p_)
+        w[(X_QUAT + 3) * LANES + dv] = 0.5 * (q0 * r_ + q1 * q_ - q2 * p_)
 
 
 @_kernel
-def _dryden(x, p, u, v, n0, n1, n2, dt):
+def _dryden(w, v, n0, n1, n2, dt):
     """Advance lane ``v``'s Dryden shaping filters one step (Euler-Maruyama), add the gust.
 
     Low-altitude MIL-F-8785C: σ_w = 0.1·W20, σ_u = σ_v = σ_w/(0.177 + 0.000823h)^0.4,
@@ -406,20 +414,23 @@ def _dryden(x, p, u, v, n0, n1, n2, dt):
     mean wind, v across it, w down. Filters are scaled so each output has variance σ².
     ``n0..n2`` are standard normal draws (zero with ``dt`` = 0: the gust of the state now).
     """
-    w20 = p[P_W20 * LANES + v]
+    xv = W_STATE * LANES + v
+    pv = W_PARAMS * LANES + v
+    uv = W_INPUT * LANES + v
+    w20 = w[P_W20 * LANES + pv]
     if w20 > 0.0:
-        steady_n = p[P_WIND_STEADY * LANES + v]
-        steady_e = p[(P_WIND_STEADY + 1) * LANES + v]
-        h_ft = min(max(-x[(X_POS + 2) * LANES + v] / _FT, 10.0), 1000.0)
+        steady_n = w[P_WIND_STEADY * LANES + pv]
+        steady_e = w[(P_WIND_STEADY + 1) * LANES + pv]
+        h_ft = min(max(-w[(X_POS + 2) * LANES + xv] / _FT, 10.0), 1000.0)
         factor = 0.177 + 0.000823 * h_ft
         sigma_w = 0.1 * w20
         sigma_uv = sigma_w / factor**0.4
         length_uv = h_ft / factor**1.2 * _FT
         length_w = h_ft * _FT
         airspeed = math.sqrt(
-            (x[X_VEL * LANES + v] - steady_n) ** 2
-            + (x[(X_VEL + 1) * LANES + v] - steady_e) ** 2
-            + x[(X_VEL + 2) * LANES + v] ** 2
+            (w[X_VEL * LANES + xv] - steady_n) ** 2
+            + (w[(X_VEL + 1) * LANES + xv] - steady_e) ** 2
+            + w[(X_VEL + 2) * LANES + xv] ** 2
         )
         airspeed = max(airspeed, DRYDEN_MIN_AIRSPEED_MPS)
         tau_uv = length_uv / airspeed
@@ -427,33 +438,33 @@ def _dryden(x, p, u, v, n0, n1, n2, dt):
         sqrt_dt = math.sqrt(dt)
         t = X_TURBULENCE
         # u: first-order, ż = (-z + n)/τ, y = σ·√(2τ)·z has variance σ².
-        x[t * LANES + v] += (-x[t * LANES + v] * dt + n0 * sqrt_dt) / tau_uv
-        gust_u = sigma_uv * math.sqrt(2.0 * tau_uv) * x[t * LANES + v]
+        w[t * LANES + xv] += (-w[t * LANES + xv] * dt + n0 * sqrt_dt) / tau_uv
+        gust_u = sigma_uv * math.sqrt(2.0 * tau_uv) * w[t * LANES + xv]
         # v, w: (1 + √3τs)/(1 + τs)², y = σ·√τ·(z1 + √3·τ·z2) has variance σ².
-        z1 = x[(t + 1) * LANES + v]
-        z2 = x[(t + 2) * LANES + v]
-        x[(t + 1) * LANES + v] = z1 + z2 * dt
-        x[(t + 2) * LANES + v] = z2 + (-(z1 + 2.0 * tau_uv * z2) * dt + n1 * sqrt_dt) / (
+        z1 = w[(t + 1) * LANES + xv]
+        z2 = w[(t + 2) * LANES + xv]
+        w[(t + 1) * LANES + xv] = z1 + z2 * dt
+        w[(t + 2) * LANES + xv] = z2 + (-(z1 + 2.0 * tau_uv * z2) * dt + n1 * sqrt_dt) / (
             tau_uv * tau_uv
         )
         gust_v = sigma_uv * math.sqrt(tau_uv) * (z1 + _SQRT3 * tau_uv * z2)
-        z1 = x[(t + 3) * LANES + v]
-        z2 = x[(t + 4) * LANES + v]
-        x[(t + 3) * LANES + v] = z1 + z2 * dt
-        x[(t + 4) * LANES + v] = z2 + (-(z1 + 2.0 * tau_w * z2) * dt + n2 * sqrt_dt) / (
+        z1 = w[(t + 3) * LANES + xv]
+        z2 = w[(t + 4) * LANES + xv]
+        w[(t + 3) * LANES + xv] = z1 + z2 * dt
+        w[(t + 4) * LANES + xv] = z2 + (-(z1 + 2.0 * tau_w * z2) * dt + n2 * sqrt_dt) / (
             tau_w * tau_w
         )
         gust_w = sigma_w * math.sqrt(tau_w) * (z1 + _SQRT3 * tau_w * z2)
         horizontal = math.hypot(steady_n, steady_e)
         cos_h = steady_n / horizontal if horizontal > 0.0 else 1.0
         sin_h = steady_e / horizontal if horizontal > 0.0 else 0.0
-        u[U_WIND * LANES + v] += gust_u * cos_h - gust_v * sin_h
-        u[(U_WIND + 1) * LANES + v] += gust_u * sin_h + gust_v * cos_h
-        u[(U_WIND + 2) * LANES + v] += gust_w
+        w[U_WIND * LANES + uv] += gust_u * cos_h - gust_v * sin_h
+        w[(U_WIND + 1) * LANES + uv] += gust_u * sin_h + gust_v * cos_h
+        w[(U_WIND + 2) * LANES + uv] += gust_w
 
 
 @_kernel
-def _air(x, p, u, noise, first, step, dt, lanes):
+def _air(w, noise, first, step, dt, lanes):
     """The air each lane flies through for the next substep: wind and density.
 
     Like the throttles, both are held over the substep's four derivative evaluations
@@ -462,68 +473,83 @@ def _air(x, p, u, noise, first, step, dt, lanes):
     """
     turbulent = False
     for v in range(lanes):
-        u[U_WIND * LANES + v] = p[P_WIND_STEADY * LANES + v]
-        u[(U_WIND + 1) * LANES + v] = p[(P_WIND_STEADY + 1) * LANES + v]
-        u[(U_WIND + 2) * LANES + v] = p[(P_WIND_STEADY + 2) * LANES + v]
-        u[U_AIR_DENSITY * LANES + v] = air_density_kgpm3(p, v, x[(X_POS + 2) * LANES + v])
-        turbulent |= p[P_W20 * LANES + v] > 0.0
+        pv = W_PARAMS * LANES + v
+        uv = W_INPUT * LANES + v
+        w[U_WIND * LANES + uv] = w[P_WIND_STEADY * LANES + pv]
+        w[(U_WIND + 1) * LANES + uv] = w[(P_WIND_STEADY + 1) * LANES + pv]
+        w[(U_WIND + 2) * LANES + uv] = w[(P_WIND_STEADY + 2) * LANES + pv]
+        down_m = w[(W_STATE + X_POS + 2) * LANES + v]
+        w[U_AIR_DENSITY * LANES + uv] = air_density_kgpm3(w, pv, down_m)
+        turbulent |= w[P_W20 * LANES + pv] > 0.0
     if not turbulent:  # the pow calls of the filters only where there is turbulence
         return
     if dt > 0.0:
         for v in range(lanes):
             k = first + v
-            _dryden(x, p, u, v, noise[k, step, 0], noise[k, step, 1], noise[k, step, 2], dt)
+            _dryden(w, v, noise[k, step, 0], noise[k, step, 1], noise[k, step, 2], dt)
     else:
         for v in range(lanes):
-            _dryden(x, p, u, v, 0.0, 0.0, 0.0, 0.0)
+            _dryden(w, v, 0.0, 0.0, 0.0, 0.0)
+
+
+# The scratch's regions as flat offsets, for the loops that treat a region's slots alike.
+_STATE = W_STATE * LANES
+_STAGE = W_STAGE * LANES
+_SLOPE = W_SLOPE * LANES
+_SLOPE_SUM = W_SLOPE_SUM * LANES
+_N_DYN = X_DYN * LANES
 
 
 @_kernel
-def _stage(x, k, h, xt, lanes):
-    """The state an RK4 stage evaluates at: ``xt = x + h·k``."""
-    for j in range(X_DYN):
-        for v in range(lanes):
-            i = j * LANES + v
-            xt[i] = x[i] + h * k[i]
-
-
-@_kernel
-def _rk4_step(x, p, u, xt, k, aux, mount, dt, lanes):
+def _rk4_step(w, mount, dt, lanes):
     """One classic RK4 substep of every lane, then the quaternion renormalized, rotor speeds
-    kept >= 0 and rotor angles wrapped."""
-    n = X_DYN * LANES
-    k1, k2, k3, k4 = k[:n], k[n : 2 * n], k[2 * n : 3 * n], k[3 * n :]
-    derivative(x, p, u, k1, aux, mount, lanes)
-    _stage(x, k1, 0.5 * dt, xt, lanes)
-    derivative(xt, p, u, k2, aux, mount, lanes)
-    _stage(x, k2, 0.5 * dt, xt, lanes)
-    derivative(xt, p, u, k3, aux, mount, lanes)
-    _stage(x, k3, dt, xt, lanes)
-    derivative(xt, p, u, k4, aux, mount, lanes)
-    for j in range(X_DYN):
-        for v in range(lanes):
-            i = j * LANES + v
-            x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    kept >= 0 and rotor angles wrapped.
+
+    Each stage's derivative writes its slope to the same rows; the loop after it adds the
+    slope to the weighted sum k1 + 2·k2 + 2·k3 (in that order, so the sum is the classic
+    formula's) and sets the next stage state. These loops run over whole rows of all
+    LANES lanes (a part chunk's unused lanes compute harmless numbers that are never read
+    back): with a fixed trip count on one array LLVM emits them as plain SIMD code.
+    """
+    half = 0.5 * dt
+    for i in range(_N_DYN):
+        w[_STAGE + i] = w[_STATE + i]
+    derivative(w, mount, lanes)
+    for i in range(_N_DYN):
+        w[_SLOPE_SUM + i] = w[_SLOPE + i]
+        w[_STAGE + i] = w[_STATE + i] + half * w[_SLOPE + i]
+    derivative(w, mount, lanes)
+    for i in range(_N_DYN):
+        w[_SLOPE_SUM + i] += 2.0 * w[_SLOPE + i]
+        w[_STAGE + i] = w[_STATE + i] + half * w[_SLOPE + i]
+    derivative(w, mount, lanes)
+    for i in range(_N_DYN):
+        w[_SLOPE_SUM + i] += 2.0 * w[_SLOPE + i]
+        w[_STAGE + i] = w[_STATE + i] + dt * w[_SLOPE + i]
+    derivative(w, mount, lanes)
+    for i in range(_N_DYN):
+        w[_STATE + i] += dt / 6.0 * (w[_SLOPE_SUM + i] + w[_SLOPE + i])
     for v in range(lanes):
+        xv = _STATE + v
         q = X_QUAT
         norm = math.sqrt(
-            x[q * LANES + v] * x[q * LANES + v]
-            + x[(q + 1) * LANES + v] * x[(q + 1) * LANES + v]
-            + x[(q + 2) * LANES + v] * x[(q + 2) * LANES + v]
-            + x[(q + 3) * LANES + v] * x[(q + 3) * LANES + v]
+            w[q * LANES + xv] * w[q * LANES + xv]
+            + w[(q + 1) * LANES + xv] * w[(q + 1) * LANES + xv]
+            + w[(q + 2) * LANES + xv] * w[(q + 2) * LANES + xv]
+            + w[(q + 3) * LANES + xv] * w[(q + 3) * LANES + xv]
         )
         for j in range(4):
-            x[(q + j) * LANES + v] /= norm
+            w[(q + j) * LANES + xv] /= norm
         for i in range(ROTORS):
-            x[(X_ROTOR_SPEED + i) * LANES + v] = max(x[(X_ROTOR_SPEED + i) * LANES + v], 0.0)
+            w[(X_ROTOR_SPEED + i) * LANES + xv] = max(w[(X_ROTOR_SPEED + i) * LANES + xv], 0.0)
             # Python's angle % 2π (exactly so for one turn per step: a - 2π is exact there),
             # as arithmetic the vector units have instead of a libm fmod call.
-            angle = x[(X_ROTOR_ANGLE + i) * LANES + v]
-            x[(X_ROTOR_ANGLE + i) * LANES + v] = angle - _TWO_PI * np.floor(angle * _PER_TURN)
+            angle = w[(X_ROTOR_ANGLE + i) * LANES + xv]
+            w[(X_ROTOR_ANGLE + i) * LANES + xv] = angle - _TWO_PI * np.floor(angle * _PER_TURN)
 
 
 @_kernel
-def _ground_contact(x, lanes):
+def _ground_contact(w, lanes):
     """The ground plane z = 0 (home): no sinking, no bounce, no sliding while resting.
 
     Landing gear and friction are taken as rigid: a vehicle that reaches the ground stops
@@ -531,83 +557,99 @@ def _ground_contact(x, lanes):
     legs with the attitude it landed with.
     """
     for v in range(lanes):
-        if x[(X_POS + 2) * LANES + v] >= 0.0:
-            x[(X_POS + 2) * LANES + v] = 0.0
-            x[X_VEL * LANES + v] = 0.0
-            x[(X_VEL + 1) * LANES + v] = 0.0
-            x[(X_VEL + 2) * LANES + v] = min(x[(X_VEL + 2) * LANES + v], 0.0)
-            x[X_RATE * LANES + v] = 0.0
-            x[(X_RATE + 1) * LANES + v] = 0.0
-            x[(X_RATE + 2) * LANES + v] = 0.0
-            x[X_ON_GROUND * LANES + v] = 1.0
+        xv = _STATE + v
+        if w[(X_POS + 2) * LANES + xv] >= 0.0:
+            w[(X_POS + 2) * LANES + xv] = 0.0
+            w[X_VEL * LANES + xv] = 0.0
+            w[(X_VEL + 1) * LANES + xv] = 0.0
+            w[(X_VEL + 2) * LANES + xv] = min(w[(X_VEL + 2) * LANES + xv], 0.0)
+            w[X_RATE * LANES + xv] = 0.0
+            w[(X_RATE + 1) * LANES + xv] = 0.0
+            w[(X_RATE + 2) * LANES + xv] = 0.0
+            w[X_ON_GROUND * LANES + xv] = 1.0
         else:
-            x[X_ON_GROUND * LANES + v] = 0.0
+            w[X_ON_GROUND * LANES + xv] = 0.0
 
 
 @_kernel
-def _outputs(x, aux, u, lanes):
+def _outputs(w, lanes):
     """Outputs at the final state that the derivative does not give: zero acceleration on
     the ground, the wind, and the specific force f = Rᵀ·(a - g) ((0, 0, -g) level at rest)."""
     for v in range(lanes):
-        if x[X_ON_GROUND * LANES + v] > 0.0:
-            aux[A_ACCEL_NED * LANES + v] = 0.0
-            aux[(A_ACCEL_NED + 1) * LANES + v] = 0.0
-            aux[(A_ACCEL_NED + 2) * LANES + v] = 0.0
-        aux[A_WIND_NED * LANES + v] = u[U_WIND * LANES + v]
-        aux[(A_WIND_NED + 1) * LANES + v] = u[(U_WIND + 1) * LANES + v]
-        aux[(A_WIND_NED + 2) * LANES + v] = u[(U_WIND + 2) * LANES + v]
+        xv = _STATE + v
+        av = W_OUTPUT * LANES + v
+        uv = W_INPUT * LANES + v
+        if w[X_ON_GROUND * LANES + xv] > 0.0:
+            w[A_ACCEL_NED * LANES + av] = 0.0
+            w[(A_ACCEL_NED + 1) * LANES + av] = 0.0
+            w[(A_ACCEL_NED + 2) * LANES + av] = 0.0
+        w[A_WIND_NED * LANES + av] = w[U_WIND * LANES + uv]
+        w[(A_WIND_NED + 1) * LANES + av] = w[(U_WIND + 1) * LANES + uv]
+        w[(A_WIND_NED + 2) * LANES + av] = w[(U_WIND + 2) * LANES + uv]
         q = X_QUAT
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = _dcm_entries(
-            x[q * LANES + v], x[(q + 1) * LANES + v], x[(q + 2) * LANES + v], x[(q + 3) * LANES + v]
+            w[q * LANES + xv],
+            w[(q + 1) * LANES + xv],
+            w[(q + 2) * LANES + xv],
+            w[(q + 3) * LANES + xv],
         )
-        an = aux[A_ACCEL_NED * LANES + v]
-        ae = aux[(A_ACCEL_NED + 1) * LANES + v]
-        ad = aux[(A_ACCEL_NED + 2) * LANES + v] - STANDARD_GRAVITY_MPS2
-        aux[A_SPECIFIC_FORCE * LANES + v] = r00 * an + r10 * ae + r20 * ad
-        aux[(A_SPECIFIC_FORCE + 1) * LANES + v] = r01 * an + r11 * ae + r21 * ad
-        aux[(A_SPECIFIC_FORCE + 2) * LANES + v] = r02 * an + r12 * ae + r22 * ad
+        an = w[A_ACCEL_NED * LANES + av]
+        ae = w[(A_ACCEL_NED + 1) * LANES + av]
+        ad = w[(A_ACCEL_NED + 2) * LANES + av] - STANDARD_GRAVITY_MPS2
+        w[A_SPECIFIC_FORCE * LANES + av] = r00 * an + r10 * ae + r20 * ad
+        w[(A_SPECIFIC_FORCE + 1) * LANES + av] = r01 * an + r11 * ae + r21 * ad
+        w[(A_SPECIFIC_FORCE + 2) * LANES + av] = r02 * an + r12 * ae + r22 * ad
+
+
+@_kernel
+def _substeps(w, noise, first, mount, n_steps, dt, lanes):
+    """``n_steps`` substeps of a chunk's scratch, then the outputs at the final state."""
+    for step in range(n_steps):
+        _air(w, noise, first, step, dt, lanes)
+        _rk4_step(w, mount, dt, lanes)
+        if mount == MOUNT_FREE:
+            _ground_contact(w, lanes)
+    _air(w, noise, first, 0, 0.0, lanes)
+    for i in range(_N_DYN):
+        w[_STAGE + i] = w[_STATE + i]
+    derivative(w, mount, lanes)
+    _outputs(w, lanes)
 
 
 @_kernel
 def _advance_chunk(states, outputs, params, throttles, noise, work, chunk, mount, n_steps, dt):
     """Run vehicles ``chunk·LANES ...`` through ``n_steps`` substeps on the chunk's scratch.
 
-    The scratch is flat, slot-major ([slot·LANES + lane]): with a stride LLVM knows, it
-    sees that the slots never overlap and vectorizes without per-slot overlap checks.
+    The scratch is one flat array, slot-major ([slot·LANES + lane]), and the kernels index
+    it at fixed offsets: LLVM sees that the slots never overlap and vectorizes without
+    overlap checks.
     """
     first = chunk * LANES
     lanes = min(LANES, states.shape[1] - first)
     w = work[chunk]
-    x = w[W_STATE * LANES : (W_STATE + X_SIZE) * LANES]
-    xt = w[W_STAGE * LANES : (W_STAGE + X_DYN) * LANES]
-    k = w[W_K * LANES : (W_K + 4 * X_DYN) * LANES]
-    u = w[W_INPUT * LANES : (W_INPUT + U_SIZE) * LANES]
-    aux = w[W_OUTPUT * LANES : (W_OUTPUT + A_SIZE) * LANES]
-    p = w[W_PARAMS * LANES : (W_PARAMS + P_SIZE) * LANES]
     for j in range(X_SIZE):
         for v in range(lanes):
-            x[j * LANES + v] = states[j, first + v]
+            w[(W_STATE + j) * LANES + v] = states[j, first + v]
     for j in range(P_SIZE):
         for v in range(lanes):
-            p[j * LANES + v] = params[j, first + v]
+            w[(W_PARAMS + j) * LANES + v] = params[j, first + v]
     for i in range(ROTORS):
         for v in range(lanes):
-            u[(U_THROTTLE + i) * LANES + v] = throttles[i, first + v]
-    for step in range(n_steps):
-        _air(x, p, u, noise, first, step, dt, lanes)
-        _rk4_step(x, p, u, xt, k, aux, mount, dt, lanes)
-        if mount == MOUNT_FREE:
-            _ground_contact(x, lanes)
-    # Outputs at the final state.
-    _air(x, p, u, noise, first, 0, 0.0, lanes)
-    derivative(x, p, u, k, aux, mount, lanes)
-    _outputs(x, aux, u, lanes)
+            w[(W_INPUT + U_THROTTLE + i) * LANES + v] = throttles[i, first + v]
+    # A whole chunk passes its lane count as a compile-time constant: numba compiles the
+    # helpers again for it, and LLVM turns each lane loop into straight SIMD code, without
+    # the trip-count tests and scalar remainders of a loop of unknown length. A part chunk
+    # runs the same source with a run-time count; both do the same IEEE operations.
+    if lanes == LANES:
+        _substeps(w, noise, first, mount, n_steps, dt, LANES)
+    else:
+        _substeps(w, noise, first, mount, n_steps, dt, lanes)
     for j in range(X_SIZE):
         for v in range(lanes):
-            states[j, first + v] = x[j * LANES + v]
+            states[j, first + v] = w[(W_STATE + j) * LANES + v]
     for j in range(A_SIZE):
         for v in range(lanes):
-            outputs[j, first + v] = aux[j * LANES + v]
+            outputs[j, first + v] = w[(W_OUTPUT + j) * LANES + v]
 
 
 @_kernel
