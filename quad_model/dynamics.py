@@ -16,13 +16,12 @@ batch of one) or a part chunk runs the same source with a run-time count, mostly
 the same IEEE operations and, without fastmath, the same numbers bit for bit.
 
 Where a vehicle-step goes (measured, one core, chunks of 8, 1 ms frames of 5 steps): four
-derivative evaluations (some 500 AVX-512 instructions per 8 lanes each, 14 of them
-divisions), the ISA pressure's pow (a scalar libm call per vehicle, about 20 ns), the RK4
-stage updates and the per-call copies in and out of the chunk's scratch: 130-155 ns
-(was 185-200 before the single-scratch kernels). The issue's goal, 10,000 vehicle-s/s on
-two cores, needs 40 ns: fewer operations per derivative (the parameter divisions as
-products, a vectorizable pow) are what remains, and each changes the numbers in the last
-bits.
+derivative evaluations (some 500 AVX-512 instructions per 8 lanes each; the parameters
+they divided by are stored as reciprocals, one division by the battery voltage remains),
+the ISA pressure's pow (a scalar libm call per vehicle, about 20 ns), the RK4 stage
+updates and the per-call copies in and out of the chunk's scratch: 120-150 ns (185-200
+before the single-scratch kernels). The issue's goal, 10,000 vehicle-s/s on two cores,
+needs 40 ns: a vectorizable pow and fewer operations per derivative are what remains.
 
 Why RK4: the stiffest mode is the motor lag (τ ≥ 10 ms); at dt = 0.2 ms RK4's error is far
 below the parameter uncertainty, it conserves energy and angular momentum of a torque-free
@@ -133,6 +132,14 @@ P_HOME_ALT = _p.add(1)
 P_WIND_STEADY = _p.add(3)
 P_W20 = _p.add(1)
 P_TEMP_OFFSET = _p.add(1)
+# Reciprocals of the parameters the derivative divides by: a product costs the vector units
+# a fraction of a division (the results differ in the last bit).
+P_MASS_INV = _p.add(1)
+P_RHO_REF_INV = _p.add(1)
+P_MOTOR_TAU_INV = _p.add(1)
+P_CURVE_VOLTAGE_INV = _p.add(1)
+P_CAPACITY_C_INV = _p.add(1)
+P_EFFICIENCY_INV = _p.add(1)
 P_SIZE = _p.size
 
 # Dryden (MIL-F-8785C) needs a speed through the air mass; hovering in calm air it would be
@@ -191,7 +198,7 @@ def open_circuit_voltage(p: np.ndarray, v: int, charge_used_c: float) -> float:
 
     :func:`quad_model.model.charge_used_for_voltage_c` is its inverse.
     """
-    soc = min(1.0, max(0.0, 1.0 - charge_used_c / p[P_CAPACITY_C * LANES + v]))
+    soc = min(1.0, max(0.0, 1.0 - charge_used_c * p[P_CAPACITY_C_INV * LANES + v]))
     cell = (
         p[P_CELL_EMPTY * LANES + v]
         + (p[P_CELL_FULL * LANES + v] - p[P_CELL_EMPTY * LANES + v]) * soc
@@ -231,7 +238,7 @@ def _add_rotor(w, v, i, ct, cq, voltage_ratio, vb0, vb1, fm):
     if sigma >= w[P_MIN_THROTTLE * LANES + pv] and sigma > 0.0:
         target = max(w[P_SPEED_SLOPE * LANES + pv] * sigma + w[P_SPEED_OFFSET * LANES + pv], 0.0)
         target *= voltage_ratio * w[(P_SPEED_SCALE + i) * LANES + pv]
-    w_dot = (target - omega) / w[P_MOTOR_TAU * LANES + pv]
+    w_dot = (target - omega) * w[P_MOTOR_TAU_INV * LANES + pv]
     w[(X_ROTOR_SPEED + i) * LANES + dv] = w_dot
     w[(X_ROTOR_ANGLE + i) * LANES + dv] = omega
     thrust = ct * omega * omega
@@ -281,7 +288,7 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
         )
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = _dcm_entries(q0, q1, q2, q3)
         rho = w[U_AIR_DENSITY * LANES + uv]
-        density_ratio = rho / w[P_RHO_REF * LANES + pv]
+        density_ratio = rho * w[P_RHO_REF_INV * LANES + pv]
 
         # Propulsion: shaft power sets the battery load, the battery voltage sets motor speed.
         ct = w[P_CT * LANES + pv] * density_ratio
@@ -289,9 +296,9 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
         w0, w1 = w[X_ROTOR_SPEED * LANES + xv], w[(X_ROTOR_SPEED + 1) * LANES + xv]
         w2, w3 = w[(X_ROTOR_SPEED + 2) * LANES + xv], w[(X_ROTOR_SPEED + 3) * LANES + xv]
         shaft_w = cq * w0 * w0 * w0 + cq * w1 * w1 * w1 + cq * w2 * w2 * w2 + cq * w3 * w3 * w3
-        load_w = shaft_w / w[P_EFFICIENCY * LANES + pv] + w[P_AVIONICS_W * LANES + pv]
+        load_w = shaft_w * w[P_EFFICIENCY_INV * LANES + pv] + w[P_AVIONICS_W * LANES + pv]
         voltage, current = battery_terminal(w, pv, w[X_CHARGE_USED * LANES + xv], load_w)
-        voltage_ratio = voltage / w[P_CURVE_VOLTAGE * LANES + pv]
+        voltage_ratio = voltage * w[P_CURVE_VOLTAGE_INV * LANES + pv]
 
         # Air-relative velocity in the body frame.
         va_n = w[X_VEL * LANES + xv] - w[U_WIND * LANES + uv]
@@ -355,7 +362,7 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
         ty = my - (r_ * hx - p_ * hz)
         tz = mz - (p_ * hy - q_ * hx)
         n_ = P_INERTIA_INV
-        mass = w[P_MASS * LANES + pv]
+        mass_inv = w[P_MASS_INV * LANES + pv]
         if mount == MOUNT_FREE:
             w[X_RATE * LANES + dv] = (
                 w[n_ * LANES + pv] * tx
@@ -372,9 +379,9 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
                 + w[(n_ + 7) * LANES + pv] * ty
                 + w[(n_ + 8) * LANES + pv] * tz
             )
-            an = (r00 * fx + r01 * fy + r02 * fz) / mass
-            ae = (r10 * fx + r11 * fy + r12 * fz) / mass
-            ad = (r20 * fx + r21 * fy + r22 * fz) / mass + STANDARD_GRAVITY_MPS2
+            an = (r00 * fx + r01 * fy + r02 * fz) * mass_inv
+            ae = (r10 * fx + r11 * fy + r12 * fz) * mass_inv
+            ad = (r20 * fx + r21 * fy + r22 * fz) * mass_inv + STANDARD_GRAVITY_MPS2
         else:
             # Benches hold the centre of mass still. A gimbal leaves one body axis free;
             # about a fixed principal-frame axis e the motion is I_ee·ω̇ = e·M (gyroscopic

@@ -203,6 +203,15 @@ def pack_params(vehicle: Vehicle, environment: Environment) -> NDArray[np.float6
     p[dyn.P_WIND_STEADY : dyn.P_WIND_STEADY + 3] = environment.wind.steady_ned_mps
     p[dyn.P_W20] = environment.wind.wind_at_6m_mps
     p[dyn.P_TEMP_OFFSET] = environment.temperature_offset_k
+    for inverse, value in (
+        (dyn.P_MASS_INV, dyn.P_MASS),
+        (dyn.P_RHO_REF_INV, dyn.P_RHO_REF),
+        (dyn.P_MOTOR_TAU_INV, dyn.P_MOTOR_TAU),
+        (dyn.P_CURVE_VOLTAGE_INV, dyn.P_CURVE_VOLTAGE),
+        (dyn.P_CAPACITY_C_INV, dyn.P_CAPACITY_C),
+        (dyn.P_EFFICIENCY_INV, dyn.P_EFFICIENCY),
+    ):
+        p[inverse] = 1.0 / p[value]
     return p
 
 
