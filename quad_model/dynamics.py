@@ -120,6 +120,7 @@ P_SPEED_OFFSET = _p.add(1)
 P_MIN_THROTTLE = _p.add(1)
 P_CURVE_VOLTAGE = _p.add(1)
 P_ROTOR_DRAG = _p.add(1)
+P_AXIAL_INFLOW = _p.add(1)
 P_CELLS = _p.add(1)
 P_CAPACITY_C = _p.add(1)
 P_CELL_FULL = _p.add(1)
@@ -220,7 +221,7 @@ def battery_terminal(p: np.ndarray, v: int, charge_used_c: float, load_w: float)
 
 
 @_inlined
-def _add_rotor(w, v, i, ct, cq, voltage_ratio, vb0, vb1, fm):
+def _add_rotor(w, v, i, ct, cq, voltage_ratio, vb0, vb1, vb2, fm):
     """Rotor ``i`` of lane ``v`` in :func:`derivative`: its spin-up into the slopes, thrust
     and torque into the outputs, and its force, moment and angular momentum added to ``fm``
     = (f FRD, M FRD, h_z)."""
@@ -241,11 +242,12 @@ def _add_rotor(w, v, i, ct, cq, voltage_ratio, vb0, vb1, fm):
     w_dot = (target - omega) * w[P_MOTOR_TAU_INV * LANES + pv]
     w[(X_ROTOR_SPEED + i) * LANES + dv] = w_dot
     w[(X_ROTOR_ANGLE + i) * LANES + dv] = omega
-    thrust = ct * omega * omega
+    # Thrust along -z FRD, less in a climb (air through the disc from above, vb2 < 0) and
+    # more in a descent, plus induced drag against the in-plane air velocity.
+    thrust = ct * omega * omega + w[P_AXIAL_INFLOW * LANES + pv] * omega * vb2
     torque = cq * omega * omega
     w[(A_THRUST + i) * LANES + av] = thrust
     w[(A_TORQUE + i) * LANES + av] = torque
-    # Thrust along -z FRD plus induced drag against the in-plane air velocity.
     k_drag = w[P_ROTOR_DRAG * LANES + pv]
     rfx = -k_drag * omega * vb0
     rfy = -k_drag * omega * vb1
@@ -321,10 +323,10 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
         )
         # Written out rotor by rotor: a loop here would be the innermost one, and LLVM
         # vectorizes only innermost loops (the lanes' loop is the one to vectorize).
-        fm = _add_rotor(w, v, 0, ct, cq, voltage_ratio, vb0, vb1, fm)
-        fm = _add_rotor(w, v, 1, ct, cq, voltage_ratio, vb0, vb1, fm)
-        fm = _add_rotor(w, v, 2, ct, cq, voltage_ratio, vb0, vb1, fm)
-        fm = _add_rotor(w, v, 3, ct, cq, voltage_ratio, vb0, vb1, fm)
+        fm = _add_rotor(w, v, 0, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
+        fm = _add_rotor(w, v, 1, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
+        fm = _add_rotor(w, v, 2, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
+        fm = _add_rotor(w, v, 3, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
         fx, fy, fz, mx, my, mz, rotor_momentum_z = fm
 
         p_ = w[X_RATE * LANES + xv]

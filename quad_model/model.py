@@ -191,6 +191,7 @@ def pack_params(vehicle: Vehicle, environment: Environment) -> NDArray[np.float6
     p[dyn.P_MIN_THROTTLE] = prop.min_throttle
     p[dyn.P_CURVE_VOLTAGE] = prop.speed_curve_voltage_v
     p[dyn.P_ROTOR_DRAG] = prop.rotor_drag_coefficient_ns_per_m_rad
+    p[dyn.P_AXIAL_INFLOW] = prop.axial_inflow_coefficient_ns_per_m_rad
     p[dyn.P_CELLS] = bat.cell_count
     p[dyn.P_CAPACITY_C] = bat.capacity_ah * 3600.0
     p[dyn.P_CELL_FULL] = bat.cell_full_v

@@ -94,6 +94,11 @@ class PropulsionParams:
     #: Induced (rotor) drag: F = -k·ω·v_perp per rotor, v_perp ⟂ to the rotor axis.
     rotor_drag_coefficient_ns_per_m_rad: NonNegative
     blade_count: PositiveInteger
+    #: Axial inflow (RotorPy's k_z): F = -k·ω·v_axial per rotor along its axis, v_axial the
+    #: air-relative velocity along it. A climbing rotor loses thrust and a descending one
+    #: gains it at the same speed (blade element and momentum theory: dT/dV = -k·ω); 0: not
+    #: modelled.
+    axial_inflow_coefficient_ns_per_m_rad: NonNegative = 0.0
 
     def __post_init__(self) -> None:
         if any(s not in (-1.0, 1.0) for s in self.spin_direction):

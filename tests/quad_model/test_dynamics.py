@@ -97,6 +97,24 @@ def test_yaw_spin_up_from_rotor_torque_matches_izz(f450_no_drag, rng, variant):
     np.testing.assert_allclose(model.truth.velocity_ned_mps, 0.0, atol=1e-6)
 
 
+def test_axial_inflow_takes_thrust_in_a_climb_and_gives_it_in_a_descent(x500, variant):
+    """Blade element and momentum theory, linear in the axial speed: each rotor's thrust is
+    k_T·ω² - k·ω·V along its axis; 1 ms at ±2 m/s (the speed changes by < 1 cm/s)."""
+    k = x500.propulsion.axial_inflow_coefficient_ns_per_m_rad
+    assert k == pytest.approx(3.5e-4)
+    without = variant(x500, propulsion={"axial_inflow_coefficient_ns_per_m_rad": 0.0})
+    for climb_mps in (2.0, -2.0):
+        thrusts = []
+        for vehicle in (x500, without):
+            model = QuadModel(vehicle, np.random.default_rng(1))
+            model.reset(position_ned_m=(0, 0, -10), velocity_ned_mps=(0, 0, -climb_mps),
+                        rotor_speed_radps=[760.0] * 4)  # fmt: skip
+            model.advance([model.hover_throttle()] * 4, 0.001)
+            thrusts.append(model.truth.rotor_thrust_n)
+            omega = model.truth.rotor_speed_radps
+        np.testing.assert_allclose(thrusts[1] - thrusts[0], k * omega * climb_mps, rtol=0.01)
+
+
 def test_motor_speed_is_a_first_order_lag(f450, rng, variant):
     # A stiff battery keeps the speed target fixed while the rotors spin up.
     vehicle = variant(f450, battery={"internal_resistance_ohm": 0.0})
