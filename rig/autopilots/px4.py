@@ -299,7 +299,13 @@ class Px4Sitl:
         self.console_path = run_dir / "px4.log"
         self.ulog_path = run_dir / "px4.ulg"
         self._process: subprocess.Popen[bytes] | None = None
-        self.bin_dir.mkdir(parents=True, exist_ok=True)
+        # PX4 keeps its state in its work dir: parameters.bson (every parameter a run set,
+        # a replay's in-flight ones too), dataman (the mission and the item it was at) and
+        # its logs. A run folder used again (--force) must not start from the last run's:
+        # a replay's mission then began at the last run's item, and no two runs were alike.
+        if self.work_dir.exists():
+            shutil.rmtree(self.work_dir)
+        self.bin_dir.mkdir(parents=True)
         lines = ["#!/bin/sh", "# Written by the rig: sourced by PX4's rcS after the airframe."]
         lines += [f"param set {name} {_px4_number(value)}" for name, value in params.items()]
         (self.bin_dir / "px4-rc.params").write_text("\n".join(lines) + "\n")

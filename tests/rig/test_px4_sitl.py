@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import pyulog
 
-from rig.autopilots.px4 import PX4_DIR_ENV, airframe_parameters, find_px4
+from rig.autopilots.px4 import PX4_DIR_ENV, Px4Sitl, airframe_parameters, find_px4
 from rig.errors import RigError
 from rig.lockstep.loop import RunOptions, run_scenario
 from rig.mavlink.simulator_link import LinkTimeouts
@@ -85,6 +85,21 @@ def test_a_px4_dir_without_px4_fails_in_one_line(tmp_path, monkeypatch):
 def test_no_px4_given_means_the_user_starts_it(monkeypatch):
     monkeypatch.delenv(PX4_DIR_ENV, raising=False)
     assert find_px4() is None
+
+
+def test_a_run_folder_used_again_gives_px4_a_clean_work_dir(tmp_path):
+    """PX4 reads back its parameters.bson and dataman (missions, the current item) at boot:
+    a run over an old run's folder (--force) must not inherit them."""
+    stale = tmp_path / "px4"
+    (stale / "log" / "2026-11-27").mkdir(parents=True)
+    for name in ("dataman", "parameters.bson", "parameters_backup.bson", "log/2026-11-27/a.ulg"):
+        (stale / name).write_bytes(b"last run")
+    sitl = Px4Sitl(None, tmp_path, 3, {"MPC_XY_VEL_MAX": 8.5})
+    assert sorted(p.relative_to(stale).as_posix() for p in stale.rglob("*")) == [
+        "bin",
+        "bin/px4-rc.params",
+    ]
+    assert "param set MPC_XY_VEL_MAX 8.5" in (sitl.bin_dir / "px4-rc.params").read_text()
 
 
 def test_airframe_parameters_follow_the_vehicle_file():
