@@ -337,7 +337,7 @@ ARMING_STATE_ARMED = 2
 _ARMING_STATE = SignalSpec(path="vehicle_status.arming_state")
 
 
-def check_arming(log: LogFile, segment_s: tuple[float, float], armed: bool) -> None:
+def _check_arming(log: LogFile, segment_s: tuple[float, float], armed: bool) -> None:
     """Raise ``state_mismatch`` unless ``log``'s vehicle is ``armed`` (or disarmed) over the
     whole of ``segment_s``: the state in force at its start and every change inside it."""
     status = log.signal(_ARMING_STATE)
@@ -366,7 +366,7 @@ def _performance_signal(
     """The test's window of one log, averaged to the test's ``average_hz`` when it has one
     (after the check that it holds the test's arming state, if the test names one)."""
     if test.armed is not None:
-        check_arming(log, segment_s, test.armed)
+        _check_arming(log, segment_s, test.armed)
     sig = _windowed(log, spec, segment_s, plan)
     if test.average_hz is None:
         return sig
