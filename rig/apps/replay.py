@@ -784,10 +784,9 @@ def _yaw_rate_limits(
     limits: list[tuple[float, float]] = []
     for time_s, rates in log.auto_yaw_rates_deg_s(AUTO_YAW_MODES, start_s, end_s):
         envelope = np.maximum(rates, np.append(rates[1:], rates[-1]))
-        for sample_s, rate in zip(time_s, envelope, strict=True):
+        for k, (sample_s, rate) in enumerate(zip(time_s, envelope, strict=True)):
             limit = round(max(float(rate), YAW_RATE_LIMIT_FLOOR_DEG_S), 1)
-            stretch_start = sample_s == time_s[0]
-            if stretch_start or abs(limit - limits[-1][1]) >= YAW_RATE_LIMIT_STEP_DEG_S:
+            if k == 0 or abs(limit - limits[-1][1]) >= YAW_RATE_LIMIT_STEP_DEG_S:
                 limits.append((float(sample_s), limit))
     return tuple(limits)
 

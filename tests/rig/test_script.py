@@ -4,7 +4,8 @@ import math
 
 import pytest
 
-from rig.scenarios.scenario import Arm, Disarm, Land, SetpointTrack, Track
+from quad_model.environment import GeoPoint
+from rig.scenarios.scenario import Arm, Disarm, Land, SetHome, SetpointTrack, Track
 from rig.scenarios.script import CommandScript
 
 
@@ -31,6 +32,9 @@ class RecordingGround:
 
     def land(self):
         return ("land",)
+
+    def set_home(self, home):
+        return ("set_home", home)
 
 
 def _walk(commands, until_s, clock_start_s=0.0, frame_s=0.001):
@@ -76,6 +80,15 @@ def test_arm_and_disarm_keep_the_stream_a_mode_command_ends_it():
     assert kinds == [(0.0, "arm"), (0.0, "offboard"), (0.1, "offboard"), (0.15, "attempt"),
                      (0.2, "offboard"), (0.25, "offboard"), (0.3, "offboard"),
                      (0.35, "land")]  # fmt: skip
+
+
+def test_a_replays_home_keeps_the_stream_and_a_refusal_does_not_end_the_run():
+    home = GeoPoint(51.9, -85.7, 185.84)
+    sent = _walk([Track(at_s=0.0, track=VELOCITY), SetHome(at_s=0.15, home=home)], 0.25)
+    kinds = [(t, conversation[0]) for t, conversation in sent]
+    assert kinds == [(0.0, "offboard"), (0.1, "offboard"), (0.15, "attempt"),
+                     (0.2, "offboard"), (0.25, "offboard")]  # fmt: skip
+    assert sent[2][1][1] == ("set_home", home)
 
 
 def test_a_rates_track_started_mid_way_sends_the_sample_in_force():
