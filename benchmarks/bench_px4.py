@@ -7,7 +7,8 @@ start-up. ``bypass`` is the same rig with its sensor layer skipped (SI samples s
 into HIL_SENSOR, commanded widths straight to the motors): what the chips cost. The anchor,
 PX4 + the barest simulator that flies it (``benchmarks.bare_px4_sim``), is measured in the
 same run at each rate (issue 16 measured 16.7x at 250 Hz on this machine kind); the goal
-for PX4 + rig with TLM chips is 80 % of it. Figures only, no pass/fail.
+for PX4 + rig with TLM chips is 80 % of it. Both start PX4 alike (``Px4Sitl``: held to
+one CPU). Figures only, no pass/fail.
 """
 
 from __future__ import annotations

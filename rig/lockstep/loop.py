@@ -546,7 +546,8 @@ class _Loop:
         self._closers.append(px4.stop)
         if px4.build is not None:
             px4.start()
-            self.log.event(self.time_us, f"started PX4: {px4.command()}")
+            where = "" if px4.cpu is None else f" on CPU {px4.cpu}"
+            self.log.event(self.time_us, f"started PX4{where}: {px4.command()}")
             link.accept(f"PX4 (its console: {px4.console_path})")
             return
         command = px4.command()

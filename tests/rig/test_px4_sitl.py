@@ -289,6 +289,47 @@ def _wait_until_flying(rig, out):
         time.sleep(0.2)
 
 
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: PX4 is not pinned")
+def test_every_px4_thread_runs_on_the_one_cpu_the_rig_chose(tmp_path, free_instance, px4_dir):
+    """PX4's lockstep chain of threads on one core, not spread over the rig's (bench_px4)."""
+    out = tmp_path / "run"
+    rig = _start_rig_cli(px4_dir, free_instance(), out)
+    try:
+        _wait_until_flying(rig, out)
+        (pid,) = _px4_pids(out)
+        allowed = {
+            task.name: next(line.split()[1] for line in (task / "status").read_text().splitlines()
+                            if line.startswith("Cpus_allowed_list:"))
+            for task in Path(f"/proc/{pid}/task").iterdir()
+        }  # fmt: skip
+    finally:
+        rig.send_signal(signal.SIGINT)
+        rig.communicate(timeout=60)
+    assert len(allowed) > 10  # PX4's modules and work queues, not just its main thread
+    (cpu,) = set(allowed.values())
+    assert int(cpu) in os.sched_getaffinity(0)
+    messages = [m.message for m in pyulog.ULog(str(out / "rig.ulg")).logged_messages]
+    assert any(m.startswith(f"started PX4 on CPU {cpu}: ") for m in messages)
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: PX4 is not pinned")
+def test_two_px4_side_by_side_run_on_different_cpus(tmp_path, free_instance, px4_dir):
+    """A second PX4 (a campaign's, a parallel test's) goes beside the first, not onto it.
+    Both boot and wait for their simulator, which never comes."""
+    first = Px4Sitl(find_px4(px4_dir), tmp_path / "a", free_instance(), {})
+    try:
+        first.start()
+        second = Px4Sitl(find_px4(px4_dir), tmp_path / "b", first.instance + 1, {})
+        try:
+            second.start()
+            assert {first.cpu, second.cpu} <= set(os.sched_getaffinity(0))
+            assert first.cpu != second.cpu
+        finally:
+            second.stop()
+    finally:
+        first.stop()
+
+
 def test_sigterm_stops_px4_and_keeps_both_logs(tmp_path, free_instance, px4_dir):
     out = tmp_path / "run"
     rig = _start_rig_cli(px4_dir, free_instance(), out)
