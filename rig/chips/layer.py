@@ -294,8 +294,8 @@ class SensorEngine:
                 errors.append(("ms5611", str(error)))
         widths_us, timed_out = await self.host.capture(frame.pulses, frame.now_us)
         return ChipReadout(
-            accel_mps2=tuple(imu.accel_mps2.tolist()),
-            gyro_radps=tuple(imu.gyro_rads.tolist()),
+            accel_mps2=imu.accel_mps2,
+            gyro_radps=imu.gyro_rads,
             imu_temperature_degc=imu.temperature_c,
             mag_gauss=mag,
             baro_pa_degc=baro,

@@ -163,7 +163,10 @@ class PwmCapture:
         self._tick_us = 1e6 / tick_hz
         self._timeout_us = timeout_s * 1e6
         self._latency_us = PWM_RESULT_LATENCY_TICKS * self._tick_us
-        self._recent: list[deque[tuple[float, float]]] = [deque(maxlen=3) for _ in range(channels)]
+        #: Per channel, the last three pulses as the clock edges that sample them.
+        self._recent: list[deque[tuple[int, int]]] = [deque(maxlen=3) for _ in range(channels)]
+        #: Per channel, the last pulse's rise and fall (µs).
+        self._last_us: list[tuple[int, int]] = [(0, 0)] * channels
         self._widths_us = [0.0] * channels
         self._timed_out = [True] * channels
         #: Per channel, the earliest time its results can change: a fall or a timeout.
@@ -179,19 +182,27 @@ class PwmCapture:
         between those events the width and timeout registers hold (a rise changes only
         the period, which the rig does not use).
         """
+        model = self.model
         for pulse in pulses:
-            start_s = pulse.start_us / 1e6
-            self._recent[pulse.channel].append((start_s, start_s + pulse.width_us / 1e6))
-            seen_fall_us = pulse.start_us + pulse.width_us + self._latency_us  # seen by a read
+            start_us, fall_us = pulse.start_us, pulse.start_us + pulse.width_us
+            start_s = start_us / 1e6
+            self._recent[pulse.channel].append(
+                model.sampled(start_s, start_s + pulse.width_us / 1e6)
+            )
+            self._last_us[pulse.channel] = (start_us, fall_us)
+            seen_fall_us = fall_us + self._latency_us  # seen by a read
             next_change_us = self._next_change_us[pulse.channel]
             self._next_change_us[pulse.channel] = min(next_change_us, seen_fall_us)
+        now = None
         for channel, recent in enumerate(self._recent):
             if now_us < self._next_change_us[channel]:
                 continue
-            result = self.model.capture(list(recent), at_s=now_us / 1e6)
+            if now is None:
+                now = model.last_edge(now_us / 1e6)
+            result = model.capture_sampled(recent, now)
             self._widths_us[channel] = result.width_ticks * self._tick_us
             self._timed_out[channel] = result.timeout
-            last_rise_us, last_fall_us = (t * 1e6 for t in recent[-1])
+            last_rise_us, last_fall_us = self._last_us[channel]
             seen_fall_us = last_fall_us + self._latency_us  # seen by a read
             pending_fall = seen_fall_us if seen_fall_us > now_us else math.inf
             timeout_at = math.inf if result.timeout else last_rise_us + self._timeout_us

@@ -12,6 +12,7 @@ Defined once here and imported by the gateware (``core``), the transaction-level
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -191,13 +192,16 @@ def data_register_bytes(sample: Mpu6000Sample, gyro_config: int, accel_config: i
     """The 14 bytes ACCEL_XOUT_H .. GYRO_ZOUT_L for ``sample`` and the configuration."""
     afs = (accel_config >> FULL_SCALE_SHIFT) & 3
     fs = (gyro_config >> FULL_SCALE_SHIFT) & 3
-    out = bytearray()
-    for name, raw in sample.fields().items():
-        value = (
-            raw if name == "temp" else scaled_register_value(raw, afs if "accel" in name else fs)
-        )
-        out += (value & 0xFFFF).to_bytes(2, "big")
-    return bytes(out)
+    return _DATA_REGISTERS.pack(
+        scaled_register_value(sample.accel_x, afs), scaled_register_value(sample.accel_y, afs),
+        scaled_register_value(sample.accel_z, afs), sample.temp,
+        scaled_register_value(sample.gyro_x, fs), scaled_register_value(sample.gyro_y, fs),
+        scaled_register_value(sample.gyro_z, fs),
+    )  # fmt: skip
+
+
+#: The data registers as the chip lays them out: seven big-endian int16, in DATA_FIELDS order.
+_DATA_REGISTERS = struct.Struct(">7h")
 
 
 def accel_mps2_per_lsb(accel_config: int) -> float:

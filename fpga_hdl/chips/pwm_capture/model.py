@@ -54,7 +54,7 @@ class PwmCaptureModel:
         ``pulses_s`` are (rise, fall) times in seconds, increasing; the line is low
         before the first rise and between pulses.
         """
-        events = []
+        sampled = []
         previous_fall = -math.inf
         for rise_s, fall_s in pulses_s:
             if not previous_fall <= rise_s < fall_s:
@@ -63,12 +63,27 @@ class PwmCaptureModel:
                     f"after a fall at {previous_fall!r}"
                 )
             previous_fall = fall_s
-            rise_edge = self._edge(rise_s, first_edge_s)
-            fall_edge = self._edge(fall_s, first_edge_s)
+            sampled.append(self.sampled(rise_s, fall_s, first_edge_s))
+        return self.capture_sampled(sampled, self.last_edge(at_s, first_edge_s))
+
+    def sampled(self, rise_s: float, fall_s: float, first_edge_s: float = 0.0) -> tuple[int, int]:
+        """The clock edges that first sample a pulse's rise and its fall (equal: a pulse
+        between two samples, which the core never sees)."""
+        return self._edge(rise_s, first_edge_s), self._edge(fall_s, first_edge_s)
+
+    def last_edge(self, at_s: float, first_edge_s: float = 0.0) -> int:
+        """Index of the last clock edge at or before ``at_s``."""
+        return math.floor((at_s - first_edge_s) * self.tick_hz + 1e-9)
+
+    def capture_sampled(self, sampled: Sequence[tuple[int, int]], now: int) -> ChannelCapture:
+        """:meth:`capture` for pulses already turned into clock edges (:meth:`sampled`),
+        read just after edge ``now``: a caller that keeps a pulse train samples each pulse
+        once instead of at every read."""
+        events = []
+        latency = self.latency_ticks
+        for rise_edge, fall_edge in sampled:
             if rise_edge != fall_edge:  # a pulse between two samples is never seen
-                latency = self.latency_ticks
                 events += [(rise_edge + latency, True), (fall_edge + latency, False)]
-        now = math.floor((at_s - first_edge_s) * self.tick_hz + 1e-9)
 
         width = period = 0
         timeout, armed, last_rise = True, False, 0
