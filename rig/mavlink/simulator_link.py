@@ -24,7 +24,11 @@ from dataclasses import dataclass
 
 from rig.errors import AutopilotNotConnected, AutopilotStalled
 from rig.mavlink.px4_api import Ports, mavlink
-from rig.mavlink.sim_messages import ActuatorControls, decode_actuator_controls
+from rig.mavlink.sim_messages import (
+    ActuatorControls,
+    actuator_controls_from_frame,
+    decode_actuator_controls,
+)
 
 #: What every link failure reminds the user of (PX4's simulator_mavlink spins forever).
 PX4_NEVER_RECONNECTS = "PX4 never reconnects to a simulator: start a new PX4 process per run"
@@ -282,24 +286,18 @@ class SimulatorLink:
                 f"the autopilot closed the simulator link ({self.endpoint}: {reason})"
                 f"{self._exit_note()}; {PX4_NEVER_RECONNECTS}"
             )
-        for message in self.mav.parse_buffer(data) or ():
-            self._handle(message)
+        controls = actuator_controls_from_frame(data) if self.mav.buf_len() == 0 else None
+        if controls is not None:
+            self._take_controls(controls)
+        else:
+            for message in self.mav.parse_buffer(data) or ():
+                self._handle(message)
         self.stats.decode_s += time.perf_counter() - received
 
     def _handle(self, message: mavlink.MAVLink_message) -> None:
         kind = message.get_type()
         if kind == "HIL_ACTUATOR_CONTROLS":
-            controls = decode_actuator_controls(message)
-            previous_us = -1 if self._latest is None else self._latest.time_us
-            if controls.time_us == previous_us:
-                self.stats.repeated_answers += 1
-                return
-            if not previous_us < controls.time_us <= self._sent_us:
-                self.stats.malformed += 1  # backwards or from the future: answers no frame
-                return
-            if self._awaited_us is not None and controls.time_us < self._awaited_us:
-                self.stats.stale_answers += 1
-            self._latest = controls
+            self._take_controls(decode_actuator_controls(message))
         elif kind == "HEARTBEAT":
             self.peer_heartbeat = message
         elif kind == "COMMAND_LONG":
@@ -308,6 +306,18 @@ class SimulatorLink:
                 self.state_interval_us = int(message.param2)
         elif kind == "BAD_DATA":
             self.stats.malformed += 1
+
+    def _take_controls(self, controls: ActuatorControls) -> None:
+        previous_us = -1 if self._latest is None else self._latest.time_us
+        if controls.time_us == previous_us:
+            self.stats.repeated_answers += 1
+            return
+        if not previous_us < controls.time_us <= self._sent_us:
+            self.stats.malformed += 1  # backwards or from the future: answers no frame
+            return
+        if self._awaited_us is not None and controls.time_us < self._awaited_us:
+            self.stats.stale_answers += 1
+        self._latest = controls
 
     def _exit_note(self) -> str:
         """`` (autopilot process …)`` when the peer's process ends within
