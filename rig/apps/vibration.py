@@ -55,6 +55,10 @@ WELCH_SEGMENT_S = 0.5
 #: Seconds of thrust-stand data per model spectrum: four rotors at nearly one speed beat
 #: over seconds (at idle about 0.3 Hz), and σ settles only over several beats.
 MODEL_SECONDS = 20.0
+#: What PX4 v1.14 SITL logs as ``sensor_combined`` per lockstep sample, as weights of the
+#: rig's IMU samples k, k-1, k-2: measured, not PX4's documented integrator (which would be
+#: the trapezoid 1/2, 1/2); ``tests/rig/test_px4_sitl.py`` checks it against the binary.
+PX4_SITL_STREAM = (0.25, 0.5, 0.25)
 #: The points whose levels are fitted; the others check the interpolation.
 FITTED_POINTS = ("idle", "hover")
 _TOPICS = (
@@ -286,9 +290,9 @@ def model_spectrum(
     seconds: float = MODEL_SECONDS,
 ) -> StreamSpectrum:
     """The model's stream at ``point``: the IMU on the thrust stand at the point's throttles,
-    fed from a bench supply at its voltage, sampled at ``imu_rate_hz`` and integrated over
-    1/``stream_rate_hz`` as PX4's vehicle_imu does: trapezoids between consecutive samples
-    (PX4's Integrator), so each mean weighs the interval's first and last sample by half."""
+    fed from a bench supply at its voltage, sampled at ``imu_rate_hz``, passed through what
+    PX4 SITL logs per lockstep sample (:data:`PX4_SITL_STREAM`) and averaged over
+    1/``stream_rate_hz``, as the credibility plans average the replay's log."""
     per_mean = imu_rate_hz / stream_rate_hz
     if abs(per_mean - round(per_mean)) > 1e-9 or per_mean < 1:
         raise IdentificationError(
@@ -307,14 +311,15 @@ def model_spectrum(
     imu = ImuModel(bench, model.environment, np.random.default_rng(seed + 1), imu_rate_hz)
     throttle = np.array(point.throttle)
     model.advance(throttle, 0.5)  # the rotors at speed
-    count = round(seconds * stream_rate_hz) * round(per_mean) + 1
+    taps = len(PX4_SITL_STREAM)
+    count = round(seconds * stream_rate_hz) * round(per_mean) + taps - 1
     samples = np.empty((count, 6))
     for k in range(count):
         model.advance(throttle, 1.0 / imu_rate_hz)
         reading = imu.sample(model.truth)
         samples[k, :3], samples[k, 3:] = reading.accel_mps2, reading.gyro_radps
-    trapezoids = (samples[1:] + samples[:-1]) / 2.0
-    means = trapezoids.reshape(-1, round(per_mean), 6).mean(axis=1)
+    logged = sum(w * samples[taps - 1 - i : count - i] for i, w in enumerate(PX4_SITL_STREAM))
+    means = logged.reshape(-1, round(per_mean), 6).mean(axis=1)
     return stream_spectrum(means, stream_rate_hz, point.spectrum.bands_hz)
 
 

@@ -19,6 +19,7 @@ import pyulog
 from rig.autopilots.px4 import PX4_DIR_ENV, Px4Sitl, airframe_parameters, find_px4
 from rig.errors import RigError
 from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.sim_messages import ACCEL_FIFO_SCALE_MPS2, GYRO_FIFO_SCALE_RADPS
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
 
@@ -59,6 +60,29 @@ def test_lockstep_holds_at_every_imu_rate(tmp_path, free_instance, px4_dir, imu_
     px4_log = pyulog.ULog(str(result.autopilot_log))
     assert px4_log.initial_parameters["IMU_INTEG_RATE"] == imu_hz
     assert px4_log.initial_parameters["IMU_GYRO_RATEMAX"] == imu_hz
+
+
+def test_px4_logs_each_imu_sample_as_the_1_2_1_mean_of_the_rigs(tmp_path, free_instance, px4_dir):
+    """What PX4 SITL logs as sensor_combined at lockstep: (x[k] + 2·x[k-1] + x[k-2])/4 of
+    the samples the rig sent, not one trapezoid. The vibration fit (rig/apps/vibration.py)
+    models the replay's stream so, at the X500 replay's 800 Hz."""
+    result = fly_px4(tmp_path, free_instance, px4_dir, "imu_stream", 6.0, rates={"imu_hz": 800})
+    sent = pyulog.ULog(str(result.rig_log), ["sensor_combined"]).get_dataset("sensor_combined")
+    logged = pyulog.ULog(str(result.autopilot_log), ["sensor_combined"])
+    logged = logged.get_dataset("sensor_combined").data
+    at = np.searchsorted(sent.data["timestamp"], logged["timestamp"])
+    assert np.array_equal(sent.data["timestamp"][at], logged["timestamp"])  # one per frame
+    at = at[at >= 2]
+    # PX4 holds each sample as int16 counts of its FIFO scale: one count may round apart.
+    for field, count in (("gyro_rad", GYRO_FIFO_SCALE_RADPS),
+                         ("accelerometer_m_s2", ACCEL_FIFO_SCALE_MPS2)):  # fmt: skip
+        for axis in range(3):
+            x = sent.data[f"{field}[{axis}]"].astype(float)
+            y = logged[f"{field}[{axis}]"].astype(float)[-len(at) :]
+            expected = [(x[at] + 2 * x[at - 1] + x[at - 2]) / 4, (x[at] + x[at - 1]) / 2]
+            errors = [np.abs(y - e).max() for e in expected]
+            assert errors[0] <= count * 1.001, (field, axis, errors)  # and float32
+            assert errors[1] > 10 * errors[0], (field, axis, errors)  # the trapezoid is not it
 
 
 def test_imu_rate_px4_cannot_follow_is_refused_before_the_run(tmp_path):
