@@ -29,13 +29,13 @@ TONE = 0
 BROADBAND = 1
 
 # Columns of the per-triad parameter array ``triad`` (one row per triad, units of the triad).
-T_NOISE_STD = 0  # white noise σ per sample (density·√rate)
-T_BIAS_WALK = 1  # bias random walk density, per √s
-T_TEMPCO = 2  # bias change per kelvin away from the reference temperature
-T_BROADBAND_STD = 3  # broadband vibration σ at the reference rotor speed
-T_AXIS_GAIN = 4  # 3 slots: vibration level of the body x, y, z axes
-T_MATRIX = 7  # 9 slots: scale factor × misalignment, row-major
-T_SIZE = 16
+T_NOISE_STD = 0  # 3 slots: white noise σ per sample of the sensor's x, y, z axes
+T_BIAS_WALK = 3  # bias random walk density, per √s
+T_TEMPCO = 4  # bias change per kelvin away from the reference temperature
+T_BROADBAND_STD = 5  # broadband vibration σ at the reference rotor speed
+T_AXIS_GAIN = 6  # 3 slots: vibration level of the body x, y, z axes
+T_MATRIX = 9  # 9 slots: scale factor × misalignment, row-major
+T_SIZE = 18
 
 # Where each triad's variates sit in one sample's draws. The order is the model's since its
 # first release, so a seed reproduces earlier runs: gyro bias walk, accel bias walk (only
@@ -181,5 +181,5 @@ def imu_sample(
             sensed = 0.0
             for j in range(3):
                 sensed += row[T_MATRIX + 3 * i + j] * vibrating[j]
-            white = row[T_NOISE_STD] * normals[drawn + _WHITE_AT[t] + i]
+            white = row[T_NOISE_STD + i] * normals[drawn + _WHITE_AT[t] + i]
             out[t, i] = sensed + bias[t, i] + row[T_TEMPCO] * delta_temperature_k + white

@@ -163,8 +163,13 @@ class ImuModel:
             levels.reshape(_kernels.TRIADS, 2, points, 3).transpose(0, 1, 3, 2)
         )
         self._environment = environment
-        self.gyro_noise_std_radps = imu.gyro_noise_density_radps_per_sqrthz * math.sqrt(rate_hz)
-        self.accel_noise_std_mps2 = imu.accel_noise_density_mps2_per_sqrthz * math.sqrt(rate_hz)
+        #: White noise σ per sample of each sensor axis (x, y, z).
+        self.gyro_noise_std_radps = (
+            imu.gyro_noise_density_radps_per_sqrthz * math.sqrt(rate_hz)
+        ) * np.asarray(imu.gyro_noise_axis_gain)
+        self.accel_noise_std_mps2 = (
+            imu.accel_noise_density_mps2_per_sqrthz * math.sqrt(rate_hz)
+        ) * np.asarray(imu.accel_noise_axis_gain)
         # Fixed errors of this unit, drawn once.
         gyro_bias = rng.normal(0.0, imu.gyro_turn_on_bias_std_radps, 3)
         accel_bias = rng.normal(0.0, imu.accel_turn_on_bias_std_mps2, 3)
@@ -181,7 +186,10 @@ class ImuModel:
         # The kernel's flat layout: one row per triad, in the order (ACCEL, GYRO).
         k = _kernels
         triad = self._triad = np.zeros((k.TRIADS, k.T_SIZE))
-        triad[:, k.T_NOISE_STD] = self.accel_noise_std_mps2, self.gyro_noise_std_radps
+        triad[:, k.T_NOISE_STD : k.T_NOISE_STD + 3] = (
+            self.accel_noise_std_mps2,
+            self.gyro_noise_std_radps,
+        )
         triad[:, k.T_BIAS_WALK] = (
             imu.accel_bias_random_walk_mps3_per_sqrthz,
             imu.gyro_bias_random_walk_radps2_per_sqrthz,

@@ -149,6 +149,10 @@ class ImuParams:
     self_heating_k: NonNegative
     #: Temperature at which the turn-on bias holds (factory calibration).
     reference_temperature_degc: Number
+    #: White noise of each sensor axis (x, y, z) relative to the density: a board's axes
+    #: need not be alike (the X500's accelerometer z is half as noisy at rest as x and y).
+    gyro_noise_axis_gain: NonNegative3 = (1.0, 1.0, 1.0)
+    accel_noise_axis_gain: NonNegative3 = (1.0, 1.0, 1.0)
 
 
 @table

@@ -337,17 +337,31 @@ def fit_vibration(
     imu = vehicle.imu
     stopped = rest_point(vehicle, measured)
     if stopped is not None:
-        # The densities that give the log's σ at rest through the same pipeline (the rotors
-        # stopped: white noise alone), one per triad: the RMS over the axes.
+        # The white noise that gives the log's σ at rest through the same pipeline (the
+        # rotors stopped: white noise alone, linear in its σ): a density per triad from the
+        # RMS over the axes, and an axis's own gain where its σ stands out of the triad's
+        # by more than the window can tell apart (twice a σ estimate's standard error).
+        alike = (1.0, 1.0, 1.0)
+        imu = replace(imu, gyro_noise_axis_gain=alike, accel_noise_axis_gain=alike)
+        vehicle = replace(vehicle, imu=imu)
         model = model_spectrum(vehicle, stopped, imu_rate_hz, stream_hz).sigma
         accel, gyro = (
             float(np.sqrt(np.mean(stopped.spectrum.sigma[t] ** 2) / np.mean(model[t] ** 2)))
             for t in (0, 1)
         )
+        samples = sum(end - start for start, end in stopped.windows_s) * stream_hz
+        resolvable = 2.0 / np.sqrt(2.0 * (samples - 1.0))
+        accel_gain, gyro_gain = (
+            _gains(np.where(np.abs(gain - 1.0) > resolvable, gain, 1.0))
+            for gain in (stopped.spectrum.sigma[t] / model[t] / d
+                         for t, d in enumerate((accel, gyro)))
+        )  # fmt: skip
         imu = replace(
             imu,
             gyro_noise_density_radps_per_sqrthz=imu.gyro_noise_density_radps_per_sqrthz * gyro,
             accel_noise_density_mps2_per_sqrthz=imu.accel_noise_density_mps2_per_sqrthz * accel,
+            gyro_noise_axis_gain=gyro_gain,
+            accel_noise_axis_gain=accel_gain,
         )
         vehicle = replace(vehicle, imu=imu)
     densities = (imu.gyro_noise_density_radps_per_sqrthz, imu.accel_noise_density_mps2_per_sqrthz)
@@ -423,6 +437,12 @@ def _mean_speed(vehicle: Vehicle):
     return speed
 
 
+def _gains(values: NDArray[np.float64]) -> tuple[float, float, float]:
+    """Per-axis gains as the vehicle file keeps them (3 decimals)."""
+    x, y, z = (round(float(v), 3) for v in values)
+    return x, y, z
+
+
 def vibration_toml(vehicle: Vehicle, measured: LogVibration, imu_rate_hz: float) -> str:
     """``[imu]`` densities and ``[vibration]`` operating-point lines for the vehicle file."""
     vib: VibrationParams = vehicle.vibration
@@ -438,6 +458,8 @@ def vibration_toml(vehicle: Vehicle, measured: LogVibration, imu_rate_hz: float)
         "[imu]",
         f"gyro_noise_density_radps_per_sqrthz = {imu.gyro_noise_density_radps_per_sqrthz:.4g}",
         f"accel_noise_density_mps2_per_sqrthz = {imu.accel_noise_density_mps2_per_sqrthz:.4g}",
+        f"gyro_noise_axis_gain = {list(imu.gyro_noise_axis_gain)}",
+        f"accel_noise_axis_gain = {list(imu.accel_noise_axis_gain)}",
         "[vibration]",
         "level_rotor_speed_radps = " + str([round(s, 1) for s in vib.level_rotor_speed_radps]),
     ]

@@ -41,8 +41,16 @@ class ReferenceImu:
     def __init__(self, vehicle, environment, rng, rate_hz):
         imu, vib = vehicle.imu, vehicle.vibration
         self.imu, self.vib, self.env, self.rng = imu, vib, environment, rng
-        self.accel_std = imu.accel_noise_density_mps2_per_sqrthz * math.sqrt(rate_hz)
-        self.gyro_std = imu.gyro_noise_density_radps_per_sqrthz * math.sqrt(rate_hz)
+        self.accel_std = (
+            imu.accel_noise_density_mps2_per_sqrthz
+            * math.sqrt(rate_hz)
+            * np.asarray(imu.accel_noise_axis_gain)
+        )
+        self.gyro_std = (
+            imu.gyro_noise_density_radps_per_sqrthz
+            * math.sqrt(rate_hz)
+            * np.asarray(imu.gyro_noise_axis_gain)
+        )
         self.period_s = 1.0 / rate_hz
         self.gyro_bias = rng.normal(0.0, imu.gyro_turn_on_bias_std_radps, 3)
         self.accel_bias = rng.normal(0.0, imu.accel_turn_on_bias_std_mps2, 3)

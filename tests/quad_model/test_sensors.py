@@ -67,6 +67,21 @@ def test_imu_white_noise_is_density_times_sqrt_rate(f450, variant, ideal_imu, ra
     )
 
 
+def test_imu_white_noise_axis_gains_scale_each_sensor_axis(f450, variant, ideal_imu):
+    """σ of axis a = density·√rate·gain[a] (the X500's accelerometer z is half as noisy)."""
+    gains = {"gyro_noise_axis_gain": (0.5, 1.0, 2.0), "accel_noise_axis_gain": (1.5, 1.0, 0.5)}
+    vehicle = variant(ideal_imu(f450, variant), imu=gains)
+    model = QuadModel(vehicle, np.random.default_rng(1))
+    imu = ImuModel(vehicle, model.environment, np.random.default_rng(2), 1000.0)
+    accel, gyro = imu_record(model, imu, [0.0] * 4, 4.0)
+    gyro_sigma = math.radians(0.005) * math.sqrt(1000.0)
+    accel_sigma = 400e-6 * G * math.sqrt(1000.0)
+    gyro_want = np.multiply(gyro_sigma, gains["gyro_noise_axis_gain"])
+    accel_want = np.multiply(accel_sigma, gains["accel_noise_axis_gain"])
+    np.testing.assert_allclose(gyro.std(axis=0), gyro_want, rtol=0.045)
+    np.testing.assert_allclose(accel.std(axis=0), accel_want, rtol=0.045)
+
+
 def test_vibration_raises_imu_noise_when_motors_spin(f450, variant, ideal_imu):
     vehicle = ideal_imu(f450, variant)
     vib = vehicle.vibration
