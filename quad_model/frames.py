@@ -206,5 +206,5 @@ def geodetic_to_ned(
 def pwm_to_throttle(pwm_us: ArrayLike) -> NDArray[np.float64]:
     """Normalized ESC throttle 0..1 from a pulse width in µs (clamped to the PWM range)."""
     pwm = np.asarray(pwm_us, dtype=float)
-    # minimum(maximum()) is np.clip's result at a third of its call cost (every rig frame).
+    # minimum(maximum()) is np.clip's result at two thirds of its call cost (every rig frame).
     return np.minimum(np.maximum((pwm - PWM_MIN_US) / (PWM_MAX_US - PWM_MIN_US), 0.0), 1.0)

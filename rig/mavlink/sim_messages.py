@@ -234,8 +234,9 @@ def actuator_controls_from_frame(frame: bytes, motor_count: int = 4) -> Actuator
     unsigned MAVLink 2 HIL_ACTUATOR_CONTROLS with a good checksum; None for anything else
     (the caller then hands it to pymavlink's parser, which also reports what is bad).
 
-    The one message the rig receives every frame, unpacked by hand: in the loop pymavlink's
-    parser cost 22 µs per answer (its code is cold by the time the answer comes), this 2.
+    The one message the rig receives every frame, unpacked by hand: in the PX4 loop at
+    250 Hz reading an answer took 24 µs through pymavlink's parser (its long path is cold
+    by the time the answer comes; 7 µs when hot) and takes 11 µs so (4 when hot).
     The layout, the checksum and its CRC_EXTRA come from pymavlink's own definitions; the
     tests check equality with its decoder.
     """
