@@ -41,8 +41,9 @@ from rig.scenarios.scenario import model_rate_for
 #: Above this the high-pass keeps vibration and drops the flight's own motion (as the
 #: credibility plans' σ tests).
 HIGHPASS_HZ = 5.0
-#: A motor command at or below this is idle (PX4's armed idle is command 0).
-IDLE_COMMAND_MAX = 0.02
+#: A motor command at or below this is idle: PX4's armed idle is command 0 (0.002 on two of
+#: the X500's motors); the first 10 Hz sample of its take-off ramp holds 0.008-0.019.
+IDLE_COMMAND_MAX = 0.005
 #: Climb and descent: airborne with |vz| averaged over 1 s at least this.
 VERTICAL_SPEED_MPS = 1.0
 #: A window starts this long after its state began: the props spin up, or coast down
@@ -267,13 +268,19 @@ def _clip(span: tuple[float, float], limits: tuple[float, float]) -> tuple[float
 
 
 def _longest(grid: NDArray, mask: NDArray, limits: tuple[float, float]):
+    """The longest span of ``mask`` over ``grid``, from its first to its last sample in
+    the state: the state is known only at the samples (``actuator_motors`` at 10 Hz), so a
+    span run on to the next sample could take in up to 0.1 s of the next state (the X500's
+    idle took in the start of the take-off's spin-up: accel x σ 14 % high)."""
     best = None
-    start = None
-    for t, ok in zip(grid, np.append(mask[:-1], False), strict=True):
-        if ok and start is None:
-            start = t
-        elif not ok and start is not None:
-            span = _clip((float(start), float(t)), limits)
+    start = last = None
+    # A sentinel sample out of the state closes a span that runs to the end.
+    for t, ok in zip(np.append(grid, np.inf), np.append(mask, False), strict=True):
+        if ok:
+            start = t if start is None else start
+            last = t
+        elif start is not None:
+            span = _clip((float(start), float(last)), limits)
             if span is not None and (best is None or span[1] - span[0] > best[1] - best[0]):
                 best = span
             start = None

@@ -64,14 +64,19 @@ def test_operating_points_of_the_x500_log(measured):
 def test_x500_vibration_matches_the_log_at_each_operating_point(measured, name):
     """The model's 200 Hz stream (800 Hz IMU on the thrust stand at the point's motor
     commands and voltage, 5 ms means, 5 Hz high-pass) against the log's: σ per axis and
-    the RMS of each band holding at least 40 % of an axis' power (5-50 or 50-100 Hz)."""
+    the RMS of each band holding at least 40 % of an axis' power (5-50 or 50-100 Hz).
+    Powers are averaged over four seeds: rotors at one command turn at one speed, so their
+    tones' relative phases (the seed's) stay put: one seed's idle σ alone came out at
+    0.68-1.42 of the log's."""
     vehicle = load_vehicle("x500_v2")
     point = measured.point(name)
-    model = model_spectrum(vehicle, point, IMU_RATE_HZ, measured.stream_rate_hz, seed=7)
+    runs = [model_spectrum(vehicle, point, IMU_RATE_HZ, measured.stream_rate_hz, seed=seed)
+            for seed in (0, 3, 7, 11)]  # fmt: skip
     real = point.spectrum
-    sigma_ratio = model.sigma / real.sigma
+    sigma_ratio = np.sqrt(np.mean([run.sigma**2 for run in runs], axis=0)) / real.sigma
+    band_rms = np.sqrt(np.mean([run.band_rms**2 for run in runs], axis=0))
     power_share = real.band_rms**2 / (real.band_rms**2).sum(axis=-1, keepdims=True)
-    band_ratio = (model.band_rms / real.band_rms)[power_share >= 0.4]
+    band_ratio = (band_rms / real.band_rms)[power_share >= 0.4]
     if name in FITTED_POINTS:
         np.testing.assert_allclose(sigma_ratio, 1.0, atol=FITTED_RTOL)
         np.testing.assert_allclose(band_ratio, 1.0, atol=FITTED_RTOL)
