@@ -16,6 +16,7 @@ Figures only, no pass/fail.
 
 from __future__ import annotations
 
+import math
 import statistics
 import tempfile
 from collections.abc import Callable, Iterator
@@ -72,7 +73,7 @@ def _case(build_root: Path, sensor_layer: str, imu_hz: int) -> Figure:
 
 def _median(runs: list[Figure], goal: str = "") -> Figure:
     """The median run's figure (its detail: its frame budget), with the range of all."""
-    failed = [run for run in runs if run.value != run.value]
+    failed = [run for run in runs if math.isnan(run.value)]
     if failed:
         return failed[0]
     middle = sorted(runs, key=lambda run: run.value)[len(runs) // 2]

@@ -127,7 +127,8 @@ def test_the_8s_quads_rest_noise_is_the_identified_density(quad_rest_and_spin):
     5 of its 1 kHz samples: white noise of one density comes out 10.9 % higher there."""
     sitl = np.convolve(PX4_SITL_STREAM, np.ones(4) / 4)  # one 200 Hz value from 800 Hz samples
     reference_over_sitl = np.sqrt(1000 / 5) / np.sqrt(800 * np.sum(sitl**2))
-    assert reference_over_sitl == pytest.approx(1.109, abs=0.001)
+    # By hand: the 6 weights (1, 3, 4, 4, 3, 1)/16 hold 52/256 of a white sample's power.
+    assert reference_over_sitl == pytest.approx(np.sqrt(200 / (800 * 52 / 256)))
     for triad in ("gyro", "accel"):
         real, sim = _sigmas(quad_rest_and_spin, "_rest", triad)
         assert len(real) == 3
