@@ -43,6 +43,7 @@ ticks longer than ``PWM_RESULT_COPY_CYCLES + 0.5`` system periods, which SensorT
 from __future__ import annotations
 
 from amaranth.hdl import (
+    Cat,
     ClockDomain,
     ClockSignal,
     DomainRenamer,
@@ -149,10 +150,16 @@ class HostWriter(wiring.Component):
         m = Module()
         index = Signal(range(self.max_words + 1))
         settle = Signal(range(3))
-        word = self.words[index]
+        # The words are taken at the request and shifted down one word per write, so the
+        # next word is always the lowest: selecting word `index` of the wide input instead
+        # would shift the whole input in every simulated cycle of every clock (Verilator
+        # evaluates logic fed by a top-level input at each step).
+        staged = Signal.like(self.words.as_value())
+        layout = self.words.shape().elem_shape
+        word = data.View(layout, staged[: layout.size])
         with m.FSM() as fsm:
             with m.State("IDLE"), m.If(self.request != self.acknowledge):
-                m.d.sync += index.eq(0)
+                m.d.sync += [index.eq(0), staged.eq(self.words)]
                 m.next = "WRITE"
             with m.State("WRITE"):
                 with m.If(index < self.count):
@@ -161,7 +168,7 @@ class HostWriter(wiring.Component):
                         self.write_data.eq(word.data),
                         self.write_en.eq(1),
                     ]
-                    m.d.sync += index.eq(index + 1)
+                    m.d.sync += [index.eq(index + 1), staged.eq(staged >> len(word.as_value()))]
                 with m.Else():
                     m.d.comb += self.commit.eq(1)
                     m.d.sync += settle.eq(2)
@@ -227,7 +234,11 @@ class HostReader(wiring.Component):
                 m.next = "READ"
             with m.State("READ"):  # one word per cycle (``read_data`` is combinational)
                 m.d.comb += self.read_addr.eq(address)
-                m.d.sync += [self.words[address].eq(self.read_data), address.eq(address + 1)]
+                # Each word enters at the top and the earlier ones move down, so word `i`
+                # ends at index `i`: writing `words[address]` in place would decode every
+                # index in every cycle.
+                shifted = Cat(self.words.as_value()[WORD_BITS:], self.read_data)
+                m.d.sync += [self.words.eq(shifted), address.eq(address + 1)]
                 with m.If(address == self.count - 1):
                     m.next = "DONE"
             with m.State("DONE"):
@@ -246,10 +257,11 @@ class UartPeer(wiring.Component):
     baud clock. A request sends ``tx[:tx_len]`` back to back at ``divider``, then keeps
     the clock running until the receiver's line has been idle for :data:`QUIET_BITS` bit
     times with nothing left to send; the acknowledge then publishes what was received
-    since the previous acknowledge (``rx[:rx_len]``, bytes past ``rx_depth`` counted in
-    ``rx_len`` but dropped) and ``line_cycles``: clock cycles from the first start bit's
-    falling edge to the strobe of the last byte (``fpga_hdl.buses.uart.line_cycles``
-    predicts it for the TLM twin). The receiver always listens, also between requests.
+    since the previous acknowledge (the last ``rx_len`` bytes of ``rx``, in order; bytes
+    past ``rx_depth`` counted in ``rx_len`` but dropped) and ``line_cycles``: clock
+    cycles from the first start bit's falling edge to the strobe of the last byte
+    (``fpga_hdl.buses.uart.line_cycles`` predicts it for the TLM twin). The receiver
+    always listens, also between requests.
 
     Attributes
     ----------
@@ -300,7 +312,10 @@ class UartPeer(wiring.Component):
             self.line_tx.eq(uart_tx.tx),
         ]
         # The receiving side, always on: bytes and the line's timing since the last publish.
-        received = Signal(data.ArrayLayout(8, self.rx_depth))
+        # A byte enters at the top of `received` and the older ones move down one place: a
+        # fixed shift, where writing byte `count` in place would decode all rx_depth
+        # places in every cycle (three quarters of a UART cycle's cost under Verilator).
+        received = Signal(8 * self.rx_depth)
         count = Signal(16)
         cycle = Signal(32)  # cycles since the first start bit's edge
         started, previous = Signal(), Signal(init=1)
@@ -312,7 +327,7 @@ class UartPeer(wiring.Component):
             m.d.sync += [started.eq(1), cycle.eq(1)]
         with m.If(uart_rx.stb):
             with m.If(count < self.rx_depth):
-                m.d.sync += received[count[: len(range(self.rx_depth))]].eq(uart_rx.data)
+                m.d.sync += received.eq(Cat(received[8:], uart_rx.data))
             m.d.sync += [count.eq(count + 1), last_cycles.eq(cycle)]
         # Silence on the line, in cycles, up to the quiet limit.
         quiet = Signal(32)

@@ -397,7 +397,7 @@ class NativeUart:
                 f"the GPS UART received {count} bytes in one exchange; the peer keeps "
                 f"{len(self._rx)}"
             )
-        data = ctypes.string_at(self._rx, count)
+        data = bytes(self._rx)[len(self._rx) - count :]  # newest at the top (UartPeer)
         return UartTransfer(data, cycles_to_us(self._line_cycles.value, self.clk_hz))
 
 

@@ -318,9 +318,9 @@ EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
 }
 
 // The GPS UART, on the UART clock alone: send `tx_len` bytes at `divider` cycles per bit,
-// then listen until the receiver's line rests; what arrived since the previous call is
-// copied to `rx` (up to `rx_bytes`), its count to `rx_len` and the line time of the last
-// byte (UART cycles) to `line_cycles`.
+// then listen until the receiver's line rests; the peer's receive buffer is copied to `rx`
+// (up to `rx_bytes`; what arrived since the previous call is its last `rx_len` bytes) and
+// the line time of the last byte (UART cycles) to `line_cycles`.
 EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_bytes,
                    uint32_t tx_len, uint8_t* rx, size_t rx_bytes, uint32_t* rx_len,
                    uint32_t* line_cycles) {

@@ -182,7 +182,8 @@ class HarnessUart:
                 f"the GPS UART received {count} bytes in one exchange; the peer keeps "
                 f"{self.rx_depth}"
             )
-        data = int(dut.uart_rx.value).to_bytes(self.rx_depth, "little")[:count]
+        # The peer keeps the newest bytes at the top of `rx` (UartPeer).
+        data = int(dut.uart_rx.value).to_bytes(self.rx_depth, "little")[self.rx_depth - count :]
         return UartTransfer(data, cycles_to_us(int(dut.uart_line_cycles.value), self.clk_hz))
 
 
