@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Coroutine, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any, Protocol, TypeVar
 
@@ -194,7 +194,11 @@ def host_port_inputs(
 class ChipHost(Protocol):
     """How samples, time and faults reach the chips (TLM: models; RTL: the host port)."""
 
-    async def load(self, frame: ChipFrame) -> None: ...
+    async def load(self, frame: ChipFrame) -> None:
+        """Load the frame's samples, time and faults. A host whose capture clock runs
+        during the bus transfers (the cocotb worker's) preloads the frame's PWM widths here
+        too, so it is only ever given whole frames."""
+        ...
 
     async def capture(
         self, pulses: tuple[Pulse, ...], now_us: int
@@ -205,11 +209,29 @@ class ChipHost(Protocol):
 
 class SensorLayer(Protocol):
     """What the loop needs of a sensor layer (:class:`TlmSensorLayer`, ``NativeSensorLayer``,
-    ``RtlSensorLayer``)."""
+    ``RtlSensorLayer``, :class:`BypassSensorLayer`).
+
+    A frame comes in two calls: :meth:`sense` with the samples (the loop makes it while
+    the autopilot computes its answer to the previous frame), then :meth:`finish` with the
+    PWM pulses that answer started. :meth:`frame` makes both at once.
+    """
 
     def start(self) -> None: ...
 
-    def frame(self, frame: ChipFrame) -> ChipReadout: ...
+    def sense(self, frame: ChipFrame) -> None:
+        """Load the frame's samples and run the drivers' sensor reads (``frame.pulses``
+        is not used: they come with :meth:`finish`)."""
+        ...
+
+    def finish(self, pulses: tuple[Pulse, ...]) -> ChipReadout:
+        """Feed the pulses that started since the previous frame, capture them: the
+        sensed frame's whole readout."""
+        ...
+
+    def frame(self, frame: ChipFrame) -> ChipReadout:
+        """One whole frame, pulses included (:meth:`sense`, then :meth:`finish`)."""
+        self.sense(frame)
+        return self.finish(frame.pulses)
 
     def close(self) -> None: ...
 
@@ -243,6 +265,7 @@ class SensorEngine:
         self._baro_phase_d1 = False  # False: a D2 (temperature) conversion is running
         self._d2 = 0
         self._baro_started = False
+        self._sensed: tuple[int, ChipReadout] | None = None  # (now_us, readout) until finish
 
     @staticmethod
     async def _boot_sleep(duration_us: int) -> None:
@@ -266,7 +289,17 @@ class SensorEngine:
             raise SensorLayerError(f"sensor start-up failed: {error}") from None
 
     async def frame(self, frame: ChipFrame) -> ChipReadout:
-        """Load the frame's samples, then read as PX4's drivers would at this time."""
+        """One whole frame: :meth:`sense`, then :meth:`finish` with the frame's pulses."""
+        await self.sense(frame)
+        return await self.finish(frame.pulses)
+
+    async def sense(self, frame: ChipFrame) -> None:
+        """Load the frame's samples, then read as PX4's drivers would at this time; the
+        readout waits in the engine for :meth:`finish`.
+
+        The sensor transfers never touch the PWM capture, so the loop runs them while the
+        autopilot computes the previous frame's answer (which sets this frame's pulses).
+        """
         await self.host.load(frame)
         if frame.gps is not None:
             await self.gps.receive(frame.now_us)
@@ -292,19 +325,28 @@ class SensorEngine:
                 baro = await self._baro_cycle()
             except BusError as error:
                 errors.append(("ms5611", str(error)))
-        widths_us, timed_out = await self.host.capture(frame.pulses, frame.now_us)
-        return ChipReadout(
+        readout = ChipReadout(
             accel_mps2=imu.accel_mps2,
             gyro_radps=imu.gyro_rads,
             imu_temperature_degc=imu.temperature_c,
             mag_gauss=mag,
             baro_pa_degc=baro,
-            pwm_widths_us=widths_us,
-            pwm_timed_out=timed_out,
+            pwm_widths_us=(),
+            pwm_timed_out=(),
             bus_errors=tuple(errors),
             gps=self.gps.poll(frame.now_us),
             range=ranged,
         )
+        self._sensed = (frame.now_us, readout)
+
+    async def finish(self, pulses: tuple[Pulse, ...]) -> ChipReadout:
+        """Feed the PWM pulses that started since the previous frame and read the capture
+        at the sensed frame's time: that frame's whole readout."""
+        if self._sensed is None:
+            raise SensorLayerError("finish() without a sensed frame: call sense() first")
+        (now_us, readout), self._sensed = self._sensed, None
+        widths_us, timed_out = await self.host.capture(pulses, now_us)
+        return replace(readout, pwm_widths_us=widths_us, pwm_timed_out=timed_out)
 
     async def _range_cycle(self) -> Range | None:
         """PX4's ll40ls ``RunImpl``: collect the acquisition started one cycle ago (none on
@@ -378,7 +420,7 @@ class TlmChips:
         return self.pwm.capture(pulses, now_us)
 
 
-class TlmSensorLayer:
+class TlmSensorLayer(SensorLayer):
     """``sensor_layer = "tlm"``: the engine in this process over :class:`TlmChips`."""
 
     def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
@@ -388,14 +430,17 @@ class TlmSensorLayer:
     def start(self) -> None:
         run_now(self.engine.start())
 
-    def frame(self, frame: ChipFrame) -> ChipReadout:
-        return run_now(self.engine.frame(frame))
+    def sense(self, frame: ChipFrame) -> None:
+        run_now(self.engine.sense(frame))
+
+    def finish(self, pulses: tuple[Pulse, ...]) -> ChipReadout:
+        return run_now(self.engine.finish(pulses))
 
     def close(self) -> None:
         """Nothing to release: the models live in this process."""
 
 
-class BypassSensorLayer:
+class BypassSensorLayer(SensorLayer):
     """No chips: the SI samples go straight into HIL_SENSOR and HIL_GPS (no receiver, no
     UART time) and the commanded pulse widths straight to the motors, as a bare simulator
     (Gazebo's) feeds PX4. For measuring what
@@ -403,15 +448,21 @@ class BypassSensorLayer:
 
     def __init__(self) -> None:
         self._widths_us = [0.0] * MOTOR_CHANNELS
+        self._sensed: ChipFrame | None = None
 
     def start(self) -> None:
         """Nothing to bring up."""
 
-    def frame(self, frame: ChipFrame) -> ChipReadout:
+    def sense(self, frame: ChipFrame) -> None:
+        self._sensed = frame
+
+    def finish(self, pulses: tuple[Pulse, ...]) -> ChipReadout:
+        frame, self._sensed = self._sensed, None
+        assert frame is not None, "the loop senses the frame first"
+        assert frame.si is not None, "the loop passes the samples"
         readings = frame.si
-        assert readings is not None, "the loop passes the samples"
         assert readings.imu is not None, "the IMU is due every frame"
-        for pulse in frame.pulses:
+        for pulse in pulses:
             if pulse.channel < MOTOR_CHANNELS:
                 self._widths_us[pulse.channel] = float(pulse.width_us)
         imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps

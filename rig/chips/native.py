@@ -39,7 +39,14 @@ from typing import TYPE_CHECKING
 
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
-from rig.chips.layer import ChipFrame, ChipReadout, SensorEngine, host_port_inputs, run_now
+from rig.chips.layer import (
+    ChipFrame,
+    ChipReadout,
+    SensorEngine,
+    SensorLayer,
+    host_port_inputs,
+    run_now,
+)
 from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmTimingError, replay_periods
 from rig.errors import CosimError
 
@@ -61,7 +68,6 @@ class NativeChips:
         self._next_edge = 0  # the capture clock's next edge, in rig ticks
         self._next_start_us = 0  # the next PWM period start not replayed yet
         self._loaded: list[int] = [0] * CHANNELS  # widths (ticks) in the preload register
-        self._later: list[tuple[int, list[int]]] = []  # this frame's further periods
         self._read_us = 0  # the previous frame's time, and the system cycles then
         self._read_cycles = 0
 
@@ -92,12 +98,6 @@ class NativeChips:
         return now_us * 1_000_000 // self.tick_ps
 
     async def load(self, frame: ChipFrame) -> None:
-        periods, self._next_start_us = replay_periods(
-            frame.pulses, frame.now_us, self._next_start_us, self.period_us, self.tick_us
-        )
-        if periods:
-            self._preload(*periods[0])
-        self._later = periods[1:]
         samples, faults = host_port_inputs(frame)
         self.harness.host.load(samples, now_us=frame.now_us, faults=faults)
 
@@ -117,9 +117,12 @@ class NativeChips:
     async def capture(
         self, pulses: tuple[Pulse, ...], now_us: int
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
-        """Replay this frame's further periods, run the capture clock to ``now_us``, read."""
+        """Replay this frame's PWM periods, run the capture clock to ``now_us``, read."""
+        periods, self._next_start_us = replay_periods(
+            pulses, now_us, self._next_start_us, self.period_us, self.tick_us
+        )
         previous_us = None
-        for start_us, widths in self._later:
+        for start_us, widths in periods:
             if previous_us is not None and widths != self._loaded:
                 self._run_to(self._ticks(previous_us))  # past the edge that took the last
             self._preload(start_us, widths)
@@ -155,7 +158,7 @@ class NativeChips:
         self._read_us, self._read_cycles = now_us, cycles
 
 
-class NativeSensorLayer:
+class NativeSensorLayer(SensorLayer):
     """The chips as compiled RTL in this process (see the module docstring).
 
     ``pwm_hz`` is the autopilot's PWM rate (its timer period is replayed by the harness's
@@ -192,9 +195,15 @@ class NativeSensorLayer:
         except Exception as error:  # one line, as the cocotb layer reports its worker's
             raise CosimError(f"the RTL co-simulation failed: {_one_line(error)}") from error
 
-    def frame(self, frame: ChipFrame) -> ChipReadout:
+    def sense(self, frame: ChipFrame) -> None:
         try:
-            return run_now(self.engine.frame(frame))
+            run_now(self.engine.sense(frame))
+        except Exception as error:
+            raise CosimError(f"the RTL co-simulation failed: {_one_line(error)}") from error
+
+    def finish(self, pulses: tuple[Pulse, ...]) -> ChipReadout:
+        try:
+            return run_now(self.engine.finish(pulses))
         except Exception as error:
             raise CosimError(f"the RTL co-simulation failed: {_one_line(error)}") from error
 

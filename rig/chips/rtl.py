@@ -30,6 +30,7 @@ import os
 import socket
 import tempfile
 import threading
+from dataclasses import replace
 from pathlib import Path
 
 from rig.chips.channel import (
@@ -41,8 +42,8 @@ from rig.chips.channel import (
     receive_message,
     send_message,
 )
-from rig.chips.layer import ChipFrame, ChipReadout
-from rig.chips.pwm import PWM_TICK_HZ
+from rig.chips.layer import ChipFrame, ChipReadout, SensorLayer
+from rig.chips.pwm import PWM_TICK_HZ, Pulse
 from rig.errors import CosimError
 
 #: ``RunOptions.sensor_layer`` that selects this layer instead of the compiled one.
@@ -52,7 +53,7 @@ WORKER_DIR = Path(__file__).resolve().parent
 DEFAULT_SIMULATOR = "verilator"
 
 
-class RtlSensorLayer:
+class RtlSensorLayer(SensorLayer):
     """The chips as RTL in a cocotb simulator process, behind the binary channel.
 
     ``pwm_hz`` is the autopilot's PWM rate (its timer period is replayed by the harness's
@@ -74,6 +75,7 @@ class RtlSensorLayer:
         self.pwm_tick_hz = pwm_tick_hz
         self.frame_timeout_s = frame_timeout_s
         self.start_timeout_s = start_timeout_s
+        self._sensed: ChipFrame | None = None  # sense() keeps the frame for finish()
         self._folder = tempfile.TemporaryDirectory(prefix="rig-cosim-")
         path = os.path.join(self._folder.name, "channel.sock")
         self._server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -146,8 +148,16 @@ class RtlSensorLayer:
         cycles (its first steps at 9600 baud), hence its own, longer bound."""
         self._request(encode_start(self.pwm_period_us), self.start_timeout_s)
 
-    def frame(self, frame: ChipFrame) -> ChipReadout:
-        return decode_readout(self._request(encode_frame(frame)))
+    def sense(self, frame: ChipFrame) -> None:
+        """Kept for :meth:`finish`: under cocotb the capture clock runs through the bus
+        transfers, so the worker needs the frame's pulses before its first transfer."""
+        self._sensed = frame
+
+    def finish(self, pulses: tuple[Pulse, ...]) -> ChipReadout:
+        frame, self._sensed = self._sensed, None
+        if frame is None:
+            raise CosimError("finish() without a sensed frame: call sense() first")
+        return decode_readout(self._request(encode_frame(replace(frame, pulses=pulses))))
 
     def close(self) -> None:
         """Ask the simulator to finish (it writes its results), then release everything."""

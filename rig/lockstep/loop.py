@@ -66,7 +66,7 @@ from rig.chips.layer import (
     TlmSensorLayer,
     gps_fix,
 )
-from rig.chips.pwm import PwmOutput, throttle_from_capture
+from rig.chips.pwm import Pulse, PwmOutput, throttle_from_capture
 from rig.errors import RigError, ScenarioError
 from rig.lockstep.pacing import Pacer
 from rig.logs.rig_log import RigLog
@@ -370,12 +370,13 @@ class _Loop:
         pending: list[Action] = []
         clock = time.perf_counter
         truth, readings = self._advance(1)
+        self._sense(1, readings)
         for frame in range(1, frames_total + 1):
             started = clock()
             self.run_us = frame * self.frame_us
             self.time_us = self.clock_start_us + self.run_us
             time_s = self.run_us / 1e6
-            chip_frame, out = self._read_chips(readings)
+            pulses, out = self._finish()
             read = clock()
             messages = self._sensor_messages(out)
             if link.state_interval_us and self.time_us >= state_next_us:
@@ -396,16 +397,19 @@ class _Loop:
             link.send_frame(self.time_us, messages)
             # While the autopilot computes its answer, do what does not depend on it: log
             # this frame, step the model to the next one (its throttle is the PWM captured
-            # up to now) and sample its sensors. The answer only sets the PWM widths that
-            # the next frame's pulses carry, so the result is the same as in strict order.
+            # up to now), sample its sensors and read them through the chips. The answer
+            # only sets the PWM widths that the next frame's pulses carry, and the sensor
+            # transfers never touch the PWM capture, so the result is the same as in
+            # strict order.
             logging = clock()
-            self._log_readings(readings, chip_frame, out)
+            self._log_readings(readings, pulses, out)
             if frame % truth_every == 0:
                 self.log.truth(self.time_us, truth)
             self._spent_s["logging"] += clock() - logging
             this_truth = truth
             if frame < frames_total:
                 truth, readings = self._advance(frame + 1)
+                self._sense(frame + 1, readings)
             controls = link.answer(self.time_us)
             if controls is not None:
                 answered = clock()
@@ -434,12 +438,13 @@ class _Loop:
         self._spent_s["sensor physics"] += time.perf_counter() - modelled
         return truth, readings
 
-    def _read_chips(self, readings: SensorReadings) -> tuple[ChipFrame, ChipReadout]:
-        """Load the samples into the chips, read them as PX4's drivers do, capture the PWM."""
+    def _sense(self, frame: int, readings: SensorReadings) -> None:
+        """Load ``frame``'s samples into the chips and read them as PX4's drivers do; the
+        PWM capture waits for :meth:`_finish`."""
+        started = time.perf_counter()
         imu, mag, baro = readings.imu, readings.mag, readings.baro
-        pulses = self.pwm.pulses(self.run_us + 1, self.faults.pwm_dropped())
         chip_frame = ChipFrame(
-            now_us=self.run_us,
+            now_us=frame * self.frame_us,
             imu=Mpu6000Sample.from_si(imu.accel_mps2, imu.gyro_radps, imu.temperature_degc),
             mag=None if mag is None else sample_from_field_gauss(mag.field_gauss),
             baro_d1_d2=None
@@ -447,13 +452,19 @@ class _Loop:
             else raw_from_si(baro.pressure_pa, baro.temperature_degc),
             read_mag=mag is not None,
             faults=self.faults.chip_faults(),
-            pulses=tuple(pulses),
             si=readings,
             gps=None if readings.gps is None else receiver_solution(
                 gps_fix(readings.gps), readings.gps.epoch_us, self.faults.gps_fault()),
             range=None if readings.range is None else sample_from_range(readings.range.distance_m),
         )  # fmt: skip
-        out = self.layer.frame(chip_frame)
+        self.layer.sense(chip_frame)
+        self._spent_s["chips"] += time.perf_counter() - started
+
+    def _finish(self) -> tuple[tuple[Pulse, ...], ChipReadout]:
+        """Feed the pulses the autopilot's last answer started and capture the PWM: the
+        sensed frame's readout, and the pulses."""
+        pulses = tuple(self.pwm.pulses(self.run_us + 1, self.faults.pwm_dropped()))
+        out = self.layer.finish(pulses)
         self._delivered = out
         for chip, error in out.bus_errors:
             self.log.bus_error(chip)
@@ -462,11 +473,11 @@ class _Loop:
         if capture != self._capture:  # it changes only at pulse ends and timeouts
             self._capture = capture
             self.throttle = throttle_from_capture(*capture)
-        return chip_frame, out
+        return pulses, out
 
-    def _log_readings(self, readings: SensorReadings, chip_frame: ChipFrame,
+    def _log_readings(self, readings: SensorReadings, pulses: tuple[Pulse, ...],
                       out: ChipReadout) -> None:  # fmt: skip
-        if chip_frame.pulses:
+        if pulses:
             self.log.pwm(self.time_us, out.pwm_widths_us)
         self.log.imu(self.time_us, self.frame_us, out.accel_mps2, out.gyro_radps)
         if out.mag_gauss is not None:

@@ -311,3 +311,14 @@ def test_bypass_layer_passes_the_si_samples_and_commanded_widths():
     assert out.baro_pa_degc == (95_500.0, 20.0)
     assert out.pwm_widths_us == (1500.0, 1501.0, 1502.0, 1503.0)
     assert out.pwm_timed_out == (False,) * MOTOR_CHANNELS
+
+
+def test_a_finish_without_a_sensed_frame_is_a_one_line_error():
+    """The loop's two calls per frame come in order; out of order is an error, not a stale
+    readout."""
+    from rig.chips.layer import SensorLayerError, TlmSensorLayer
+
+    layer = TlmSensorLayer()
+    layer.start()
+    with pytest.raises(SensorLayerError, match=r"^finish\(\) without a sensed frame"):
+        layer.finish(())
