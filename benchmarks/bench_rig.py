@@ -13,8 +13,9 @@ of ``tests/rig`` (answers each frame at a fixed throttle, doing almost no work),
 shows the rig's own cost. The budget splits each frame's wall time (µs) into the parts of
 :class:`rig.lockstep.loop.FrameBudget`. The lockstep is sequential, so the autopilot's compute
 adds to the frame: it shows as ``wait`` (blocked on the answer beyond the model step,
-sensor sampling and logging the rig overlaps with it) and inside ``send`` (the send wakes
-the autopilot, which often runs on the sender's core before the send returns).
+sensor sampling, the next frame's chip reads and logging the rig overlaps with it) and
+inside ``send`` (the send wakes the autopilot, which often runs on the sender's core
+before the send returns).
 
 20× is 50 µs per frame at 1 kHz and 200 µs at 250 Hz, rig and autopilot together. The
 model step and sensor physics (quad_model, numpy per sample) alone take 110-150 µs, the
