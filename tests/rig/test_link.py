@@ -168,6 +168,23 @@ def test_nan_motor_command_is_a_protocol_error(listening_link, start_double):
         _run_until_failure(link)
 
 
+def test_freewheeling_frames_go_out_at_most_at_real_time(listening_link, start_double):
+    """While the peer boots (200 frames here) the rig streams no faster than real time, so
+    a boot's simulated length is its wall time, whatever the machine's speed or load."""
+    link = listening_link()
+    start_double(link.ports.simulator_tcp, "px4", "--after", "200")
+    link.accept()
+    started = time.monotonic()
+    answers = []
+    while not answers or answers[-1] is None:
+        answers += _run_frames(link, 1, start=len(answers) + 1)
+    freewheel_s = time.monotonic() - started
+    assert link.stats.freewheel_frames >= 200
+    # frame k waits until (k - 1) frame times after the first; the last one, answered,
+    # returns early
+    assert freewheel_s >= (link.stats.freewheel_frames - 2) * FRAME_US / 1e6
+
+
 def test_nobody_connecting_is_a_clear_error(listening_link):
     link = listening_link(LinkTimeouts(connect_s=0.2))
     with pytest.raises(AutopilotNotConnected, match=r"no autopilot connected to TCP .* 0\.2 s"):
