@@ -70,11 +70,11 @@ def px4_cpu() -> int | None:
     cpus = sorted(os.sched_getaffinity(0))
     if len(cpus) < 2:
         return None
-    taken = Counter(_cpus_of_pinned_px4())
+    taken = Counter(cpus_of_pinned_px4())
     return min(reversed(cpus), key=lambda cpu: taken[cpu])
 
 
-def _cpus_of_pinned_px4() -> Iterator[int]:
+def cpus_of_pinned_px4() -> Iterator[int]:
     """The CPU of each running PX4 process held to a single CPU."""
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():

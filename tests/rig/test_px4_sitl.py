@@ -10,13 +10,20 @@ import signal
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 import pytest
 import pyulog
 
-from rig.autopilots.px4 import PX4_DIR_ENV, Px4Sitl, airframe_parameters, find_px4
+from rig.autopilots.px4 import (
+    PX4_DIR_ENV,
+    Px4Sitl,
+    airframe_parameters,
+    cpus_of_pinned_px4,
+    find_px4,
+)
 from rig.errors import RigError
 from rig.lockstep.loop import RunOptions, run_scenario
 from rig.mavlink.sim_messages import ACCEL_FIFO_SCALE_MPS2, GYRO_FIFO_SCALE_RADPS
@@ -338,16 +345,20 @@ def test_every_px4_thread_runs_on_the_one_cpu_the_rig_chose(tmp_path, free_insta
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: PX4 is not pinned")
 def test_two_px4_side_by_side_run_on_different_cpus(tmp_path, free_instance, px4_dir):
-    """A second PX4 (a campaign's, a parallel test's) goes beside the first, not onto it.
-    Both boot and wait for their simulator, which never comes."""
+    """A second PX4 (a campaign's, a parallel test's) goes beside the first, not onto it:
+    onto a CPU with the fewest PX4s held to it, the first counted (and any other test's
+    running meanwhile). Both boot and wait for their simulator, which never comes."""
     first = Px4Sitl(find_px4(px4_dir), tmp_path / "a", free_instance(), {})
     try:
         first.start()
         second = Px4Sitl(find_px4(px4_dir), tmp_path / "b", first.instance + 1, {})
         try:
+            taken = Counter(cpus_of_pinned_px4())
             second.start()
-            assert {first.cpu, second.cpu} <= set(os.sched_getaffinity(0))
-            assert first.cpu != second.cpu
+            cpus = os.sched_getaffinity(0)
+            assert {first.cpu, second.cpu} <= cpus
+            assert taken[first.cpu] >= 1
+            assert taken[second.cpu] == min(taken[cpu] for cpu in cpus)
         finally:
             second.stop()
     finally:
