@@ -2,8 +2,8 @@
 
 Why: in the closed loop at PX4's rates (IMU 1 kHz, PWM capture tick 1 µs) a frame needs
 about 1,000 capture-clock cycles and 600 system cycles (an MPU-6000 burst at 5 MHz SCLK,
-at 100 Hz an IST8310 read at 400 kHz). Under cocotb the harness's gated Verilog clocks run
-as Verilator ``--timing`` coroutines and every transaction wakes Python twice through
+every 20 ms an IST8310 read at 400 kHz). Under cocotb the harness's gated Verilog clocks
+run as Verilator ``--timing`` coroutines and every transaction wakes Python twice through
 the VPI: 1.8 ms of wall time per 1 ms frame. Here the same generated Verilog of
 :class:`~fpga_hdl.cosim.harness.CosimHarness` is Verilated to C++ without ``--timing`` and
 linked with ``native_harness.cpp`` (a C ABI: reset, one SPI transfer, one I2C write/read,

@@ -4,9 +4,10 @@ Per lockstep frame the rig hands the chips a :class:`ChipFrame` (new samples as 
 chips' raw words, simulated time, bus faults, the PWM pulses that ended) and gets back a
 :class:`ChipReadout` decoded by fpga_hdl's autopilot-side drivers, which issue PX4's own
 transactions: an MPU-6000 burst every frame, an IST8310 read + single-measurement trigger
-at the mag rate, the MS5611 convert/read cycle every 10 ms (D2 then D1, so a pressure every
-20 ms), and the PWM capture's widths. Quantization, full-scale saturation, conversion
-latency and bus faults therefore reach the autopilot as on the real rig.
+at the mag rate (PX4's driver: every 20 ms, the default), the MS5611 convert/read cycle
+every 10 ms (D2 then D1, so a pressure every 20 ms), and the PWM capture's widths.
+Quantization, full-scale saturation, conversion latency and bus faults therefore reach the
+autopilot as on the real rig.
 
 Rangefinder: the LIDAR-Lite v3 shares the IST8310's I2C bus. PX4's ll40ls driver runs on
 the frames that carry a rangefinder sample (the loop samples the physics at the driver's

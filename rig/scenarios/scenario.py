@@ -106,7 +106,7 @@ class Rates:
 
     model_hz: PositiveInteger | None = None
     imu_hz: PositiveInteger = 1000
-    mag_hz: PositiveInteger = 100
+    mag_hz: PositiveInteger = 50  # PX4's IST8310 driver: read + next trigger every 20 ms
     baro_hz: PositiveInteger = 50
     pwm_hz: PositiveInteger = 400
     pwm_tick_hz: PositiveInteger = round(PWM_TICK_HZ)  # 1 µs, the unit PX4 uses for PWM widths

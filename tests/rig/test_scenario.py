@@ -31,7 +31,7 @@ def test_defaults_are_px4_sitl_home_and_the_contract_rates():
     scenario = scenario_from_dict(MINIMAL)
     assert scenario.environment.home == PX4_DEFAULT_HOME
     assert (scenario.rates.model_hz, scenario.rates.imu_hz) == (5000, 1000)
-    assert (scenario.rates.mag_hz, scenario.rates.baro_hz) == (100, 50)
+    assert (scenario.rates.mag_hz, scenario.rates.baro_hz) == (50, 50)
     assert scenario.rates.pwm_hz == 400
     assert scenario.rates.frame_us == 1000
     assert scenario.sensor_layer == "tlm"
