@@ -108,15 +108,17 @@ class PwmCaptureModel:
         return max(0, math.ceil((time_s - first_edge_s) * self.tick_hz - 1e-9))
 
 
+#: The host-port keys of each channel's width and period, built once: a read per frame.
+_CHANNEL_KEYS = tuple(
+    (ch, ("pwm", f"width_ticks_{ch}"), ("pwm", f"period_ticks_{ch}")) for ch in range(CHANNELS)
+)
+
+
 def channel_captures(results: Mapping[tuple[str, str], int]) -> list[ChannelCapture]:
     """The PWM capture's per-channel results out of the host port's result words (the
     cocotb and the compiled harness read the same words)."""
     timeout = results[("pwm", "timeout")]
     return [
-        ChannelCapture(
-            results[("pwm", f"width_ticks_{ch}")],
-            results[("pwm", f"period_ticks_{ch}")],
-            bool(timeout >> ch & 1),
-        )
-        for ch in range(CHANNELS)
+        ChannelCapture(results[width], results[period], bool(timeout >> ch & 1))
+        for ch, width, period in _CHANNEL_KEYS
     ]
