@@ -51,13 +51,13 @@ class LinkTimeouts:
 
     ``answer_s`` is wall time for one lockstep answer: generous, because a debugger or a
     loaded machine can pause the autopilot, yet short enough that a hang is reported.
-    ``first_answer_sim_s`` bounds the freewheel phase in simulated time (PX4 answered
-    after 52–112 ms when it was measured).
+    ``first_answer_sim_s`` bounds the freewheel phase in simulated time, which runs at real
+    time (PX4 answered after 30–112 ms when it was measured).
     """
 
     connect_s: float = 60.0
     answer_s: float = 10.0
-    first_answer_sim_s: float = 30.0
+    first_answer_sim_s: float = 10.0
 
     def __post_init__(self) -> None:
         for name in ("connect_s", "answer_s", "first_answer_sim_s"):

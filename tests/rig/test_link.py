@@ -30,7 +30,7 @@ def _run_frames(link, count, start=1):
 
 def _run_until_failure(link):
     """Frames until the link raises: a slow peer may first answer after many freewheeling
-    frames, so no fixed count is enough; the freewheel bound (30 s simulated) ends it."""
+    frames, so no fixed count is enough; the freewheel bound (10 s simulated) ends it."""
     _run_frames(link, 40_000)
 
 
