@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Coroutine, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, TypeVar
 
@@ -266,7 +266,8 @@ class SensorEngine:
         self._baro_phase_d1 = False  # False: a D2 (temperature) conversion is running
         self._d2 = 0
         self._baro_started = False
-        self._sensed: tuple[int, ChipReadout] | None = None  # (now_us, readout) until finish
+        #: (now_us, the readout's sensor fields) from sense() until finish()
+        self._sensed: tuple[int, dict[str, Any]] | None = None
 
     @staticmethod
     async def _boot_sleep(duration_us: int) -> None:
@@ -326,28 +327,26 @@ class SensorEngine:
                 baro = await self._baro_cycle()
             except BusError as error:
                 errors.append(("ms5611", str(error)))
-        readout = ChipReadout(
-            accel_mps2=imu.accel_mps2,
-            gyro_radps=imu.gyro_rads,
-            imu_temperature_degc=imu.temperature_c,
-            mag_gauss=mag,
-            baro_pa_degc=baro,
-            pwm_widths_us=(),
-            pwm_timed_out=(),
-            bus_errors=tuple(errors),
-            gps=self.gps.poll(frame.now_us),
-            range=ranged,
-        )
-        self._sensed = (frame.now_us, readout)
+        sensed = {
+            "accel_mps2": imu.accel_mps2,
+            "gyro_radps": imu.gyro_rads,
+            "imu_temperature_degc": imu.temperature_c,
+            "mag_gauss": mag,
+            "baro_pa_degc": baro,
+            "bus_errors": tuple(errors),
+            "gps": self.gps.poll(frame.now_us),
+            "range": ranged,
+        }
+        self._sensed = (frame.now_us, sensed)
 
     async def finish(self, pulses: tuple[Pulse, ...]) -> ChipReadout:
         """Feed the PWM pulses that started since the previous frame and read the capture
         at the sensed frame's time: that frame's whole readout."""
         if self._sensed is None:
             raise SensorLayerError("finish() without a sensed frame: call sense() first")
-        (now_us, readout), self._sensed = self._sensed, None
+        (now_us, sensed), self._sensed = self._sensed, None
         widths_us, timed_out = await self.host.capture(pulses, now_us)
-        return replace(readout, pwm_widths_us=widths_us, pwm_timed_out=timed_out)
+        return ChipReadout(**sensed, pwm_widths_us=widths_us, pwm_timed_out=timed_out)
 
     async def _range_cycle(self) -> Range | None:
         """PX4's ll40ls ``RunImpl``: collect the acquisition started one cycle ago (none on
