@@ -9,8 +9,8 @@ stamped with its own ``time_usec``. Stale answers (to frames sent while freewhee
 consumed on the way, so once lockstep is established the autopilot is never behind.
 Freewheeling frames go out at most at real time, as Gazebo streams them: PX4's boot takes
 wall time, and a faster stream only stretches it in simulated time, by as much as the
-machine happens to be loaded (1.07 s instead of 0.05–0.45 s once, with two test workers
-beside it).
+machine happens to be loaded (streamed as fast as the rig could: 0.15–0.6 s, and 1.07 s
+once with two test workers beside it; at real time 30–60 ms).
 
 The watchdog turns every way the autopilot can fail into one :class:`AutopilotStalled`
 line that says which side stalled: the link closed, the autopilot process exited, or no
