@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -177,6 +178,35 @@ def test_same_seed_gives_identical_rig_log(tmp_path, free_instance):
     assert not np.array_equal(
         data(first, "sensor_combined")["gyro_rad[0]"], data(other, "sensor_combined")["gyro_rad[0]"]
     )
+
+
+def test_reading_the_sensors_while_the_autopilot_computes_changes_nothing(
+    tmp_path, free_instance, monkeypatch
+):
+    """The loop senses frame k+1 before the answer to frame k, with frame k+1's samples:
+    the same log as a layer that does each whole frame at once, after the answer (the
+    strict order)."""
+    import rig.lockstep.loop as loop
+    from rig.chips.layer import TlmSensorLayer, run_now
+
+    class StrictOrder(TlmSensorLayer):
+        def sense(self, frame):
+            assert frame.si.imu.time_us == frame.now_us, "the frame's own samples"
+            self._frame = frame
+
+        def finish(self, pulses):
+            return run_now(self.engine.frame(replace(self._frame, pulses=pulses)))
+
+    spin = ("--behaviour", "px4", "--throttle", "0.6", "--arm-after", "100")
+    _, overlapped, _ = fly(tmp_path, free_instance, *spin, name="overlapped", seed=7)
+    monkeypatch.setattr(loop, "TlmSensorLayer", StrictOrder)
+    _, strict, _ = fly(tmp_path, free_instance, *spin, name="strict", seed=7)
+    for topic in ("sensor_combined", "sensor_mag", "sensor_baro", "actuator_outputs",
+                  "vehicle_local_position_groundtruth"):  # fmt: skip
+        a, b = data(overlapped, topic), data(strict, topic)
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=f"{topic}.{key}")
 
 
 def test_killed_autopilot_ends_the_run_with_a_clear_message_and_a_readable_log(
