@@ -276,6 +276,9 @@ class Replay:
     parameters: dict[str, float | int]  # applied, as the log has them
     skipped: tuple[SkippedParameter, ...]
     unknown_parameter_count: int
+    #: The heading flown from the start: the log's at --start plus every estimator reset
+    #: after it (``heading_resets``), so the vehicle points where the real one did once its
+    #: estimator had corrected itself. Sticks are body-frame: a wrong heading turns them.
     yaw_rad: float
     home: GeoPoint | None
     real_arm_s: float | None
@@ -311,6 +314,9 @@ class Replay:
     #: (log s, home): where and when the real PX4 moved its home while armed
     #: (:meth:`_FlightLog.home_moves`); a PX4 replay sets each with DO_SET_HOME.
     home_moves: tuple[tuple[float, GeoPoint], ...] = ()
+    #: (log s, rad): the log's estimator heading resets after --start
+    #: (:meth:`_FlightLog.heading_resets`), taken into the start heading.
+    heading_resets: tuple[tuple[float, float], ...] = ()
 
     @property
     def px4(self) -> bool:
@@ -437,6 +443,17 @@ class Replay:
                     f"{self.real_arm_s:.3f} s (the autopilot's start-up)",
                 )
             )
+        notes += [
+            ("info", f"replay: the log's estimator reset its heading by "
+                     f"{math.degrees(delta):+.1f}° at {time_s:.3f} s (a correction, not a turn)")
+            for time_s, delta in self.heading_resets
+        ]  # fmt: skip
+        if self.heading_resets:
+            notes.append((
+                "info",
+                f"replay: the vehicle starts at heading {math.degrees(self.yaw_rad):.1f}°, "
+                "the log's at --start plus its estimator's resets",
+            ))  # fmt: skip
         if self.initial_battery_voltage_v is None:
             notes.append(("warn", "replay: the battery starts full (no battery_status in the log)"))
         if self.air_density_kgpm3 is None:
@@ -569,6 +586,10 @@ class Replay:
             ],
             "log_warnings": list(self.log_warnings),
             "start_yaw_deg": math.degrees(self.yaw_rad),
+            "heading_resets": [
+                {"time_s": time_s, "delta_deg": math.degrees(delta)}
+                for time_s, delta in self.heading_resets
+            ],
             "home": None
             if self.home is None
             else {
@@ -664,6 +685,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
     home_moves = log.home_moves(home, real_arm_s, disarm_s or end_s) if px4 else ()
     if any(e.commanded and e.nav_state == NAV_STATE_MISSION for e in events):
         mission, mission_notes = log.flown_mission(home, bool(home_moves))
+    heading_resets = log.heading_resets(start_s, end_s)
     sticks = None
     if px4:
         sticks = log.sticks(start_s, end_s)
@@ -688,7 +710,10 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         parameters=parameters,
         skipped=skipped,
         unknown_parameter_count=unknown,
-        yaw_rad=log.heading_at(start_s),
+        yaw_rad=math.remainder(
+            log.heading_at(start_s) + sum(delta for _, delta in heading_resets), math.tau
+        ),
+        heading_resets=heading_resets,
         home=home,
         real_arm_s=real_arm_s,
         arm_s=arm_s,
@@ -1000,6 +1025,25 @@ class _FlightLog:
                 f"{time_s:g} s (the start heading)"
             )
         return heading
+
+    def heading_resets(self, start_s: float, end_s: float) -> tuple[tuple[float, float], ...]:
+        """(log s, rad): each jump the estimator made in its heading after ``start_s``.
+
+        A reset is the estimator correcting itself (EKF2's in-flight magnetometer alignment
+        once airborne, away from the ground's iron; a switch of estimator instance), not the
+        vehicle turning: the X500's heading jumps 8.9° at 415.1 s, 2 s after take-off. Empty
+        where the log predates ``heading_reset_counter``.
+        """
+        data = self.topics.get("vehicle_local_position", {})
+        if "heading_reset_counter" not in data or "delta_heading" not in data:
+            return ()
+        time_s = data["timestamp"] / 1e6
+        jumps = np.flatnonzero(np.diff(data["heading_reset_counter"]) != 0) + 1
+        return tuple(
+            (float(time_s[i]), float(data["delta_heading"][i]))
+            for i in jumps
+            if start_s < time_s[i] <= end_s and math.isfinite(data["delta_heading"][i])
+        )
 
     def air_density(self, start_s: float, end_s: float) -> float | None:
         """Mean vehicle_air_data.rho over the replay (None: not logged or not plausible)."""
@@ -1322,11 +1366,30 @@ class _FlightLog:
         not control (vx, vy, vz before take-off, thrust in some modes), and the replay must
         still command something there; before any finite value a velocity is 0 (the vehicle
         is landed at the start) and a rate or thrust is 0. Yaw stays NaN (not controlled).
+        Set-points logged before an estimator heading reset are turned by the resets after
+        them, into the frame the replay starts in (:meth:`heading_resets`).
         """
         name, fields = _DRIVE_FIELDS[drive]
         data = self.topic(name, f"needed by --drive {drive}", fields)
         times_s = data["timestamp"] / 1e6
         values = np.column_stack([data[f].astype(float) for f in fields])
+        resets = self.heading_resets(start_s, end_s)
+        turn = np.zeros_like(times_s)
+        for reset_s, delta in resets:
+            turn[times_s < reset_s] += delta
+        if drive == "velocity":
+            cos, sin = np.cos(turn), np.sin(turn)
+            values[:, 0], values[:, 1] = (
+                cos * values[:, 0] - sin * values[:, 1],
+                sin * values[:, 0] + cos * values[:, 1],
+            )
+            values[:, 3] = np.remainder(values[:, 3] + turn + np.pi, 2 * np.pi) - np.pi
+        elif drive == "attitude":  # q_d ← (a turn about NED down) ⊗ q_d
+            w, x, y, z = values[:, :4].T
+            c, s = np.cos(turn / 2), np.sin(turn / 2)
+            values[:, :4] = np.column_stack(
+                (c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w)
+            )
         if drive != "velocity":
             values[:, -1] = -values[:, -1]  # thrust = −thrust_body[2] (PX4 FRD, 0..1)
         held = values.shape[1] - 1 if drive == "velocity" else values.shape[1]

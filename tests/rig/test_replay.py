@@ -14,6 +14,7 @@ import pytest
 import pyulog
 
 from quad_model.environment import DRY_AIR_GAS_CONSTANT, isa_pressure_pa, isa_temperature_k
+from quad_model.frames import quat_multiply
 from quad_model.vehicle import load_vehicle
 from rig.apps.cli import main
 from rig.apps.identify import IdentificationError, identify_vehicle
@@ -84,7 +85,24 @@ def test_plan_reads_the_x500_configuration_from_its_log(x500_path):
     assert plan.real_arm_s == pytest.approx(X500_ARMED_S, abs=1e-3)
     assert plan.arm_s == plan.real_arm_s  # 1.5 s after the start: the autopilot is ready
     assert plan.disarm_s == pytest.approx(503.1, abs=0.05)  # SOURCES.md: disarmed at 503.1
-    assert math.degrees(plan.yaw_rad) == pytest.approx(98.3, abs=0.1)  # heading 1.716 rad
+    # heading 1.716 rad at the start; EKF2's in-flight alignment at 415.14 s, 2 s after the
+    # take-off, moved it by +0.1554 rad: the vehicle starts at the corrected heading
+    ((reset_s, delta),) = plan.heading_resets
+    assert reset_s == pytest.approx(415.14, abs=0.01)
+    assert delta == pytest.approx(0.1554, abs=1e-4)
+    assert math.degrees(plan.yaw_rad) == pytest.approx(98.3 + 8.9, abs=0.1)
+    assert plan.summary()["heading_resets"] == [
+        {"time_s": reset_s, "delta_deg": pytest.approx(8.90, abs=0.01)}
+    ]
+    # the yaw set-points logged before the reset are turned into the corrected frame too
+    yaw = np.array(plan.tracks["velocity"].values)[:, 3]
+    track_s = plan.start_s + np.array(plan.tracks["velocity"].times_s)
+    logged = pyulog.ULog(str(x500_path), ["vehicle_local_position_setpoint"]).data_list[0].data
+    logged_s, logged_yaw = logged["timestamp"] / 1e6, logged["yaw"]
+    for at_s, turned in ((414.5, delta), (416.0, 0.0)):
+        k = np.searchsorted(track_s, at_s)
+        j = np.searchsorted(logged_s, track_s[k])
+        assert yaw[k] == pytest.approx(logged_yaw[j] + turned, abs=1e-5)
     assert plan.home.lat_deg == pytest.approx(51.901, abs=1e-3)
     track = plan.tracks["velocity"]
     times_s = plan.start_s + np.array(track.times_s)
@@ -431,9 +449,13 @@ def test_window_drive_flies_the_logs_setpoints(
     """Inside the window the autopilot's logged setpoints are the real log's, sample for
     sample (zero-order hold): each real sample is in force from the first frame after it
     (1 ms) and the fast log's 4 ms period, so every rig sample from 5 ms after it to the next
-    real sample equals it (float32; the attitude is renormalized, hence 1e-6)."""
+    real sample equals it (float32; the attitude is renormalized, hence 1e-6). The window
+    holds the estimator's heading reset at 415.14 s: an attitude set-point before it is the
+    log's turned about down by the reset, into the frame the replay starts in."""
     _, autopilot = _fly(x500_path, tmp_path, free_instance(), drive=drive, end_s=417.0,
                         window_s=CLIMB_WINDOW_S)  # fmt: skip
+    ((reset_s, delta),) = plan_replay(x500_path).heading_resets
+    turn = np.array([math.cos(delta / 2), 0.0, 0.0, math.sin(delta / 2)])
     real = real_log.get_dataset(topic).data
     rig = autopilot.get_dataset(topic).data
     real_s, rig_s = real["timestamp"] / 1e6, rig["timestamp"] / 1e6
@@ -441,8 +463,11 @@ def test_window_drive_flies_the_logs_setpoints(
     compared = 0
     for k in inside[:-1]:
         held = (rig_s >= real_s[k] + 0.005) & (rig_s < real_s[k + 1])
-        for field in fields:
-            np.testing.assert_allclose(rig[field][held], real[field][k], rtol=0, atol=1e-6)
+        expected = [real[field][k] for field in fields]
+        if drive == "attitude" and real_s[k] < reset_s:
+            expected[:4] = quat_multiply(turn, np.array(expected[:4]))
+        for field, value in zip(fields, expected, strict=True):
+            np.testing.assert_allclose(rig[field][held], value, rtol=0, atol=1e-6)
         compared += int(held.sum())
     assert len(inside) >= 19
     assert compared >= len(inside)
