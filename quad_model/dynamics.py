@@ -143,6 +143,10 @@ P_CAPACITY_C_INV = _p.add(1)
 P_EFFICIENCY_INV = _p.add(1)
 P_SIZE = _p.size
 
+#: The force per unit mass with which legs and ground stop a vehicle that lands or slides
+#: (m/s², about 3 g): landing gear takes a touchdown over a few centimetres and a few tenths
+#: of a second at most. [estimate]
+LANDING_DECELERATION_MPS2 = 30.0
 # Dryden (MIL-F-8785C) needs a speed through the air mass; hovering in calm air it would be
 # zero, so the correlation time uses at least this speed.
 DRYDEN_MIN_AIRSPEED_MPS = 1.0
@@ -165,6 +169,7 @@ W_SLOPE = _w.add(X_DYN)  # that stage's slope
 W_SLOPE_SUM = _w.add(X_DYN)  # k1 + 2·k2 + 2·k3 so far
 W_INPUT = _w.add(U_SIZE)
 W_OUTPUT = _w.add(A_SIZE)
+W_VEL_START = _w.add(3)  # the velocity at the start of the advance (ground outputs)
 W_PARAMS = _w.add(P_SIZE)
 W_SIZE = _w.size
 
@@ -558,20 +563,30 @@ def _rk4_step(w, mount, dt, lanes):
 
 
 @_kernel
-def _ground_contact(w, lanes):
+def _ground_contact(w, dt, lanes):
     """The ground plane z = 0 (home): no sinking, no bounce, no sliding while resting.
 
-    Landing gear and friction are taken as rigid: a vehicle that reaches the ground stops
-    there (inelastic contact), and while its thrust cannot lift it, it stays put on its
-    legs with the attitude it landed with.
+    A vehicle that reaches the ground stays on it (inelastic contact), with the attitude
+    it landed with, while its thrust cannot lift it. Its legs and the ground's friction
+    take its speed into the ground at LANDING_DECELERATION_MPS2 per step (the force they
+    push with, per unit mass: what the accelerometer feels), not within one step: so the
+    accelerometer feels the touchdown, and an estimator that integrates it stops
+    descending with the vehicle (PX4's land detector waits for that). The legs' few
+    centimetres of give are not modelled: the body stays at z = 0.
     """
+    bleed = LANDING_DECELERATION_MPS2 * dt
     for v in range(lanes):
         xv = _STATE + v
         if w[(X_POS + 2) * LANES + xv] >= 0.0:
             w[(X_POS + 2) * LANES + xv] = 0.0
-            w[X_VEL * LANES + xv] = 0.0
-            w[(X_VEL + 1) * LANES + xv] = 0.0
-            w[(X_VEL + 2) * LANES + xv] = min(w[(X_VEL + 2) * LANES + xv], 0.0)
+            vn = w[X_VEL * LANES + xv]
+            ve = w[(X_VEL + 1) * LANES + xv]
+            vd = max(w[(X_VEL + 2) * LANES + xv], 0.0)  # into the ground; a lift-off is free
+            speed = math.sqrt(vn * vn + ve * ve + vd * vd)
+            scale = max(speed - bleed, 0.0) / speed if speed > 0.0 else 0.0
+            w[X_VEL * LANES + xv] = vn * scale
+            w[(X_VEL + 1) * LANES + xv] = ve * scale
+            w[(X_VEL + 2) * LANES + xv] = min(w[(X_VEL + 2) * LANES + xv], 0.0) + vd * scale
             w[X_RATE * LANES + xv] = 0.0
             w[(X_RATE + 1) * LANES + xv] = 0.0
             w[(X_RATE + 2) * LANES + xv] = 0.0
@@ -581,17 +596,20 @@ def _ground_contact(w, lanes):
 
 
 @_kernel
-def _outputs(w, lanes):
-    """Outputs at the final state that the derivative does not give: zero acceleration on
-    the ground, the wind, and the specific force f = Rᵀ·(a - g) ((0, 0, -g) level at rest)."""
+def _outputs(w, duration, lanes):
+    """Outputs at the final state that the derivative does not give: on the ground the
+    acceleration the contact allowed (the velocity's change over the advance: 0 at rest, the
+    legs' deceleration in a touchdown), the wind, and the specific force f = Rᵀ·(a - g)
+    ((0, 0, -g) level at rest)."""
+    per_second = 1.0 / duration if duration > 0.0 else 0.0
     for v in range(lanes):
         xv = _STATE + v
         av = W_OUTPUT * LANES + v
         uv = W_INPUT * LANES + v
         if w[X_ON_GROUND * LANES + xv] > 0.0:
-            w[A_ACCEL_NED * LANES + av] = 0.0
-            w[(A_ACCEL_NED + 1) * LANES + av] = 0.0
-            w[(A_ACCEL_NED + 2) * LANES + av] = 0.0
+            for axis in range(3):
+                change = w[(X_VEL + axis) * LANES + xv] - w[(W_VEL_START + axis) * LANES + v]
+                w[(A_ACCEL_NED + axis) * LANES + av] = change * per_second
         w[A_WIND_NED * LANES + av] = w[U_WIND * LANES + uv]
         w[(A_WIND_NED + 1) * LANES + av] = w[(U_WIND + 1) * LANES + uv]
         w[(A_WIND_NED + 2) * LANES + av] = w[(U_WIND + 2) * LANES + uv]
@@ -613,16 +631,19 @@ def _outputs(w, lanes):
 @_kernel
 def _substeps(w, noise, first, mount, n_steps, dt, lanes):
     """``n_steps`` substeps of a chunk's scratch, then the outputs at the final state."""
+    for axis in range(3):
+        for v in range(lanes):
+            w[(W_VEL_START + axis) * LANES + v] = w[(X_VEL + axis) * LANES + _STATE + v]
     for step in range(n_steps):
         _air(w, noise, first, step, dt, lanes)
         _rk4_step(w, mount, dt, lanes)
         if mount == MOUNT_FREE:
-            _ground_contact(w, lanes)
+            _ground_contact(w, dt, lanes)
     _air(w, noise, first, 0, 0.0, lanes)
     for i in range(_N_DYN):
         w[_STAGE + i] = w[_STATE + i]
     derivative(w, mount, lanes)
-    _outputs(w, lanes)
+    _outputs(w, n_steps * dt, lanes)
 
 
 @_kernel

@@ -242,15 +242,28 @@ def test_ground_contact_holds_and_landing_does_not_bounce(f450, rng):
     np.testing.assert_allclose(truth.specific_force_frd_mps2, [0, 0, -G], atol=1e-12)
     # Dropped from 2 m with motors off: it stops on the ground and stays there.
     model.reset(position_ned_m=(0, 0, -2))
-    heights = []
+    heights, speeds, accels, forces = [], [], [], []
     for _ in range(1500):
         model.advance([0.0] * 4, 0.001)
         heights.append(model.truth.position_ned_m[2])
-    heights = np.array(heights)
+        speeds.append(model.truth.velocity_ned_mps[2])
+        accels.append(model.truth.acceleration_ned_mps2[2])
+        forces.append(model.truth.specific_force_frd_mps2[2])
+    heights, speeds = np.array(heights), np.array(speeds)
     touchdown = int(np.argmax(heights >= 0.0))
     assert heights.max() == 0.0  # never below the ground
     assert 0.55 < touchdown * 1e-3 < 0.7  # √(2h/g) = 0.64 s (less with drag)
     np.testing.assert_array_equal(heights[touchdown:], 0.0)  # no bounce
+    # The legs stop it with the accelerometer feeling it: the accelerations reported from
+    # the touchdown on add up to the speed it hit with (Δv = ∫a dt), and the legs push
+    # with LANDING_DECELERATION_MPS2 (specific force −3 g less the body drag's part).
+    impact = speeds[touchdown - 1]
+    assert sum(accels[touchdown:]) * 1e-3 == pytest.approx(-impact, rel=1e-9)
+    stopped = touchdown + int(np.argmax(speeds[touchdown:] == 0.0))
+    # net of gravity (less the drag) the legs take it at about 30 - 8.4 m/s²
+    assert (stopped - touchdown) * 1e-3 == pytest.approx(impact / (30.0 - 8.4), rel=0.05)
+    assert min(forces) == pytest.approx(-dyn.LANDING_DECELERATION_MPS2, rel=0.06)
+    np.testing.assert_array_equal(accels[stopped + 1 :], 0.0)
     # Enough thrust lifts it off.
     model.advance([1.2 * model.hover_throttle()] * 4, 1.0)
     assert model.truth.position_ned_m[2] < -0.1
