@@ -568,11 +568,11 @@ def _ground_contact(w, dt, lanes):
 
     A vehicle that reaches the ground stays on it (inelastic contact), with the attitude
     it landed with, while its thrust cannot lift it. Its legs and the ground's friction
-    take its speed into the ground at LANDING_DECELERATION_MPS2 per step (the force they
-    push with, per unit mass: what the accelerometer feels), not within one step: so the
-    accelerometer feels the touchdown, and an estimator that integrates it stops
-    descending with the vehicle (PX4's land detector waits for that). The legs' few
-    centimetres of give are not modelled: the body stays at z = 0.
+    take off its speed into and along the ground at LANDING_DECELERATION_MPS2 (the force
+    they push with, per unit mass), not within one step: so the accelerometer feels the
+    touchdown, and an estimator that integrates it stops descending with the vehicle
+    (PX4's land detector waits for that). The legs' few centimetres of give are not
+    modelled: the body stays at z = 0.
     """
     bleed = LANDING_DECELERATION_MPS2 * dt
     for v in range(lanes):

@@ -1384,7 +1384,8 @@ class _FlightLog:
                 sin * values[:, 0] + cos * values[:, 1],
             )
             values[:, 3] = np.remainder(values[:, 3] + turn + np.pi, 2 * np.pi) - np.pi
-        elif drive == "attitude":  # q_d ← (a turn about NED down) ⊗ q_d
+        elif drive == "attitude":  # q_d ← (a turn about NED down) ⊗ q_d, for every sample
+            # at once (quad_model.frames.quat_multiply takes one pair)
             w, x, y, z = values[:, :4].T
             c, s = np.cos(turn / 2), np.sin(turn / 2)
             values[:, :4] = np.column_stack(
