@@ -26,9 +26,12 @@ does the UART clock, which only a UART exchange enables (nothing else runs meanw
 each transaction sees the same edges as under cocotb, where the design sees no time but
 its clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
 caller asks (:meth:`NativePwm.cycles`), at once or on the library's worker thread while
-the caller goes on (every other call waits for it first): its domain and the system
-domain meet only in the results' synchroniser, which a read lets catch up before it
-freezes the results.
+the caller goes on. It runs in a second instance of the same Verilated harness: its
+domain and the system domain meet only in the results' synchroniser, so a host-port read
+copies the synchroniser's source side (its published copy and Gray count) from that
+instance into the first and lets it catch up there before it freezes the results. The bus
+transfers therefore run while the capture clock runs; only the PWM writes, the reads and
+the cycle counts wait for it.
 
 :class:`NativeHarness` bundles the buses like :class:`fpga_hdl.cosim.peripherals.Harness`
 (whose cocotb classes this mirrors): ``spi`` and ``i2c`` implement the
@@ -77,6 +80,10 @@ SOURCE = Path(__file__).with_name("native_harness.cpp")
 #: ``pwm_clock``, ``uart_clock``); the C++ reaches their registers through Verilator's root
 #: members.
 _SYNC_CLOCK, _PWM_CLOCK, _UART_CLOCK = "sync_clock", "pwm_clock", "uart_clock"
+#: SensorTop's PWM results' synchroniser (``SensorTop._capture_results``): the C++ copies
+#: its source side, ``held`` and ``gray``, from the capture clock's instance of the
+#: harness into the system clock's.
+_CAPTURE_SYNCHRONISER = ("top", "capture_cdc")
 #: ``cosim_gated_clock`` for this build: the C++ writes 1, the rising edge clears it. The
 #: ports and parameter are the gated clock's; ``enable`` is read by the C++ only.
 NATIVE_CLOCK_VERILOG = """\
@@ -133,6 +140,8 @@ def build_native_harness(harness: CosimHarness, *, build_dir: Path = BUILD_DIR) 
         "PWM_CLOCK": _root_member(_PWM_CLOCK, "clk"),
         "UART_CLOCK": _root_member(_UART_CLOCK, "clk"),
         "UART_ENABLE": _root_member(_UART_CLOCK, "enable"),
+        "CAPTURE_HELD": _root_member(*_CAPTURE_SYNCHRONISER, "held"),
+        "CAPTURE_GRAY": _root_member(*_CAPTURE_SYNCHRONISER, "gray"),
     }
     cflags = " ".join([CXXFLAGS, *(f"-D{name}={value}" for name, value in defines.items())])
     args = [*VERILATOR_ARGS, "-CFLAGS", cflags, "--top-module", HARNESS_TOPLEVEL]
@@ -423,8 +432,8 @@ class NativePwm:
 
     def cycles(self, count: int, *, later: bool = False) -> None:
         """Run ``count`` capture-clock cycles (generator and capture core); with ``later``,
-        on the library's worker thread while the caller goes on (the next call that
-        touches the model waits for them)."""
+        on the library's worker thread while the caller goes on (bus transfers run
+        meanwhile; the next PWM write, host-port read or cycle count waits for them)."""
         if count > 0:
             self._model.call("nh_pwm_cycles_later" if later else "nh_pwm_cycles", count)
 

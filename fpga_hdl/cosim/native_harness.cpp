@@ -11,10 +11,17 @@
 // on its own rising edge, so one eval() is one whole clock cycle. The system clock
 // follows the gated clock's rule: whole cycles while its `enable` (the harness's
 // `sync_run`) is high, checked after every cycle; so does the UART clock (the GPS
-// receiver's domain and the autopilot's UART), which only a UART exchange enables. The
-// capture clock runs only when asked (nh_pwm_cycles, or nh_pwm_cycles_later on a worker
-// thread); nothing in the system domain depends on it but the results' synchroniser,
-// which every read lets catch up (HostReader).
+// receiver's domain and the autopilot's UART), which only a UART exchange enables.
+//
+// Two instances of the harness. `model` runs the system and UART clocks: host port,
+// buses, chips. `capture` runs only the capture clock: the PWM generator, the capture
+// core and the source side of the results' synchroniser (its published copy `held` and
+// Gray change count). The two clock domains meet only in that synchroniser, so a read
+// first copies those two registers from `capture` into `model` (whose own capture clock
+// never runs) and then lets the synchroniser's destination side catch up, as it does in
+// the whole design (HostReader). Since no state is shared, the capture clock can run on
+// a worker thread (nh_pwm_cycles_later) while the caller's bus transfers run on `model`;
+// only the calls that touch `capture` wait for it.
 //
 // Errors: every function returns 0 on success and -1 on failure, with the reason in
 // nh_error(). Ports are copied as little-endian bytes, whatever their Verilated type.
@@ -32,11 +39,13 @@
 #include "Vharness___024root.h"
 #include "verilated.h"
 
-// The root members of the three clocks' registers and the gated ones' enables, given by
-// fpga_hdl.cosim.native as -D flags (their names follow the harness's hierarchy).
+// The root members of the three clocks' registers, the gated ones' enables and the
+// results' synchroniser's source side, given by fpga_hdl.cosim.native as -D flags (their
+// names follow the harness's hierarchy).
 #if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(PWM_CLOCK) || \
-    !defined(UART_CLOCK) || !defined(UART_ENABLE)
-#error "build through fpga_hdl.cosim.native: the clock and enable -D flags are missing"
+    !defined(UART_CLOCK) || !defined(UART_ENABLE) || !defined(CAPTURE_HELD) || \
+    !defined(CAPTURE_GRAY)
+#error "build through fpga_hdl.cosim.native: the clock and register -D flags are missing"
 #endif
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "ports are copied as little-endian");
@@ -48,22 +57,40 @@ namespace {
 // never acknowledges is reported, not waited for forever.
 constexpr uint64_t CYCLE_LIMIT = 10'000'000;
 
-struct Harness {
+// One Verilated harness with its own context.
+struct Instance {
     VerilatedContext context;
     Vharness model;
+
+    Instance() : model{&context, "harness"} { model.eval(); }  // initial blocks, first settle
+
+    // A model's scopes unregister from this thread's current context, which is the last
+    // one created here, not necessarily theirs (with two harnesses, destroying the first
+    // one through the second's freed context deadlocked): make it this one's. The body
+    // runs before the members' destructors.
+    ~Instance() {
+        Verilated::threadContextp(&context);
+        model.final();
+    }
+};
+
+struct Harness {
+    Instance system_instance;
+    Instance capture_instance;
+    Vharness& model = system_instance.model;     // the system and UART clocks
+    Vharness& capture = capture_instance.model;  // the capture clock (see the top of this file)
     uint64_t sys_cycles = 0;
     uint64_t pwm_cycles = 0;
     uint64_t uart_cycles = 0;
     std::string error;
     // Capture-clock cycles left to a worker thread (nh_pwm_cycles_later). Only one of the
-    // two threads touches the model at a time: every call first waits until it is idle.
+    // two threads touches `capture` at a time: every call that does first waits until the
+    // worker is idle.
     std::thread worker;
     std::mutex mutex;
     std::condition_variable changed;
     uint64_t queued = 0;  // cycles the worker is to run; 0 when it is idle
     bool quit = false;
-
-    Harness() : model{&context, "harness"} {}
 
     ~Harness() {
         if (worker.joinable()) {
@@ -114,9 +141,15 @@ struct Harness {
     }
 
     void pwm_cycle() {
-        model.rootp->PWM_CLOCK = 1;
-        model.eval();
+        capture.rootp->PWM_CLOCK = 1;
+        capture.eval();
         ++pwm_cycles;
+    }
+
+    // The results' synchroniser's source side, from `capture` into `model`.
+    void copy_capture_results() {
+        model.rootp->CAPTURE_HELD = capture.rootp->CAPTURE_HELD;
+        model.rootp->CAPTURE_GRAY = capture.rootp->CAPTURE_GRAY;
     }
 
     void uart_cycle() {
@@ -216,19 +249,12 @@ int status(bool ok) { return ok ? 0 : -1; }
 extern "C" {
 
 EXPORT void* nh_create() {
-    auto* harness = new Harness();
-    harness->model.eval();  // initial blocks and the first settle: every port at its reset
-    return harness;
+    return new Harness();
 }
 
 EXPORT void nh_destroy(void* handle) {
     auto* harness = static_cast<Harness*>(handle);
     harness->wait_idle();
-    // A model's scopes unregister from this thread's current context, which is the last
-    // one created here, not necessarily theirs: with two harnesses, destroying the first
-    // one through the second's freed context deadlocked.
-    Verilated::threadContextp(&harness->context);
-    harness->model.final();
     delete harness;
     Verilated::threadContextp(nullptr);  // and the last context: none is left dangling
 }
@@ -246,18 +272,24 @@ EXPORT int nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles,
 }
 
 // Reset every domain: `rst` high for these cycles of each clock, then the system and
-// UART clocks run until they stop by themselves.
+// UART clocks run until they stop by themselves. (`model`'s capture clock and
+// `capture`'s other clocks never run: each instance resets only the domains it runs.)
 EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles,
                     uint32_t uart_cycles) {
     auto* h = static_cast<Harness*>(handle);
     h->wait_idle();
     Vharness& m = h->model;
     m.rst = 1;
+    h->capture.rst = 1;
     m.eval();
+    h->capture.eval();
     for (uint32_t i = 0; i < sys_cycles; ++i) h->sync_cycle();
     for (uint32_t i = 0; i < pwm_cycles; ++i) h->pwm_cycle();
     for (uint32_t i = 0; i < uart_cycles; ++i) h->uart_cycle();
     m.rst = 0;
+    h->capture.rst = 0;
+    h->capture.eval();
+    h->copy_capture_results();
     return status(h->run_sync("reset") && h->run_uart("reset"));
 }
 
@@ -265,7 +297,6 @@ EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles,
 EXPORT int nh_spi(void* handle, uint32_t device, uint32_t length, uint32_t divider, uint32_t mode3,
            const uint8_t* tx, uint8_t* rx, size_t bytes) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
     Vharness& m = h->model;
     m.spi_device = device;
     m.spi_length = length;
@@ -283,7 +314,6 @@ EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t r
            const uint8_t* tx, size_t tx_bytes, uint8_t* rx, size_t rx_bytes,
            int32_t* nack_index) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
     Vharness& m = h->model;
     m.i2c_address = address;
     m.i2c_write_len = write_len;
@@ -299,7 +329,6 @@ EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t r
 // The host writer's burst: `count` packed (address, data) words, commit, chips settled.
 EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint32_t count) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
     Vharness& m = h->model;
     m.host_count = count;
     bool ok = put(*h, m.host_words, words, bytes, "host_words") &&
@@ -307,10 +336,12 @@ EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint3
     return status(ok);
 }
 
-// The host reader's burst: every result word, frozen in one cycle.
+// The host reader's burst: every result word, frozen in one cycle (the capture clock's
+// results copied in first).
 EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
     auto* h = static_cast<Harness*>(handle);
     h->wait_idle();
+    h->copy_capture_results();
     Vharness& m = h->model;
     bool ok = h->request(m.read_request, m.read_acknowledge, "host-port read") &&
               get(*h, m.read_words, words, bytes, "read_words");
@@ -325,7 +356,6 @@ EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_
                    uint32_t tx_len, uint8_t* rx, size_t rx_bytes, uint32_t* rx_len,
                    uint32_t* line_cycles) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
     Vharness& m = h->model;
     m.uart_divider = divider;
     m.uart_tx_len = tx_len;
@@ -341,18 +371,18 @@ EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_
 EXPORT int nh_pwm_set(void* handle, const uint8_t* widths, size_t bytes, uint32_t period_ticks) {
     auto* h = static_cast<Harness*>(handle);
     h->wait_idle();
-    Vharness& m = h->model;
+    Vharness& m = h->capture;
     m.pwm_period_ticks = period_ticks;
     return status(put(*h, m.pwm_width_ticks, widths, bytes, "pwm_width_ticks"));
 }
 
 // `count` cycles of the capture clock on the worker thread; the call returns at once and
-// the next call that touches the model waits for them. Python's own threads would need
+// the next call that touches `capture` waits for them. Python's own threads would need
 // the GIL to start and finish the call, which the rig's thread holds while it works.
 EXPORT int nh_pwm_cycles_later(void* handle, uint64_t count) {
     auto* h = static_cast<Harness*>(handle);
     h->wait_idle();
-    h->model.eval();  // inputs written since the last eval settle before the first edge
+    h->capture.eval();  // inputs written since the last eval settle before the first edge
     h->run_later(count);
     return 0;
 }
@@ -361,7 +391,7 @@ EXPORT int nh_pwm_cycles_later(void* handle, uint64_t count) {
 EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
     auto* h = static_cast<Harness*>(handle);
     h->wait_idle();
-    h->model.eval();  // inputs written since the last eval settle before the first edge
+    h->capture.eval();  // inputs written since the last eval settle before the first edge
     for (uint64_t i = 0; i < count; ++i) h->pwm_cycle();
     return 0;
 }

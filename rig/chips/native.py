@@ -23,14 +23,15 @@ written before that edge runs. The capture is read after edge ``now_tick`` (the 
 tick at or before the frame time) and before the next one, once the reader has let the
 results' synchroniser catch up, so the read sees exactly what the cocotb worker's read
 just before edge ``now_tick`` sees (its reader latches after that edge)
-(``rig/chips/cosim_worker.py``). The bus transfers run while the capture clock stands
-still: the two domains meet only in that synchroniser, so where they fall between two
-capture edges changes nothing read. A frame's transfers must still fit in its span of
-time, as they do on the real bus. For the same reason the capture clock may run ahead:
-once a frame is read, the edges up to the next frame's read (but not the edge that takes
-the next PWM period's widths, which come with the next frame) run on a worker thread
-while the rig encodes, sends, logs and steps its model, so on a second core they cost
-the loop nothing.
+(``rig/chips/cosim_worker.py``). The two domains meet only in that synchroniser, so
+where the bus transfers fall between two capture edges changes nothing read. A frame's
+transfers must still fit in its span of time, as they do on the real bus. For the same
+reason the capture clock may run ahead: once a frame is read, the edges up to the next
+frame's read (but not the edge that takes the next PWM period's widths, which come with
+the next frame) run on a worker thread while the rig encodes, sends, logs, steps its
+model and reads the next frame's sensors (the capture clock runs in its own instance of
+the Verilated harness, :mod:`fpga_hdl.cosim.native`), so on a free core they cost the
+loop nothing.
 """
 
 from __future__ import annotations
