@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -152,7 +152,14 @@ PX4_IMU_HZ = Rates().imu_hz
 PILOT_DISARM_REASONS = frozenset({1, 2, 4})
 #: nav_states flown on the pilot's sticks: PX4 needs manual control input in them.
 STICK_MODES = frozenset({0, 1, 2, 10, 15})
-NAV_STATE_MISSION, NAV_STATE_OFFBOARD = 3, 14
+NAV_STATE_MISSION, NAV_STATE_LOITER, NAV_STATE_OFFBOARD = 3, 4, 14
+#: Loiter commands (MAV_CMD_NAV_LOITER_UNLIM, _TIME, _TO_ALT): a navigator that started one
+#: of these at the switch to Mission, then replaced it by the mission's first item, held
+#: the vehicle where it was meanwhile (``_FlightLog.mission_start_holds``).
+LOITER_COMMANDS = frozenset({17, 19, 31})
+#: The navigator starts a mission item this soon after the switch to Mission (it runs at
+#: 20 Hz); a later first record belongs to something else.
+MISSION_START_S = 0.5
 #: nav_states whose heading PX4's auto planner sets (MPC_YAWRAUTO_*): Mission, Loiter,
 #: Return, Takeoff, Land, Precision land.
 AUTO_YAW_MODES = frozenset({3, 4, 5, 17, 18, 20})
@@ -295,6 +302,9 @@ class Replay:
     events: tuple[FlightEvent, ...] = ()
     mission: tuple[MissionItem, ...] = ()
     mission_notes: tuple[str, ...] = ()
+    #: Per switch to Mission (log seconds): how long the real navigator held the vehicle
+    #: where it was before the mission's first item; flown as Hold (``mission_start_holds``).
+    mission_holds: tuple[tuple[float, float], ...] = ()
     sticks: SetpointTrack | None = None
     firmware: str = ""  # the log's PX4, as its header says
     #: The wind flown: the log's hover tilt through the vehicle's drag (rig.apps.wind);
@@ -369,6 +379,7 @@ class Replay:
             takeoff = Takeoff(at_s=self.ready_s + 0.1, altitude_m=self.start_height_m)
             commands += [Arm(at_s=self.ready_s), takeoff]
         arms = {event.time_s for event in self.events if event.kind == "arm"}
+        holds = dict(self.mission_holds)
         for event in self.events:
             if not event.commanded:
                 continue
@@ -383,6 +394,10 @@ class Replay:
                 commands.append(Track(at_s=at_s, track=velocity))
             else:  # the mode it armed in is selected before the arm
                 at_s -= ARM_MODE_LEAD_S if event.time_s in arms else 0.0
+                hold_s = holds.get(event.time_s) if event.nav_state == NAV_STATE_MISSION else None
+                if hold_s is not None:
+                    commands.append(SetMode(at_s=at_s, nav_state=NAV_STATE_LOITER))
+                    at_s += hold_s
                 commands.append(SetMode(at_s=at_s, nav_state=event.nav_state))
         commands += [
             SetParam(at_s=time_s - origin, name="MPC_YAWRAUTO_MAX", value=limit)
@@ -506,6 +521,12 @@ class Replay:
         ))  # fmt: skip
         notes += [("info", f"replay: {note}") for note in self.mission_notes]
         notes += [
+            ("info", f"replay: after the switch to Mission at {time_s:.3f} s the real "
+                     f"navigator held the vehicle where it was for {hold_s:.3f} s (a loiter) "
+                     "before the mission's first item: flown as Hold, then Mission")
+            for time_s, hold_s in self.mission_holds
+        ]  # fmt: skip
+        notes += [
             ("info", f"replay: the real PX4 moved its home at {time_s:.3f} s to "
                      f"{home.alt_amsl_m:.2f} m AMSL: set then with DO_SET_HOME")
             for time_s, home in self.home_moves
@@ -610,6 +631,7 @@ class Replay:
                 for item in self.mission
             ],
             "mission_notes": list(self.mission_notes),
+            "mission_holds": [list(hold) for hold in self.mission_holds],
             "seed": self.options.seed,
             "sensor_layer": self.options.sensor_layer,
             "imu_hz": self.options.imu_hz,
@@ -682,9 +704,11 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
     home = log.home()
     mission: tuple[MissionItem, ...] = ()
     mission_notes: tuple[str, ...] = ()
+    mission_holds: tuple[tuple[float, float], ...] = ()
     home_moves = log.home_moves(home, real_arm_s, disarm_s or end_s) if px4 else ()
     if any(e.commanded and e.nav_state == NAV_STATE_MISSION for e in events):
         mission, mission_notes = log.flown_mission(home, bool(home_moves))
+        mission_holds = log.mission_start_holds(events)
     heading_resets = log.heading_resets(start_s, end_s)
     sticks = None
     if px4:
@@ -726,6 +750,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         events=events,
         mission=mission,
         mission_notes=mission_notes,
+        mission_holds=mission_holds,
         sticks=sticks,
         firmware=log.firmware,
         learned=_learned_parameters(log, parameters, events),
@@ -1306,6 +1331,38 @@ class _FlightLog:
             for k, (lat, lon), altitude in zip(rows, positions, altitudes, strict=True)
         )  # fmt: skip
         return items, tuple(notes)
+
+    def mission_start_holds(self, events: Sequence[FlightEvent]) -> tuple[tuple[float, float], ...]:
+        """Per commanded switch to Mission, the time the real navigator held the vehicle
+        before the mission's first item: (switch, hold) in log seconds, where it first
+        started a loiter it then replaced by the item logged last with the same sequence
+        number (the one the replay uploads, :meth:`flown_mission`).
+
+        Why: PX4 v1.17 (the X500's) loiters at the vehicle's position for 0.41 s after the
+        switch, then starts the mission; PX4 v1.14 SITL starts it at once, and ran the
+        whole mission and the POSCTL flying after it 0.4 s ahead of the log.
+        """
+        data = self.topics.get("navigator_mission_item")
+        if data is None or not {"sequence_current", "nav_cmd"} <= data.keys():
+            return ()
+        times_s = data["timestamp"] / 1e6
+        sequence = data["sequence_current"].astype(int)
+        last = {int(seq): k for k, seq in enumerate(sequence)}
+        holds = []
+        for event in events:
+            if not (event.commanded and event.nav_state == NAV_STATE_MISSION):
+                continue
+            first = int(np.searchsorted(times_s, event.time_s))
+            if first == len(times_s) or times_s[first] > event.time_s + MISSION_START_S:
+                continue
+            flown = last[int(sequence[first])]
+            if (
+                flown > first
+                and int(data["nav_cmd"][first]) in LOITER_COMMANDS
+                and (sequence[first:flown] == sequence[first]).all()
+            ):
+                holds.append((event.time_s, float(times_s[flown] - times_s[first])))
+        return tuple(holds)
 
     def _mission_altitudes(
         self,

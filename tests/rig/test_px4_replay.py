@@ -23,6 +23,7 @@ from rig.apps.replay import (
     PX4_BOOT_S,
     PX4_SETUP_S,
     YAW_RATE_LIMIT_FLOOR_DEG_S,
+    FlightEvent,
     ReplayError,
     ReplayOptions,
     _FlightLog,
@@ -51,7 +52,9 @@ X500 = LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
 #: switch"), mode switches (nav_state_user_intention) and disarm ("Disarmed by landing").
 FIRST_S, ARMED_S = 407.404345, 408.889359
 MISSION_S, TAKEOVER_S, LAND_S, DISARMED_S = 437.862, 455.431, 481.566, 503.072
-POSCTL, ALTCTL, MISSION, LAND = 2, 1, 3, 18
+POSCTL, ALTCTL, MISSION, HOLD, LAND = 2, 1, 3, 4, 18
+#: v1.17 loitered where the X500 was from the switch to Mission until the mission's item 0.
+MISSION_HOLD_S = 438.274 - 437.865
 #: What SITL must never get from a real vehicle, one example per rule (the log's names).
 NEVER_COPIED = {
     "CAL_ACC0_ID": "calibration of the real sensor chips",
@@ -179,7 +182,8 @@ def test_the_replay_follows_the_logs_events(plan):
         ("Arm", round(ARMED_S, 3), None),
         ("SetHome", 411.979, None),  # where the real PX4 moved its home at the take-off
         ("SetHome", 412.221, None),
-        ("SetMode", MISSION_S, MISSION),
+        ("SetMode", MISSION_S, HOLD),  # as the real navigator held, then its mission
+        ("SetMode", round(MISSION_S + MISSION_HOLD_S, 3), MISSION),
         ("SetMode", TAKEOVER_S, POSCTL),
         ("SetMode", 474.362, ALTCTL),  # the pilot's sticks act in Altitude as they did
         ("SetMode", 476.353, POSCTL),
@@ -197,6 +201,14 @@ def test_the_replay_follows_the_logs_events(plan):
         "replay: log event 474.362 s PX4 switched to Altitude by itself (failsafe: commanded, "
         "so the sticks act in the mode the vehicle flew): commanded"
     ) in notes
+    assert plan.mission_holds == ((pytest.approx(MISSION_S, abs=1e-3),
+                                   pytest.approx(MISSION_HOLD_S, abs=1e-3)),)  # fmt: skip
+    assert (
+        "replay: after the switch to Mission at 437.862 s the real navigator held the vehicle "
+        "where it was for 0.409 s (a loiter) before the mission's first item: flown as Hold, "
+        "then Mission"
+    ) in notes
+    assert plan.summary()["mission_holds"] == [[plan.mission_holds[0][0], plan.mission_holds[0][1]]]
 
 
 def test_the_mission_is_uploaded_as_it_was_flown(plan):
@@ -257,9 +269,9 @@ def test_the_home_moves_where_the_real_px4_moved_it(plan):
     assert any("moved its home at 412.221 s to 185.84 m AMSL" in text for _, text in plan.notes)
 
 
-def _mission_log(sequence, times_s):
+def _mission_log(sequence, times_s, commands=None):
     """A flight log holding only a mission flown at ``times_s`` (items 10 m apart, 5 m above
-    a home at 100 m AMSL, the vehicle hovering at 106 m)."""
+    a home at 100 m AMSL, the vehicle hovering at 106 m), waypoints unless ``commands``."""
     count = len(sequence)
     log = object.__new__(_FlightLog)
     log.path = Path("synthetic.ulg")
@@ -267,7 +279,8 @@ def _mission_log(sequence, times_s):
         "navigator_mission_item": {
             "timestamp": np.array(times_s) * 1e6,
             "sequence_current": np.array(sequence),
-            "frame": np.full(count, 6), "nav_cmd": np.full(count, 16),
+            "frame": np.full(count, 6),
+            "nav_cmd": np.array(commands) if commands else np.full(count, 16),
             "latitude": 47.0 + np.array(sequence) * 1e-4, "longitude": np.full(count, 8.0),
             "altitude": np.full(count, 5.0), "altitude_is_relative": np.ones(count, bool),
             "time_inside": np.zeros(count), "acceptance_radius": np.zeros(count),
@@ -290,6 +303,22 @@ def test_only_an_item_left_at_once_is_put_where_it_was_passed():
     items, notes = _mission_log([0, 1, 0, 1], [10.0, 20.0, 30.0, 35.0]).flown_mission(home)
     assert [i.alt_m for i in items] == [5.0, 5.0]
     assert not any("passed" in n for n in notes)
+
+
+def test_only_a_loiter_the_navigator_replaced_by_the_mission_is_flown_as_hold():
+    """A loiter (31) started at the switch and replaced by item 0 is a hold; an inserted
+    climb (22, which PX4 v1.14 inserts itself), a mission whose item 0 is a loiter, and a
+    first item long after the switch are not."""
+    switch = FlightEvent(10.0, "mode", MISSION, True, "test")
+    other = FlightEvent(10.0, "mode", POSCTL, True, "test")
+    log = _mission_log([0, 0, 1], [10.01, 10.41, 10.46], [31, 16, 16])
+    assert log.mission_start_holds([switch]) == ((10.0, pytest.approx(0.4)),)
+    assert log.mission_start_holds([other]) == ()
+    assert _mission_log([0, 0, 1], [10.01, 12.0, 15.0], [22, 16, 16]).mission_start_holds(
+        [switch]) == ()  # fmt: skip
+    assert _mission_log([0, 1], [10.01, 15.0], [17, 16]).mission_start_holds([switch]) == ()
+    assert _mission_log([0, 0, 1], [11.0, 11.4, 12.0], [31, 16, 16]).mission_start_holds(
+        [switch]) == ()  # fmt: skip
 
 
 def test_the_pilots_sticks_are_the_logs(plan):
@@ -439,16 +468,29 @@ def _height_gain_m(log, time_s, ground_s=411.0):
     return float(z[0] - z[1])
 
 
+def _item_current_s(log: pyulog.ULog, sequence: int) -> float:
+    """When the navigator first started mission item ``sequence``."""
+    data = log.get_dataset("navigator_mission_item").data
+    return float(data["timestamp"][data["sequence_current"] == sequence][0] / 1e6)
+
+
 @pytest.mark.closed_loop
 def test_px4_arms_switches_modes_and_climbs_as_the_real_flight(flown):
     """PX4 arms at the log's time (within 0.1 s), flies the log's modes in its order (each
-    switch within 0.5 s of the log's; the take-over it makes itself, from the replayed
+    switch within 0.5 s of the log's, the Hold before the mission within 0.1 s; the
+    take-over it makes itself, from the replayed
     sticks), takes off within 0.5 s of the real take-off and climbs like the real one (its
     estimate's height gain at 420 s within 1.5 m, 430 s within 2 m)."""
     out, real, px4, _ = flown
     flown_changes, real_changes = _armed_modes(px4, WINDOW_END_S), _armed_modes(real, WINDOW_END_S)
-    modes = [POSCTL, MISSION, POSCTL]
-    assert [mode for _, mode in flown_changes] == [mode for _, mode in real_changes] == modes
+    assert [mode for _, mode in real_changes] == [POSCTL, MISSION, POSCTL]
+    # The real navigator's loiter before the mission's item 0 is flown as Hold, from the
+    # log's switch to Mission; the mission's item 1 then becomes current at the real time.
+    assert [mode for _, mode in flown_changes] == [POSCTL, HOLD, MISSION, POSCTL]
+    assert flown_changes[1][0] == pytest.approx(real_changes[1][0], abs=0.1)
+    assert flown_changes[2][0] == pytest.approx(real_changes[1][0] + MISSION_HOLD_S, abs=0.1)
+    assert _item_current_s(px4, 1) == pytest.approx(_item_current_s(real, 1), abs=0.1)
+    del flown_changes[1:3], real_changes[1]
     assert flown_changes[0][0] == pytest.approx(ARMED_S, abs=0.1)
     for flown_change, real_change in zip(flown_changes, real_changes, strict=True):
         assert flown_change[0] == pytest.approx(real_change[0], abs=0.5)
