@@ -393,9 +393,10 @@ class Replay:
                 velocity = _delayed(self.tracks["velocity"], self.lead_in_s)
                 commands.append(Track(at_s=at_s, track=velocity))
             else:  # the mode it armed in is selected before the arm
-                at_s -= ARM_MODE_LEAD_S if event.time_s in arms else 0.0
+                armed_in_it = event.time_s in arms
+                at_s -= ARM_MODE_LEAD_S if armed_in_it else 0.0
                 hold_s = holds.get(event.time_s) if event.nav_state == NAV_STATE_MISSION else None
-                if hold_s is not None:
+                if hold_s is not None and not armed_in_it:  # a hold is in the air
                     commands.append(SetMode(at_s=at_s, nav_state=NAV_STATE_LOITER))
                     at_s += hold_s
                 commands.append(SetMode(at_s=at_s, nav_state=event.nav_state))
