@@ -1288,7 +1288,7 @@ class _FlightLog:
         if missing:
             return (), (f"navigator_mission_item has no field {missing[0]}: no mission to "
                         "upload",)  # fmt: skip
-        last = {int(seq): k for k, seq in enumerate(data["sequence_current"])}
+        last = _last_row_per_item(data)
         flown = 0
         while flown in last:
             flown += 1
@@ -1348,7 +1348,7 @@ class _FlightLog:
             return ()
         times_s = data["timestamp"] / 1e6
         sequence = data["sequence_current"].astype(int)
-        last = {int(seq): k for k, seq in enumerate(sequence)}
+        last = _last_row_per_item(data)
         holds = []
         for event in events:
             if not (event.commanded and event.nav_state == NAV_STATE_MISSION):
@@ -1459,6 +1459,12 @@ class _FlightLog:
         track_times = (0.0, *(float(t) - start_s for t in times_s[inside]))
         rows = (first, *values[inside])
         return SetpointTrack(drive, track_times, tuple(tuple(float(v) for v in r) for r in rows))
+
+
+def _last_row_per_item(data: Mapping[str, NDArray[Any]]) -> dict[int, int]:
+    """navigator_mission_item's last row for each sequence number: the item as flown (one
+    the navigator started first in its place, a climb or a loiter, is logged before it)."""
+    return {int(seq): k for k, seq in enumerate(data["sequence_current"])}
 
 
 def _mission_positions(
