@@ -10,9 +10,20 @@ Methods, each reported with its data window and an uncertainty:
 - **Hover**: steady windows found automatically (airborne, small velocity and body rates).
   The ESC throttle there is ``actuator_motors`` mapped through the log's PWM range
   (``PWM_MAIN/AUX_MINn/MAXn`` of the motor outputs) onto the model's 1000-2000 µs throttle
-  (:func:`quad_model.frames.pwm_to_throttle`). The vehicle's hover rotor speed
-  ω_h = √(mg/4k_T) (at the log's air density) must sit at that throttle on the speed curve;
-  the curve's full-throttle point (the KV estimate) is kept and its offset solved for.
+  (:func:`quad_model.frames.pwm_to_throttle`). The hover rotor speed ω_h must sit at that
+  throttle on the speed curve; the curve's full-throttle point is kept and its offset solved
+  for. ω_h is measured where the log shows it, else ω_h = √(mg/4k_T) with the vehicle's k_T.
+- **Rotor line**: the rotors' once-per-revolution line (prop and motor imbalance) is the
+  strongest peak of the accelerometer's spectrum in hover. A logged stream folds lines above
+  its Nyquist frequency, so the line must also *rise* with the motor command × voltage
+  across the flight (a folded line falls; neither: not identified), and the rotors' shaft
+  power at that speed must stay below the battery's power into the motors (a harmonic read
+  as the 1× would not). Then ω_h = 2πf and k_T = mg/(4ω_h²), the thrust coefficient at the
+  vehicle's reference air density.
+- **Battery**: V = E₀ − s·Q − R·I over the armed flight (``battery_status``: voltage, current,
+  charge drawn) by least squares gives the internal resistance R; the current after the
+  disarm (rotors stopped) the avionics' power; the hover's electrical power against the
+  rotors' shaft power 4·k_Q·ω_h³ (the vehicle's torque coefficient) the propulsion efficiency.
 - **Rate-loop plant** per axis: the frequency response torque set-point → body rate, fitted
   to ``B·e^{−sd}/(s(τ_m s+1))`` times the log's gyro low-pass (``IMU_GYRO_CUTOFF``,
   PX4's 2nd-order Butterworth), so the filter's phase is not blamed on the motors. The data
@@ -67,6 +78,21 @@ HOVER_MAX_RATE_RADPS = 0.25
 MIN_HOVER_S = 3.0
 #: … and the thrust set-point within this fraction of its airborne median.
 HOVER_THRUST_BAND = 0.2
+#: The rotor line: the strongest peak of the accelerometer PSD (three axes summed, 1 Hz
+#: resolution) above ROTOR_LINE_MIN_HZ in the hover windows; it sits at the power-weighted
+#: mean frequency within ± ROTOR_LINE_BAND of the peak (four rotors at slightly different
+#: speeds), ± the power-weighted spread there.
+ROTOR_LINE_MIN_HZ = 10.0
+ROTOR_LINE_BAND = 0.1
+#: Folding check: in FOLD_WINDOW_S windows over the airborne span, the line's frequency
+#: (within ± FOLD_BAND of the hover line) against the mean motor command × voltage; it must
+#: correlate with |Pearson r| ≥ FOLD_MIN_CORRELATION over at least FOLD_MIN_WINDOWS windows.
+FOLD_WINDOW_S = 2.0
+FOLD_BAND = 0.3
+FOLD_MIN_CORRELATION = 0.5
+FOLD_MIN_WINDOWS = 8
+#: Battery: the after-disarm current is the avionics' once the rotors have coasted down.
+DISARM_SETTLE_S = 0.5
 #: Both legs of the joint input-output estimate must reach this coherence (γ²) at a
 #: frequency for it to enter the fit: below ≈ 0.4 the random error of one leg exceeds
 #: ≈ 30 % with the segment counts of a one-minute log (Bendat & Piersol ε_r).
@@ -110,6 +136,8 @@ _TOPICS = (
     "vehicle_local_position",
     "vehicle_land_detected",
     "vehicle_air_data",
+    "sensor_combined",
+    "actuator_armed",
 )
 
 
@@ -129,6 +157,29 @@ class Estimate:
     @property
     def relative_uncertainty(self) -> float:
         return abs(self.uncertainty / self.value) if self.value else math.inf
+
+
+@dataclass(frozen=True)
+class RotorLine:
+    """The rotors' once-per-revolution line in the log's IMU stream, read in hover."""
+
+    #: Where the line is (Hz); ± the spread of the four rotors' lines.
+    frequency: Estimate
+    #: Pearson r of the line's frequency with command × voltage across the flight.
+    correlation: float
+    #: k_T = mg/(4ω_h²) at the vehicle's reference air density.
+    thrust_coefficient: Estimate
+
+
+@dataclass(frozen=True)
+class BatteryIdentification:
+    """The pack and the power it delivers, from ``battery_status``."""
+
+    internal_resistance_ohm: Estimate
+    #: None when the log holds no current after the disarm.
+    avionics_power_w: Estimate | None
+    #: Shaft power over electrical power into the motors, in hover.
+    propulsion_efficiency: Estimate
 
 
 @dataclass(frozen=True)
@@ -152,6 +203,9 @@ class HoverIdentification:
     #: rotors' centre): a centre of mass off the middle makes the autopilot trim the motors
     #: apart, and the rotors then turn at different speeds (their IMU tones beat).
     centre_of_mass_frd_m: tuple[float, float] = (0.0, 0.0)
+    #: The measured hover rotor speed; None (``rotor_line_reason`` says why): ω_h from k_T.
+    rotor_line: RotorLine | None = None
+    rotor_line_reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -191,6 +245,9 @@ class Identification:
     hover: HoverIdentification
     axes: tuple[AxisIdentification, ...]
     notes: tuple[str, ...]
+    #: None (``battery_reason`` says why) when the log cannot give it.
+    battery: BatteryIdentification | None = None
+    battery_reason: str = ""
 
     def axis(self, name: str) -> AxisIdentification:
         return self.axes[_AXES.index(name)]
@@ -300,6 +357,7 @@ def identify_vehicle(
             "the B/(s(τs+1)) plant and flight excites it little; I_zz kept from the vehicle",
         )
     )
+    battery, battery_reason = _identify_battery(log, hover, vehicle)
     return Identification(
         log=log.path,
         vehicle_name=vehicle.name,
@@ -309,6 +367,8 @@ def identify_vehicle(
         hover=hover,
         axes=tuple(axes),
         notes=(*log.derived, *_notes(sample_rate_hz, log.params)),
+        battery=battery,
+        battery_reason=battery_reason,
     )
 
 
@@ -443,14 +503,27 @@ def _identify_hover(
     else:
         density = prop.reference_air_density_kgpm3
         density_source = "the vehicle's reference density (log has no vehicle_air_data)"
-    k_t = prop.thrust_coefficient_n_per_radps2 * density / prop.reference_air_density_kgpm3
-    speed = math.sqrt(vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * k_t))
+    line, line_reason = _identify_rotor_line(log, windows, vehicle, density)
+    if line is None:
+        k_t = prop.thrust_coefficient_n_per_radps2 * density / prop.reference_air_density_kgpm3
+        speed = math.sqrt(vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * k_t))
+        speed_std = 0.0
+        speed_source = f"ω_h = √(mg/4k_T) = {speed:.0f} rad/s (ρ from {density_source})"
+    else:
+        speed = 2.0 * math.pi * line.frequency.value
+        speed_std = 2.0 * math.pi * line.frequency.uncertainty
+        speed_source = f"ω_h = {speed:.0f} rad/s (the rotor line)"
     # quad_model.dynamics: ω = (slope·σ + offset)·V/V_curve. Keep ω(σ=1) = slope + offset
     # (the KV estimate at V_curve) and move the offset so that ω(σ_h) = ω_h at V_hover.
     full = prop.speed_slope_radps + prop.speed_offset_radps
     curve_speed = speed * prop.speed_curve_voltage_v / voltage
     slope = (full - curve_speed) / (1.0 - throttle)
     throttle_std = float(throttle_samples.std())
+    # offset = full − (full − ω_c)/(1 − σ_h): the throttle's spread and ω_h's, in quadrature
+    offset_std = math.hypot(
+        (full - curve_speed) / (1.0 - throttle) ** 2 * throttle_std,
+        speed_std * prop.speed_curve_voltage_v / voltage / (1.0 - throttle),
+    )
     window = (span[0], span[1])
     method_hover = f"{len(windows)} hover window(s), {throttle_samples.size} samples"
     return HoverIdentification(
@@ -470,17 +543,242 @@ def _identify_hover(
         rotor_speed_radps=speed,
         speed_offset_radps=Estimate(
             full - slope,
-            # d(offset)/dσ = −(full − curve_speed)/(1 − σ)²: the throttle spread carried over
-            (full - curve_speed) / (1.0 - throttle) ** 2 * throttle_std,
-            f"ω_h = √(mg/4k_T) = {speed:.0f} rad/s (ρ from {density_source}) at "
-            f"{voltage:.2f} V on the curve through σ_h and ω(1) = {full:.0f} rad/s kept",
+            offset_std,
+            f"{speed_source} at {voltage:.2f} V on the curve through σ_h and ω(1) = "
+            f"{full:.0f} rad/s kept",
             window,
         ),
         speed_slope_radps=slope,
         centre_of_mass_frd_m=_thrust_centre(
             vehicle, commands.mean(axis=1), pwm_range, voltage, slope, full - slope
         ),
+        rotor_line=line,
+        rotor_line_reason=line_reason,
     )
+
+
+def _identify_rotor_line(
+    log: _Log, windows: tuple[tuple[float, float], ...], vehicle: Vehicle, density: float
+) -> tuple[RotorLine | None, str]:
+    """The hover rotor speed from the rotors' line in ``sensor_combined`` (module docstring);
+    (None, why) when the log cannot show it."""
+    data = log.topics.get("sensor_combined")
+    if data is None or "accelerometer_m_s2[0]" not in data:
+        return None, "no sensor_combined accelerometer in the log"
+    accel = np.array([data[f"accelerometer_m_s2[{axis}]"] for axis in range(3)], dtype=float)
+    finite = np.isfinite(accel).all(axis=0)
+    time_s, accel = data["t"][finite], accel[:, finite]
+    if time_s.size < 100:
+        return None, f"sensor_combined holds only {time_s.size} finite samples"
+    rate = float((time_s.size - 1) / (time_s[-1] - time_s[0]))
+    segment = max(8, round(rate))  # 1 Hz resolution
+    spectra, weights = [], []
+    for start, end in windows:
+        inside = (time_s >= start) & (time_s < end)
+        if inside.sum() >= segment:
+            freqs, power = _accel_psd(accel[:, inside], rate, segment)
+            spectra.append(power)
+            weights.append(int(inside.sum()))
+    if not spectra:
+        return None, "no hover window holds a second of sensor_combined"
+    power = np.average(spectra, axis=0, weights=weights)
+    above = freqs >= ROTOR_LINE_MIN_HZ
+    if not above.any():
+        return None, f"sensor_combined at {rate:.0f} Hz has no band above {ROTOR_LINE_MIN_HZ:g} Hz"
+    peak = float(freqs[above][np.argmax(power[above])])
+    line, spread = _weighted_frequency(freqs, power, peak, ROTOR_LINE_BAND)
+
+    correlation, count = _line_against_drive(log, time_s, accel, rate, line)
+    if count < FOLD_MIN_WINDOWS:
+        return None, (
+            f"only {count} airborne {FOLD_WINDOW_S:g} s windows: too few to tell whether "
+            f"the line at {line:.1f} Hz is folded"
+        )
+    if correlation <= -FOLD_MIN_CORRELATION:
+        return None, (
+            f"the line at {line:.1f} Hz falls as the motors speed up (r = {correlation:.2f}): "
+            f"it is folded from above the stream's Nyquist frequency ({rate / 2:.0f} Hz), "
+            "where it may sit at several frequencies; a raw IMU log (SDLOG_PROFILE) would show it"
+        )
+    if correlation < FOLD_MIN_CORRELATION:
+        return None, (
+            f"the line at {line:.1f} Hz does not follow the motor command × voltage "
+            f"(r = {correlation:.2f} over {count} windows): not a rotor line, or folded"
+        )
+    speed = 2.0 * math.pi * line
+    # A harmonic read as the 1× line would turn the rotors faster than the battery can: their
+    # shaft power must stay below the electrical power into the motors, where it is logged.
+    battery = log.topics.get("battery_status", {})
+    if "current_a" in battery:
+        electric = _mean_in(battery["t"], battery["voltage_v"] * battery["current_a"], windows)
+        into_motors = float(electric.mean()) - vehicle.battery.avionics_power_w
+        shaft = _shaft_power_w(vehicle, density, speed)
+        if shaft > into_motors:
+            return None, (
+                f"the line at {line:.1f} Hz as the rotors' speed ({speed:.0f} rad/s) needs "
+                f"{shaft:.0f} W of shaft power, more than the {into_motors:.0f} W the battery "
+                "gives the motors in hover: a harmonic, not the once-per-revolution line"
+            )
+    span = (windows[0][0], windows[-1][1])
+    reference = vehicle.propulsion.reference_air_density_kgpm3
+    k_t = (
+        vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * speed**2)
+        * reference / density
+    )  # fmt: skip
+    method = (
+        f"strongest accelerometer line above {ROTOR_LINE_MIN_HZ:g} Hz in hover, in the "
+        f"{rate:.0f} Hz stream, ± the rotors' spread; it rises with command × voltage "
+        f"(r = {correlation:.2f}, {count} windows): not folded"
+    )
+    return RotorLine(
+        frequency=Estimate(line, spread, method, span),
+        correlation=correlation,
+        thrust_coefficient=Estimate(
+            k_t,
+            2.0 * k_t * spread / line,
+            f"mg/(4ω_h²) with ω_h = 2π·{line:.1f} Hz = {speed:.0f} rad/s, m = "
+            f"{vehicle.body.mass_kg:g} kg, at ρ {reference:g} kg/m³",
+            span,
+        ),
+    ), ""
+
+
+def _line_against_drive(
+    log: _Log, time_s: NDArray, accel: NDArray, rate: float, line_hz: float
+) -> tuple[float, int]:
+    """Pearson r of the line's frequency (near ``line_hz``) with the mean motor command ×
+    voltage, over FOLD_WINDOW_S windows of the airborne span, and the number of windows: a
+    line below the stream's Nyquist frequency rises with the rotor speed, a folded one falls."""
+    columns = [log.series("actuator_motors", f"control[{m}]", "the rotors' drive")
+               for m in range(ROTOR_COUNT)]  # fmt: skip
+    t_cmd, command = columns[0][0], np.mean([values for _, values in columns], axis=0)
+    if "battery_status" in log.topics:
+        t_volt, volts = log.series("battery_status", "voltage_v", "the rotors' drive")
+    else:  # the command alone orders the rotor speeds when the voltage is not logged
+        t_volt, volts = t_cmd, np.ones_like(command)
+    short = max(8, round(rate * FOLD_WINDOW_S / 3))
+    drive, heard = [], []
+    airborne = _airborne_span(log)
+    for start in np.arange(airborne[0], airborne[1] - FOLD_WINDOW_S, FOLD_WINDOW_S):
+        inside = (time_s >= start) & (time_s < start + FOLD_WINDOW_S)
+        commanded = (t_cmd >= start) & (t_cmd < start + FOLD_WINDOW_S)
+        if inside.sum() < 2 * short or not commanded.any():
+            continue
+        freqs, power = _accel_psd(accel[:, inside], rate, short)
+        voltage = float(np.interp(start + FOLD_WINDOW_S / 2, t_volt, volts))
+        drive.append(float(command[commanded].mean()) * voltage)
+        heard.append(_weighted_frequency(freqs, power, line_hz, FOLD_BAND)[0])
+    if len(drive) < 2:
+        return 0.0, len(drive)
+    return float(np.corrcoef(drive, heard)[0, 1]), len(drive)
+
+
+def _accel_psd(accel: NDArray, rate_hz: float, segment: int) -> tuple[NDArray, NDArray]:
+    """Welch PSD of the three accelerometer axes, summed: every axis carries the line."""
+    freqs, power = signal.welch(accel, rate_hz, nperseg=min(segment, accel.shape[1]), axis=-1)
+    return freqs, power.sum(axis=0)
+
+
+def _weighted_frequency(
+    freqs: NDArray, power: NDArray, centre_hz: float, band: float
+) -> tuple[float, float]:
+    """Power-weighted mean frequency within ± ``band``·centre of ``centre_hz``, and the
+    power-weighted spread about it."""
+    near = np.abs(freqs - centre_hz) <= band * centre_hz
+    weights = power[near]
+    mean = float(np.sum(weights * freqs[near]) / np.sum(weights))
+    spread = float(np.sqrt(np.sum(weights * (freqs[near] - mean) ** 2) / np.sum(weights)))
+    return mean, spread
+
+
+# ------------------------------------------------------------------ battery
+def _identify_battery(
+    log: _Log, hover: HoverIdentification, vehicle: Vehicle
+) -> tuple[BatteryIdentification | None, str]:
+    """Internal resistance, avionics power and propulsion efficiency (module docstring)."""
+    data = log.topics.get("battery_status")
+    if data is None:
+        return None, "no battery_status in the log"
+    missing = [f for f in ("voltage_v", "current_a", "discharged_mah") if f not in data]
+    if missing:
+        return None, f"battery_status has no {', '.join(missing)}"
+    time_s = data["t"]
+    volts, amps, used_mah = (np.asarray(data[f], dtype=float)
+                             for f in ("voltage_v", "current_a", "discharged_mah"))  # fmt: skip
+    armed_from, armed_to = _armed_span(log)
+    use = (time_s >= armed_from) & (time_s < armed_to) & np.isfinite(volts) & (amps > 0)
+    if use.sum() < 20:
+        return None, f"only {int(use.sum())} battery_status samples while armed with a current"
+    design = np.column_stack([np.ones(use.sum()), -used_mah[use], -amps[use]])
+    solution, *_ = np.linalg.lstsq(design, volts[use], rcond=None)
+    residual = volts[use] - design @ solution
+    covariance = np.var(residual, ddof=3) * np.linalg.inv(design.T @ design)
+    span = (float(time_s[use][0]), float(time_s[use][-1]))
+    resistance = Estimate(
+        float(solution[2]),
+        float(np.sqrt(covariance[2, 2])),
+        f"V = E₀ − s·Q − R·I, least squares over {int(use.sum())} armed samples "
+        f"(RMS residual {np.sqrt(np.mean(residual**2)) * 1e3:.0f} mV)",
+        span,
+    )
+    after = (time_s >= armed_to + DISARM_SETTLE_S) & np.isfinite(volts) & (amps >= 0)
+    avionics = None
+    if after.any():
+        power = volts[after] * amps[after]
+        avionics = Estimate(
+            float(power.mean()),
+            float(power.std()),
+            f"V·I after the disarm (rotors stopped from {DISARM_SETTLE_S:g} s), {int(after.sum())} "
+            "samples ± σ",
+            (float(time_s[after][0]), float(time_s[after][-1])),
+        )
+    hovering = _mean_in(time_s, volts * amps, hover.windows_s)
+    into_motors = float(hovering.mean()) - (
+        avionics.value if avionics else vehicle.battery.avionics_power_w
+    )
+    shaft = _shaft_power_w(vehicle, hover.air_density_kgpm3, hover.rotor_speed_radps)
+    efficiency = shaft / into_motors
+    if not 0.0 < efficiency <= 1.0:
+        return None, (
+            f"the rotors' shaft power in hover ({shaft:.0f} W at {hover.rotor_speed_radps:.0f} "
+            f"rad/s) against {into_motors:.0f} W into the motors gives an efficiency of "
+            f"{efficiency:.2f}: the torque coefficient or the rotor speed is off"
+        )
+    line = hover.rotor_line
+    relative = math.hypot(
+        3.0 * line.frequency.relative_uncertainty if line else 0.0,
+        float(hovering.std() / hovering.mean()) / math.sqrt(max(1, hovering.size)),
+    )
+    return BatteryIdentification(
+        internal_resistance_ohm=resistance,
+        avionics_power_w=avionics,
+        propulsion_efficiency=Estimate(
+            efficiency,
+            efficiency * relative,
+            f"shaft 4·k_Q·ω_h³ = {shaft:.0f} W over {into_motors:.0f} W into the motors in "
+            "hover (battery V·I less the avionics)",
+            (hover.windows_s[0][0], hover.windows_s[-1][1]),
+        ),
+    ), ""
+
+
+def _shaft_power_w(vehicle: Vehicle, density: float, speed_radps: float) -> float:
+    """All rotors' shaft power at ``speed_radps``: 4·k_Q·ω³, k_Q at the air density."""
+    prop = vehicle.propulsion
+    k_q = prop.torque_coefficient_nm_per_radps2 * density / prop.reference_air_density_kgpm3
+    return ROTOR_COUNT * k_q * speed_radps**3
+
+
+def _armed_span(log: _Log) -> tuple[float, float]:
+    """First arm to the disarm after the last armed sample (``actuator_armed``), else the
+    airborne span."""
+    if "actuator_armed" in log.topics:
+        time_s, armed = log.series("actuator_armed", "armed", "")
+        if np.any(armed > 0.5):
+            on = time_s[armed > 0.5]
+            off = time_s[(time_s > on[-1]) & (armed < 0.5)]
+            return float(on[0]), float(off[0] if off.size else time_s[-1])
+    return _airborne_span(log)
 
 
 def _thrust_centre(
@@ -747,12 +1045,20 @@ def identification_table(result: Identification) -> Table:
         "vehicle_thrust_setpoint / hover_thrust_estimate",
         "",
     )
-    table.add_row(
-        "hover rotor speed",
-        f"{hover.rotor_speed_radps:.0f} rad/s",
-        f"√(mg/4k_T) at ρ {hover.air_density_kgpm3:.3f} kg/m³, {hover.battery_voltage_v:.2f} V",
-        "",
-    )
+    line = hover.rotor_line
+    if line is None:
+        table.add_row("rotor line", "not identified", hover.rotor_line_reason, "")
+        table.add_row(
+            "hover rotor speed",
+            f"{hover.rotor_speed_radps:.0f} rad/s",
+            f"√(mg/4k_T) at ρ {hover.air_density_kgpm3:.3f} kg/m³, {hover.battery_voltage_v:.2f} V",
+            "",
+        )
+    else:
+        add("rotor line Hz", line.frequency)
+        speed = f"{hover.rotor_speed_radps:.0f} rad/s"
+        table.add_row("hover rotor speed", speed, "2π × the line", "")
+        add("thrust_coefficient", line.thrust_coefficient, _format(line.thrust_coefficient, 1, 4))
     add("speed_offset_radps", hover.speed_offset_radps)
     table.add_row(
         "speed_slope_radps",
@@ -774,6 +1080,13 @@ def identification_table(result: Identification) -> Table:
         add(f"{axis.axis} delay s", axis.delay_s)
         if axis.reason:
             table.add_row("", "", axis.reason, "")
+    battery = result.battery
+    if battery is None:
+        table.add_row("battery", "not identified", result.battery_reason, "")
+    else:
+        add("internal_resistance_ohm", battery.internal_resistance_ohm)
+        add("avionics_power_w", battery.avionics_power_w)
+        add("propulsion_efficiency", battery.propulsion_efficiency)
     for note in result.notes:
         table.add_row("note", "", note, "")
     return table
@@ -812,6 +1125,15 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
         f"speed_offset_radps = {offset.value:.1f}   # [identified] {source}, hover "
         f"{window[0]:.1f}-{window[1]:.1f} s, ± {offset.uncertainty:.0f} rad/s",
     ]
+    line = hover.rotor_line
+    if line is None:
+        lines.append(f"# thrust_coefficient_n_per_radps2 kept: {hover.rotor_line_reason}")
+    else:
+        k_t = line.thrust_coefficient
+        lines.append(
+            f"thrust_coefficient_n_per_radps2 = {k_t.value:.4g}   # [identified] {source}, "
+            f"hover rotor line {line.frequency.value:.1f} ± {line.frequency.uncertainty:.1f} Hz"
+        )
     lags = [a.motor_time_constant_s for a in result.axes if a.motor_lag_identified]
     if lags:
         tau = float(np.mean([e.value for e in lags]))
@@ -823,4 +1145,21 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
             f"# motor_time_constant_s = {prop.motor_time_constant_s} kept: "
             "not identifiable from this log"
         )
+    battery = result.battery
+    lines += ["", "[battery]"]
+    if battery is None:
+        lines.append(f"# kept: {result.battery_reason}")
+    else:
+        for key, estimate, digits in (
+            ("internal_resistance_ohm", battery.internal_resistance_ohm, 4),
+            ("avionics_power_w", battery.avionics_power_w, 3),
+            ("propulsion_efficiency", battery.propulsion_efficiency, 3),
+        ):
+            if estimate is None:
+                lines.append(f"# {key} kept: no current after the disarm")
+            else:
+                lines.append(
+                    f"{key} = {estimate.value:.{digits}g}   # [identified] {source}, "
+                    f"± {estimate.uncertainty:.2g}"
+                )
     return "\n".join(lines) + "\n"

@@ -14,7 +14,7 @@ from quad_model.vehicle import VEHICLES_DIR
         # √(m·g/(4·C_T)) from each file's mass and thrust coefficient.
         ("f450_high_precision", 557.33, 1.4),
         ("f450_low_precision", 555.08, 1.4),
-        ("x500_v2", 757.35, 2.0),
+        ("x500_v2", 576.37, 2.0),
     ],
 )
 def test_bundled_vehicles_load(name, hover_radps, mass_kg):

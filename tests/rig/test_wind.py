@@ -39,11 +39,12 @@ def test_the_wind_balances_the_thrusts_horizontal_part(tilt_deg):
 
 
 def test_the_x500_flights_wind():
-    """Four hover windows, the thrust axis against its attitude on the ground: about 4 m/s
-    from the north-north-east, the windows and the level reference spread ±2 m/s."""
+    """Four hover windows, the thrust axis against its attitude on the ground: about 5 m/s
+    from the north-north-east, the windows and the level reference spread ±2 m/s (4.2 m/s
+    with Gazebo's thrust coefficient, whose faster rotors carried more rotor drag)."""
     wind = estimate_wind(X500_LOG, load_vehicle("x500_v2"))
     assert len(wind.windows_s) == 4
-    assert wind.speed_mps == pytest.approx(4.2, abs=0.3)
+    assert wind.speed_mps == pytest.approx(4.8, abs=0.3)
     assert wind.from_deg == pytest.approx(19.0, abs=10.0)
     assert 0.5 < wind.bound_mps < 3.0
     assert wind.steady_ned_mps[2] == 0.0
