@@ -19,6 +19,7 @@ from quad_model.environment import (
     isa_pressure_pa,
     isa_temperature_k,
 )
+from quad_model.frames import STANDARD_GRAVITY_MPS2
 from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import VEHICLES_DIR, load_vehicle
 from rig.apps import cli
@@ -324,7 +325,7 @@ def test_the_rotor_line_gives_the_hover_rotor_speed_unless_it_is_folded():
     assert line.frequency.value == pytest.approx(85.0, abs=0.3)
     assert line.correlation > 0.9
     speed = 2 * np.pi * line.frequency.value
-    expected = vehicle.body.mass_kg * 9.80665 / (4 * speed**2)
+    expected = vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (4 * speed**2)
     assert line.thrust_coefficient.value == pytest.approx(expected, rel=1e-9)
     line, reason = _identify_rotor_line(_line_log(True), ((10.0, 20.0),), vehicle, rho)
     assert line is None
