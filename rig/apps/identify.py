@@ -178,8 +178,10 @@ class BatteryIdentification:
     internal_resistance_ohm: Estimate
     #: None when the log holds no current after the disarm.
     avionics_power_w: Estimate | None
-    #: Shaft power over electrical power into the motors, in hover.
-    propulsion_efficiency: Estimate
+    #: Shaft power over electrical power into the motors, in hover; None when implausible
+    #: or not measured (``efficiency_reason`` says why).
+    propulsion_efficiency: Estimate | None
+    efficiency_reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -712,7 +714,7 @@ def _identify_battery(
     design = np.column_stack([np.ones(use.sum()), -used_mah[use], -amps[use]])
     solution, *_ = np.linalg.lstsq(design, volts[use], rcond=None)
     residual = volts[use] - design @ solution
-    covariance = np.var(residual, ddof=3) * np.linalg.inv(design.T @ design)
+    covariance = np.var(residual, ddof=3) * np.linalg.pinv(design.T @ design)
     span = (float(time_s[use][0]), float(time_s[use][-1]))
     resistance = Estimate(
         float(solution[2]),
@@ -732,12 +734,25 @@ def _identify_battery(
             "samples ± σ",
             (float(time_s[after][0]), float(time_s[after][-1])),
         )
-    hovering = _mean_in(time_s, volts * amps, hover.windows_s)
-    into_motors = float(hovering.mean()) - (
-        avionics.value if avionics else vehicle.battery.avionics_power_w
+    efficiency, efficiency_reason = _propulsion_efficiency(
+        _mean_in(time_s, volts * amps, hover.windows_s),
+        avionics.value if avionics else vehicle.battery.avionics_power_w,
+        hover,
+        vehicle,
     )
+    return BatteryIdentification(resistance, avionics, efficiency, efficiency_reason), ""
+
+
+def _propulsion_efficiency(
+    electric_w: NDArray, avionics_w: float, hover: HoverIdentification, vehicle: Vehicle
+) -> tuple[Estimate | None, str]:
+    """The rotors' shaft power in hover over the battery's power into the motors (its
+    samples ``electric_w`` in the hover windows, less the avionics)."""
+    if electric_w.size == 0:
+        return None, "no battery_status sample in the hover windows"
+    into_motors = float(electric_w.mean()) - avionics_w
     shaft = _shaft_power_w(vehicle, hover.air_density_kgpm3, hover.rotor_speed_radps)
-    efficiency = shaft / into_motors
+    efficiency = shaft / into_motors if into_motors > 0 else math.inf
     if not 0.0 < efficiency <= 1.0:
         return None, (
             f"the rotors' shaft power in hover ({shaft:.0f} W at {hover.rotor_speed_radps:.0f} "
@@ -747,18 +762,14 @@ def _identify_battery(
     line = hover.rotor_line
     relative = math.hypot(
         3.0 * line.frequency.relative_uncertainty if line else 0.0,
-        float(hovering.std() / hovering.mean()) / math.sqrt(max(1, hovering.size)),
+        float(electric_w.std() / electric_w.mean()) / math.sqrt(electric_w.size),
     )
-    return BatteryIdentification(
-        internal_resistance_ohm=resistance,
-        avionics_power_w=avionics,
-        propulsion_efficiency=Estimate(
-            efficiency,
-            efficiency * relative,
-            f"shaft 4·k_Q·ω_h³ = {shaft:.0f} W over {into_motors:.0f} W into the motors in "
-            "hover (battery V·I less the avionics)",
-            (hover.windows_s[0][0], hover.windows_s[-1][1]),
-        ),
+    return Estimate(
+        efficiency,
+        efficiency * relative,
+        f"shaft 4·k_Q·ω_h³ = {shaft:.0f} W over {into_motors:.0f} W into the motors in hover "
+        "(battery V·I less the avionics)",
+        (hover.windows_s[0][0], hover.windows_s[-1][1]),
     ), ""
 
 
@@ -1086,7 +1097,10 @@ def identification_table(result: Identification) -> Table:
     else:
         add("internal_resistance_ohm", battery.internal_resistance_ohm)
         add("avionics_power_w", battery.avionics_power_w)
-        add("propulsion_efficiency", battery.propulsion_efficiency)
+        if battery.propulsion_efficiency is None:
+            table.add_row("propulsion_efficiency", "not identified", battery.efficiency_reason, "")
+        else:
+            add("propulsion_efficiency", battery.propulsion_efficiency)
     for note in result.notes:
         table.add_row("note", "", note, "")
     return table
@@ -1150,13 +1164,13 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
     if battery is None:
         lines.append(f"# kept: {result.battery_reason}")
     else:
-        for key, estimate, digits in (
-            ("internal_resistance_ohm", battery.internal_resistance_ohm, 4),
-            ("avionics_power_w", battery.avionics_power_w, 3),
-            ("propulsion_efficiency", battery.propulsion_efficiency, 3),
+        for key, estimate, digits, why in (
+            ("internal_resistance_ohm", battery.internal_resistance_ohm, 4, ""),
+            ("avionics_power_w", battery.avionics_power_w, 3, "no current after the disarm"),
+            ("propulsion_efficiency", battery.propulsion_efficiency, 3, battery.efficiency_reason),
         ):
             if estimate is None:
-                lines.append(f"# {key} kept: no current after the disarm")
+                lines.append(f"# {key} kept: {why}")
             else:
                 lines.append(
                     f"{key} = {estimate.value:.{digits}g}   # [identified] {source}, "
