@@ -1069,7 +1069,7 @@ def identification_table(result: Identification) -> Table:
         add("rotor line Hz", line.frequency)
         speed = f"{hover.rotor_speed_radps:.0f} rad/s"
         table.add_row("hover rotor speed", speed, "2π × the line", "")
-        add("thrust_coefficient", line.thrust_coefficient, _format(line.thrust_coefficient, 1, 4))
+        add("thrust_coefficient", line.thrust_coefficient)
     add("speed_offset_radps", hover.speed_offset_radps)
     table.add_row(
         "speed_slope_radps",
