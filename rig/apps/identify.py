@@ -610,10 +610,8 @@ def _identify_rotor_line(
     speed = 2.0 * math.pi * line
     # A harmonic read as the 1× line would turn the rotors faster than the battery can: their
     # shaft power must stay below the electrical power into the motors, where it is logged.
-    battery = log.topics.get("battery_status", {})
-    if "current_a" in battery:
-        electric = _mean_in(battery["t"], battery["voltage_v"] * battery["current_a"], windows)
-        into_motors = float(electric.mean()) - vehicle.battery.avionics_power_w
+    into_motors = _hover_power_into_motors(log, windows, vehicle.battery.avionics_power_w)
+    if into_motors is not None:
         shaft = _shaft_power_w(vehicle, density, speed)
         if shaft > into_motors:
             return None, (
@@ -654,7 +652,7 @@ def _line_against_drive(
     columns = [log.series("actuator_motors", f"control[{m}]", "the rotors' drive")
                for m in range(ROTOR_COUNT)]  # fmt: skip
     t_cmd, command = columns[0][0], np.mean([values for _, values in columns], axis=0)
-    if "battery_status" in log.topics:
+    if "voltage_v" in log.topics.get("battery_status", {}):
         t_volt, volts = log.series("battery_status", "voltage_v", "the rotors' drive")
     else:  # the command alone orders the rotor speeds when the voltage is not logged
         t_volt, volts = t_cmd, np.ones_like(command)
@@ -707,7 +705,7 @@ def _identify_battery(
     time_s = data["t"]
     volts, amps, used_mah = (np.asarray(data[f], dtype=float)
                              for f in ("voltage_v", "current_a", "discharged_mah"))  # fmt: skip
-    armed_from, armed_to = _armed_span(log)
+    armed_from, armed_to, disarm_logged = _armed_span(log)
     use = (time_s >= armed_from) & (time_s < armed_to) & np.isfinite(volts) & (amps > 0)
     if use.sum() < 20:
         return None, f"only {int(use.sum())} battery_status samples while armed with a current"
@@ -723,9 +721,10 @@ def _identify_battery(
         f"(RMS residual {np.sqrt(np.mean(residual**2)) * 1e3:.0f} mV)",
         span,
     )
+    # after a logged disarm only: the end of the airborne span may still idle the rotors
     after = (time_s >= armed_to + DISARM_SETTLE_S) & np.isfinite(volts) & (amps >= 0)
     avionics = None
-    if after.any():
+    if disarm_logged and after.any():
         power = volts[after] * amps[after]
         avionics = Estimate(
             float(power.mean()),
@@ -741,6 +740,19 @@ def _identify_battery(
         vehicle,
     )
     return BatteryIdentification(resistance, avionics, efficiency, efficiency_reason), ""
+
+
+def _hover_power_into_motors(
+    log: _Log, windows: tuple[tuple[float, float], ...], avionics_w: float
+) -> float | None:
+    """The battery's mean V·I in the hover windows less the avionics; None when the log
+    holds no voltage and current there."""
+    battery = log.topics.get("battery_status", {})
+    if not {"voltage_v", "current_a"} <= battery.keys():
+        return None
+    electric = _mean_in(battery["t"], battery["voltage_v"] * battery["current_a"], windows)
+    electric = electric[np.isfinite(electric)]
+    return float(electric.mean()) - avionics_w if electric.size else None
 
 
 def _propulsion_efficiency(
@@ -780,16 +792,18 @@ def _shaft_power_w(vehicle: Vehicle, density: float, speed_radps: float) -> floa
     return ROTOR_COUNT * k_q * speed_radps**3
 
 
-def _armed_span(log: _Log) -> tuple[float, float]:
+def _armed_span(log: _Log) -> tuple[float, float, bool]:
     """First arm to the disarm after the last armed sample (``actuator_armed``), else the
-    airborne span."""
+    airborne span; and whether the span ends at a logged disarm."""
     if "actuator_armed" in log.topics:
         time_s, armed = log.series("actuator_armed", "armed", "")
         if np.any(armed > 0.5):
             on = time_s[armed > 0.5]
             off = time_s[(time_s > on[-1]) & (armed < 0.5)]
-            return float(on[0]), float(off[0] if off.size else time_s[-1])
-    return _airborne_span(log)
+            if off.size:
+                return float(on[0]), float(off[0]), True
+            return float(on[0]), float(time_s[-1]), False
+    return (*_airborne_span(log), False)
 
 
 def _thrust_centre(

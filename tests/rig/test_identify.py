@@ -590,3 +590,36 @@ def test_the_8s_quads_armed_idle_is_its_rest(quad4001_identification):
     assert idle.windows_s[0][1] > 109.0
     assert vibration.rest_point(vehicle, measured) is idle
     assert vehicle.vibration.level_rotor_speed_radps == pytest.approx((394.8,), abs=0.1)
+
+
+def test_a_log_without_voltage_or_a_logged_disarm_leaves_just_those_parts_out(
+    real_identification,
+):
+    """A battery_status with a current but no voltage neither orders the line's windows nor
+    bounds its shaft power (no traceback); without actuator_armed the end of the flight may
+    still idle the rotors, so no avionics power is read after it."""
+    result, vehicle = real_identification
+    log = _line_log(False)
+    log.topics["battery_status"] = {"t": log.topics["battery_status"]["t"],
+                                    "current_a": np.full(600, 12.0)}  # fmt: skip
+    rho = vehicle.propulsion.reference_air_density_kgpm3
+    line, reason = _identify_rotor_line(log, ((10.0, 20.0),), vehicle, rho)
+    assert line is not None, reason
+    assert line.frequency.value == pytest.approx(85.0, abs=0.3)
+    t = np.arange(0.0, 60.0, 0.2)
+    current = 12.0 + 3.0 * np.sin(t)
+    used = np.cumsum(current) * 0.2 / 3.6
+    topics = {
+        "battery_status": {
+            "t": t,
+            "voltage_v": 15.2 - 0.0006 * used - 0.05 * current,
+            "current_a": current,
+            "discharged_mah": used,
+        },
+        "vehicle_land_detected": {"t": t, "landed": (t > 50.0).astype(float)},
+    }
+    hover = replace(result.hover, windows_s=((10.0, 20.0),), rotor_speed_radps=600.0)
+    battery, reason = _identify_battery(_Log(Path("synthetic.ulg"), topics, {}), hover, vehicle)
+    assert battery is not None, reason
+    assert battery.internal_resistance_ohm.value == pytest.approx(0.05, rel=1e-6)
+    assert battery.avionics_power_w is None
