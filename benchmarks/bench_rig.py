@@ -18,12 +18,13 @@ inside ``send`` (the send wakes the autopilot, which often runs on the sender's 
 before the send returns).
 
 20× is 50 µs per frame at 1 kHz and 200 µs at 250 Hz, rig and autopilot together. The
-model step and sensor physics (quad_model, numpy per sample) alone take 110-150 µs, the
-loopback round trip with its two process wake-ups 20-80 µs, and the rest of the chip path
-is fpga_hdl's numpy decode and tick-exact PWM model. Reaching it would need the whole
-frame (model, sensor physics, chip words and register models, driver decode) compiled as
-one kernel, logging batched into blocks, the autopilot compiled likewise, and an idle
-second core for the autopilot; see the README's speed section.
+first two figures measure the lockstep exchange alone (``benchmarks.lockstep_exchange``:
+HIL_SENSOR out, HIL_ACTUATOR_CONTROLS back, two processes on TCP loopback, nothing else
+computed): on this machine kind it alone takes more than 50 µs, with pymavlink on both
+sides about twice that, so no Python simulator and Python autopilot in separate processes
+reach 20× at 1 kHz, whatever they compute. Reaching it would need the whole frame (model,
+sensor physics, chip words and register models, driver decode, MAVLink) compiled, the
+autopilot compiled likewise, and an idle core for each; see the README's speed section.
 
 The peak resident memory comes from one 60 s TLM run with the reference autopilot in a
 fresh process (``python -m benchmarks.bench_rig --peak-rss`` prints it as JSON): the rig's
@@ -42,6 +43,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from benchmarks.figures import Figure, budget_detail, peak_rss_mib
+from benchmarks.lockstep_exchange import exchange_us
 from rig.chips.rtl import COCOTB_LAYER
 from rig.errors import RigError
 from rig.lockstep.loop import Progress, RunOptions, RunResult, run_scenario
@@ -142,6 +144,25 @@ def peak_rss() -> dict[str, float]:
     }
 
 
+#: Exchanges timed for the floor: about two seconds each.
+EXCHANGE_FRAMES = 20_000
+EXCHANGE_NAMES = {
+    "pymavlink": "encoded and parsed with pymavlink on both sides",
+    "bytes": "the same bytes packed beforehand (socket round trip and wake-ups alone)",
+}
+
+
+def exchange_floor() -> Iterator[Figure]:
+    """The lockstep exchange alone (``benchmarks.lockstep_exchange``) as a real-time factor
+    at IMU 1 kHz: the most any Python simulator and autopilot pair reaches here."""
+    for mode, what in EXCHANGE_NAMES.items():
+        per_frame_us = exchange_us(EXCHANGE_FRAMES, mode)
+        yield Figure(f"anchor: the lockstep exchange alone, IMU 1000 Hz, {mode}",
+                     1000.0 / per_frame_us, "× real time",
+                     detail=f"{per_frame_us:.0f} µs per HIL_SENSOR → HIL_ACTUATOR_CONTROLS "
+                     f"over TCP loopback between two processes, {what}")  # fmt: skip
+
+
 #: ``make hil-sim``'s flight (rig/scenarios/hil_sim.toml), for the projected wall time.
 HIL_SIM_S = 60.0
 RTL_TICK_INSTANCE = INSTANCE + 1  # its own ports: the cases above may still be closing
@@ -174,6 +195,7 @@ def rtl_pwm_tick_cases() -> Iterator[Figure]:
 
 
 def figures() -> Iterator[Figure]:
+    yield from exchange_floor()
     autopilots = ["reference", "double"]
     for sensor_layer in ("tlm", "rtl"):
         for imu_hz in (1000, 250):

@@ -7,6 +7,7 @@ import pytest
 
 from benchmarks.__main__ import main, merged_record
 from benchmarks.figures import Figure
+from benchmarks.lockstep_exchange import MODES, exchange_us
 
 
 def _record(path, modules):
@@ -63,3 +64,15 @@ def test_compare_says_in_one_line_what_is_wrong(tmp_path, capsys):
     bad.write_text("[1, 2]")
     with pytest.raises(SystemExit, match=r"bad.json: not a figures file"):
         main(["--compare", str(bad), str(bad)])
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_lockstep_exchange_alone_answers_every_frame(mode):
+    """The floor's two processes trade every frame (a peer that missed one would leave the
+    timing side waiting and fail on the timeout); the time is a benchmark's, not checked."""
+    assert exchange_us(300, mode) > 0
+
+
+def test_the_lockstep_exchange_refuses_an_unknown_mode():
+    with pytest.raises(ValueError, match=r"mode must be one of .*not 'udp'"):
+        exchange_us(10, "udp")
