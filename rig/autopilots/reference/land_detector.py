@@ -3,8 +3,10 @@
 Landing goes through PX4's three stages (``MulticopterLandDetector.cpp``), each of which
 must hold for a third of ``LNDMC_TRIG_TIME`` before the next one is considered:
 
-1. *ground contact*: descent commanded, thrust below 30 % of the range from ``MPC_THR_MIN``
-   to ``MPC_THR_HOVER``, no vertical (``LNDMC_Z_VEL_MAX``) or horizontal
+1. *ground contact*: descent commanded, thrust below 60 % of the range from ``MPC_THR_MIN``
+   to the hover thrust (PX4 takes 30 % without a valid hover thrust estimate and 60 % with
+   one, which its estimator gives in flight; this autopilot's hover thrust is
+   ``MPC_THR_HOVER``, known), no vertical (``LNDMC_Z_VEL_MAX``) or horizontal
    (``LNDMC_XY_VEL_MAX``) movement, and, when a rangefinder gives the height above the
    ground, less than 1 m of it (PX4 ``_is_close_to_ground``). The position controller
    then cuts thrust to its minimum and resets its integrators (PX4 ``mc_pos_control``:
@@ -25,6 +27,9 @@ import math
 
 from rig.autopilots.reference.params import Parameters
 
+#: Ground contact's low thrust, as a fraction of the range from MPC_THR_MIN to the hover
+#: thrust: PX4's value while its hover thrust estimate is valid (``thr_pct_hover``).
+LOW_THRUST_FRACTION = 0.6
 #: PX4 ``DIST_FROM_GROUND_THRESHOLD``: ground contact needs the rangefinder's height below it.
 CLOSE_TO_GROUND_M = 1.0
 #: Takeoff: with the motors above idle, climbing this far above the arming height or this
@@ -118,7 +123,7 @@ class LandDetector:
         still = abs(velocity_down_mps) <= min(0.45 * land_speed, params["LNDMC_Z_VEL_MAX"]) and (
             horizontal_speed_mps is None or horizontal_speed_mps <= params["LNDMC_XY_VEL_MAX"]
         )
-        low_thrust = collective_thrust <= thr_min + 0.3 * (hover - thr_min)
+        low_thrust = collective_thrust <= thr_min + LOW_THRUST_FRACTION * (hover - thr_min)
         close_to_ground = dist_bottom_m is None or dist_bottom_m < CLOSE_TO_GROUND_M
         self.ground_contact = self._ground_contact.update(
             descending and still and low_thrust and close_to_ground, time_us, stage_us
