@@ -1,5 +1,6 @@
 """``python -m benchmarks``: the figures file keeps every module's last figures, and
-``--compare`` sets two of them side by side (the benchmarks themselves run in ``make bench``)."""
+``--compare`` sets two of them side by side; the lockstep-exchange anchor's two processes
+answer each other (the benchmarks themselves run in ``make bench``)."""
 
 import json
 
