@@ -20,11 +20,12 @@ before the send returns).
 20× is 50 µs per frame at 1 kHz and 200 µs at 250 Hz, rig and autopilot together. The
 first two figures measure the lockstep exchange alone (``benchmarks.lockstep_exchange``:
 HIL_SENSOR out, HIL_ACTUATOR_CONTROLS back, two processes on TCP loopback, nothing else
-computed): on this machine kind it alone takes more than 50 µs, with pymavlink on both
-sides about twice that, so no Python simulator and Python autopilot in separate processes
-reach 20× at 1 kHz, whatever they compute. Reaching it would need the whole frame (model,
-sensor physics, chip words and register models, driver decode, MAVLink) compiled, the
-autopilot compiled likewise, and an idle core for each; see the README's speed section.
+computed): on this machine kind it alone takes more than 50 µs, and about twice that with
+each message encoded and decoded as the rig and the reference autopilot do, so no Python
+simulator and Python autopilot in separate processes reach 20× at 1 kHz, whatever they
+compute. Reaching it would need the whole frame (model, sensor physics, chip words and
+register models, driver decode, MAVLink) compiled, the autopilot compiled likewise, and an
+idle core for each; see the README's speed section.
 
 The peak resident memory comes from one 60 s TLM run with the reference autopilot in a
 fresh process (``python -m benchmarks.bench_rig --peak-rss`` prints it as JSON): the rig's
@@ -147,7 +148,7 @@ def peak_rss() -> dict[str, float]:
 #: Exchanges timed for the floor: about two seconds each.
 EXCHANGE_FRAMES = 20_000
 EXCHANGE_NAMES = {
-    "pymavlink": "encoded and parsed with pymavlink on both sides",
+    "pymavlink": "encoded and decoded as the rig and the reference autopilot do",
     "bytes": "the same bytes packed beforehand (socket round trip and wake-ups alone)",
 }
 

@@ -7,9 +7,9 @@ model, no sensors, no control. What one exchange costs is the most frames per se
 Python simulator and a Python autopilot can reach on this machine, whatever they compute;
 ``bench_rig`` prints it beside the rig's own figures.
 
-Measured twice: encoded and parsed with pymavlink on both sides, as the rig and the
-reference autopilot do, and with the same bytes packed once beforehand (the socket round
-trip and the two process wake-ups alone).
+Measured twice: each message encoded and decoded as the rig (``rig.mavlink.sim_messages``)
+and the reference autopilot (pymavlink's parser) do, and with the same bytes packed once
+beforehand (the socket round trip and the two process wake-ups alone).
 
 ``python -m benchmarks.lockstep_exchange PORT FRAMES MODE`` is the autopilot's side (the
 benchmark starts it).
@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from rig.mavlink.px4_api import LOCKSTEP_FLAG, mavlink
+from rig.mavlink.sim_messages import actuator_controls_from_frame, hil_sensor
 
 REPO = Path(__file__).resolve().parent.parent
 MODES = ("pymavlink", "bytes")
@@ -33,10 +34,9 @@ TIMEOUT_S = 30.0
 
 def _sensor(mav: mavlink.MAVLink, frame: int) -> bytes:
     """One HIL_SENSOR as the rig sends it at an IMU-only frame (accel and gyro)."""
-    return mavlink.MAVLink_hil_sensor_message(
-        (frame + 1) * 1000, 0.1, -0.2, -9.8, 0.01, 0.02, -0.03, 0.0, 0.0, 0.0,
-        0.0, 0.0, 0.0, 0.0, 0b111111, 0,
-    ).pack(mav)  # fmt: skip
+    time_us = (frame + 1) * 1000
+    message = hil_sensor(mav, time_us, accel_mps2=(0.1, -0.2, -9.8), gyro_radps=(0.01, 0.02, -0.03))
+    return message.pack(mav)
 
 
 def _controls(mav: mavlink.MAVLink, time_us: int) -> bytes:
@@ -95,9 +95,12 @@ def exchange_us(frames: int, mode: str) -> float:
                         _receive(link)
                         continue
                     link.sendall(_sensor(mav, frame))
-                    answers: list = []
-                    while not answers:
-                        answers = mav.parse_buffer(_receive(link)) or []
+                    answered = False
+                    while not answered:  # the rig's decoder, pymavlink's for anything else
+                        data = _receive(link)
+                        answered = bool(
+                            actuator_controls_from_frame(data) or mav.parse_buffer(data)
+                        )
                 elapsed = time.perf_counter() - started
         except BaseException:  # a timeout or Ctrl-C: the peer must not outlive the benchmark
             peer.kill()
