@@ -544,8 +544,8 @@ class _Loop:
             elif ground.busy or waiting:
                 waiting.append(action)
             else:
-                self._event(f"{action.name}: sent")
-                ground.start(action.name, action.conversation, time_s)
+                done = ground.start(action.name, action.conversation, time_s)
+                self._event(f"{action.name}: {done}")
         return waiting
 
     # -- autopilot process ---------------------------------------------------------------

@@ -58,6 +58,12 @@ PX4_MODES: dict[int, tuple[int, int, str]] = {
 }  # fmt: skip
 #: How many times an arm is asked again, a HEARTBEAT (1 s) apart, while PX4 is not ready.
 ARM_READY_RETRIES = 30
+#: How long (simulated time) a polled conversation waits for the autopilot's first
+#: HEARTBEAT before its first message. PX4 starts its MAVLink links from its start-up
+#: script, in wall time, while its lockstep clock already runs: on a loaded machine the
+#: first simulated second can pass before its onboard link listens, and a message sent
+#: earlier is lost (UDP), as a MISSION_COUNT at t = 1 s once was.
+AUTOPILOT_HEARD_TIMEOUT_SIM_S = 30.0
 #: Period of the offboard setpoint keep-alive: PX4 leaves offboard after COM_OF_LOSS_T (1 s).
 OFFBOARD_KEEPALIVE_S = 0.1
 
@@ -116,6 +122,7 @@ class _Pending:
     step: Expect
     name: str
     started_s: float
+    sent: bool
 
 
 @dataclass
@@ -173,16 +180,27 @@ class GroundLink:
             except StopIteration as done:
                 return done.value
 
-    def start(self, name: str, conversation: Conversation, time_s: float) -> None:
-        """Begin a conversation that :meth:`poll` advances frame by frame (PX4 SITL)."""
+    def start(self, name: str, conversation: Conversation, time_s: float) -> str:
+        """Begin a conversation that :meth:`poll` advances frame by frame (PX4 SITL); its
+        first message waits for the autopilot's first HEARTBEAT. Returns what was done."""
         if self._pending is not None:
             raise GroundLinkError(
                 f"{name} at t={time_s:.3f} s: {self._pending.name} is still waiting for "
                 f"{self._pending.step.waiting_for}"
             )
-        step = next(conversation)
-        self._send(step.send)
-        self._pending = _Pending(conversation, step, name, time_s)
+        self._drain()
+        self._pending = _Pending(conversation, next(conversation), name, time_s, sent=False)
+        if not self.autopilot_heard:
+            udp = self.ports.onboard_remote_udp
+            return f"held until the autopilot's first HEARTBEAT on UDP {udp}"
+        self._send(self._pending.step.send)
+        self._pending.sent = True
+        return "sent"
+
+    @property
+    def autopilot_heard(self) -> bool:
+        """Whether an autopilot's HEARTBEAT has arrived: its onboard link listens."""
+        return self.custom_mode is not None
 
     @property
     def busy(self) -> bool:
@@ -194,6 +212,19 @@ class GroundLink:
         if pending is None:
             self._drain()
             return None
+        if not pending.sent:
+            self._drain()
+            if not self.autopilot_heard:
+                if time_s - pending.started_s > AUTOPILOT_HEARD_TIMEOUT_SIM_S:
+                    raise GroundLinkError(
+                        f"{pending.name}: no HEARTBEAT from the autopilot on UDP "
+                        f"{self.ports.onboard_remote_udp} within "
+                        f"{AUTOPILOT_HEARD_TIMEOUT_SIM_S:g} s of simulated time (its onboard "
+                        "MAVLink link never started)"
+                    )
+                return None
+            self._send(pending.step.send)
+            pending.sent, pending.started_s = True, time_s
         while (answer := self._receive_matching(pending.step, 0.0)) is not None:
             try:
                 pending.step = pending.conversation.send(answer)

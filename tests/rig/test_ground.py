@@ -20,11 +20,14 @@ from tests.instances import worker_instances
 
 
 class ScriptedAutopilot(threading.Thread):
-    """Answers COMMAND_LONG, the mission protocol and PARAM_SET like PX4; records all."""
+    """Answers COMMAND_LONG, the mission protocol and PARAM_SET like PX4; records all. Its
+    onboard link announces itself with a HEARTBEAT as it starts, as PX4's does (unless
+    ``heartbeat`` is False: a link not started yet)."""
 
-    def __init__(self, ports, refuse=(), statustext="", announce_late=False):
+    def __init__(self, ports, refuse=(), statustext="", announce_late=False, heartbeat=True):
         super().__init__(daemon=True)
         self.ports = ports
+        self.heartbeat = heartbeat
         self.announce_late = announce_late  # PX4's second PARAM_VALUE of a change, late
         self.announced = {}
         self.refuse = set(refuse)
@@ -45,8 +48,18 @@ class ScriptedAutopilot(threading.Thread):
         for message in messages:
             self.sock.sendto(message.pack(self.mav), to)
 
+    def beat(self):
+        """PX4's HEARTBEAT, to the port its onboard link sends to (the rig's)."""
+        beat = self.mav.heartbeat_encode(
+            mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+            mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, 0,
+        )  # fmt: skip
+        self.reply(beat, to=("127.0.0.1", self.ports.onboard_remote_udp))
+
     def run(self):
         parser = mavlink.MAVLink(None, 0, 0)
+        if self.heartbeat:
+            self.beat()
         while not self.stopped.is_set():
             try:
                 data, sender = self.sock.recvfrom(65536)
@@ -272,6 +285,34 @@ def test_polling_driver_completes_when_the_ack_arrives(pair):
         result = link.poll(1.0)
     assert result == "arm: accepted"
     assert not link.busy
+
+
+def test_polling_driver_holds_its_first_message_until_the_autopilot_is_heard(pair):
+    """PX4's onboard link starts from its start-up script while its lockstep clock runs: a
+    MISSION_COUNT sent before it listens is lost, so the first message waits for PX4's
+    HEARTBEAT, and then goes out."""
+    link, peer = pair(heartbeat=False)
+    assert link.start("arm", link.arm(), 1.0).startswith("held until the autopilot's first")
+    for time_s in (1.1, 1.2, 20.0):  # a late start is no answer timeout
+        assert link.poll(time_s) is None
+    time.sleep(0.2)
+    assert peer.received == []
+    assert link.busy
+    peer.beat()
+    result, deadline = None, time.monotonic() + 5.0
+    while result is None and time.monotonic() < deadline:
+        result = link.poll(20.5)
+    assert result == "arm: accepted"
+    assert [m.get_type() for m in peer.received] == ["COMMAND_LONG"]
+
+
+def test_an_autopilot_never_heard_is_named_in_one_line(pair):
+    link, _ = pair(heartbeat=False)
+    link.start("upload_mission", link.upload_mission([]), 1.0)
+    assert link.poll(30.0) is None
+    with pytest.raises(GroundLinkError, match=r"^upload_mission: no HEARTBEAT from the autopilot "
+                       r"on UDP \d+ within 30 s of simulated time"):  # fmt: skip
+        link.poll(31.5)
 
 
 def test_log_chirp_frequency_runs_from_f_min_to_f_max():
