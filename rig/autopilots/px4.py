@@ -166,7 +166,7 @@ def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, fl
         zip(propulsion.position_frd_m, propulsion.spin_direction, strict=True)
     ):
         params |= {f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": spin * ratio}
-    params["MPC_THR_HOVER"] = round(hover_throttle, 3)
+    params["MPC_THR_HOVER"] = round(float(hover_throttle), 3)
     params["BAT1_N_CELLS"] = vehicle.battery.cell_count
     return params
 

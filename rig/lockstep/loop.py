@@ -57,7 +57,14 @@ from quad_model.frames import ned_to_geodetic, yaw_quat
 from quad_model.model import Mount, VehicleTruth
 from quad_model.sensors import SensorReadings
 from quad_model.vehicle import VehicleFileError
-from rig.autopilots.px4 import Px4Sitl, check_imu_rate, find_px4, px4_parameters
+from rig.autopilots.px4 import (
+    Px4Sitl,
+    airframe_parameters,
+    check_imu_rate,
+    find_px4,
+    px4_parameters,
+)
+from rig.autopilots.reference.params import is_parameter
 from rig.chips.layer import (
     BypassSensorLayer,
     ChipFrame,
@@ -340,6 +347,14 @@ class _Loop:
             params = px4_parameters(vehicle, self.model.hover_throttle(), self.rates.imu_hz,
                                     options.autopilot_params)  # fmt: skip
             self._px4 = Px4Sitl(find_px4(options.px4_dir), run_dir, options.instance, params)
+        else:
+            # The airframe's parameters PX4 gets that the reference autopilot has too (rotor
+            # geometry, hover thrust), then the user's, which win name by name.
+            airframe = airframe_parameters(vehicle, self.model.hover_throttle())
+            self._reference_params = (
+                *(f"{name}={value!r}" for name, value in airframe.items() if is_parameter(name)),
+                *options.autopilot_params,
+            )
 
     # -- run ---------------------------------------------------------------------------
 
@@ -572,7 +587,7 @@ class _Loop:
         argv = self.options.autopilot_argv or (
             sys.executable, "-m", "rig.autopilots.reference",
             "--instance", str(self.ports.instance), "--log", str(log_path),
-            *(arg for param in self.options.autopilot_params for arg in ("--param", param)),
+            *(arg for param in self._reference_params for arg in ("--param", param)),
         )  # fmt: skip
         self._process = subprocess.Popen(list(argv), start_new_session=True,
                                          preexec_fn=restore_sigint)  # fmt: skip

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import pyulog
 
+from quad_model import QuadModel, load_vehicle
+from rig.autopilots.reference.params import parse_assignment
 from rig.lockstep.loop import RunOptions, run_scenario
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
@@ -18,13 +20,15 @@ pytestmark = pytest.mark.closed_loop
 HOVER_BOUND_M = 0.5
 
 
-def fly(tmp_path, free_instance, name, commands, duration_s, **scenario):
-    document = {"name": name, "vehicle": "f450_high_precision", "duration_s": duration_s,
-                "seed": scenario.pop("seed", 3), "commands": commands, **scenario}  # fmt: skip
+def fly(tmp_path, free_instance, name, commands, duration_s, params=(), **scenario):
+    document = {"name": name, "vehicle": scenario.pop("vehicle", "f450_high_precision"),
+                "duration_s": duration_s, "seed": scenario.pop("seed", 3), "commands": commands,
+                **scenario}  # fmt: skip
     options = RunOptions(
         instance=free_instance(),
         out_dir=tmp_path / name,
         timeouts=LinkTimeouts(connect_s=60, answer_s=30),
+        autopilot_params=params,
     )
     result = run_scenario(scenario_from_dict(document), options)
     return result, pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
@@ -118,6 +122,26 @@ def test_gps_loss_in_hover_triggers_the_failsafe_descent(tmp_path, free_instance
     assert "GPS" in failsafe[0][1]
     assert -truth_at(rig_log, [15.9])["z"][0] < 0.2  # down on the ground
     assert "fault gps_loss started" in [m.message for m in rig_log.logged_messages]
+
+
+@pytest.mark.parametrize("params", [(), ("MPC_THR_HOVER=0.61", "CA_ROTOR3_PY=0.2")])
+def test_the_reference_autopilot_flies_the_vehicles_airframe_unless_told_otherwise(
+    tmp_path, free_instance, params
+):
+    """As PX4 gets them: the vehicle file's rotor geometry and the model's hover throttle
+    (the X500's rotors are not on a square, its hover is not PX4's default 0.5); the user's
+    ``--param`` wins name by name. Read back from the autopilot's own log."""
+    vehicle = load_vehicle("x500_v2")
+    _, _, autopilot_log = fly(tmp_path, free_instance, "x500", [], 0.1, params, vehicle="x500_v2")
+    got = autopilot_log.initial_parameters
+    rotors = vehicle.propulsion.position_frd_m
+    overridden = dict(parse_assignment(text) for text in params)
+    for i, (x, y, _) in enumerate(rotors):
+        assert got[f"CA_ROTOR{i}_PX"] == pytest.approx(overridden.get(f"CA_ROTOR{i}_PX", x))
+        assert got[f"CA_ROTOR{i}_PY"] == pytest.approx(overridden.get(f"CA_ROTOR{i}_PY", y))
+    hover = QuadModel(vehicle, np.random.default_rng(0)).hover_throttle()
+    assert got["MPC_THR_HOVER"] == pytest.approx(overridden.get("MPC_THR_HOVER", hover), abs=1e-3)
+    assert not 0.49 < hover < 0.51
 
 
 def test_same_seed_same_flight(tmp_path, free_instance):

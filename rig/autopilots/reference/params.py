@@ -63,6 +63,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("MC_YAWRATE_FF", 0.0, 0.0, _INF, "", "Yaw rate feedforward"),
     _p("MC_YAWRATE_K", 1.0, 0.01, 5.0, "", "Yaw rate controller gain"),
     _p("MC_YR_INT_LIM", 0.3, 0.0, _INF, "", "Yaw rate integrator limit"),
+    # PX4 v1.15 on (in the X500 and 8S quad logs' v1.16/v1.17; not in the v1.14 SITL)
+    _p("MC_YAW_TQ_CUTOFF", 2.0, 0.0, 10.0, "Hz", "Yaw torque setpoint low-pass cutoff (0: off)"),
     # src/modules/sensors/vehicle_angular_velocity/imu_gyro_parameters.yaml
     _p("IMU_GYRO_CUTOFF", 40.0, 0.0, 1000.0, "Hz", "Low pass filter cutoff for the gyro"),
     _p("IMU_DGYRO_CUTOFF", 30.0, 0.0, 1000.0, "Hz", "Cutoff for the angular acceleration (D-term)"),
@@ -237,6 +239,11 @@ class Parameters:
 
     def as_dict(self) -> dict[str, float | int]:
         return dict(self._values)
+
+
+def is_parameter(name: str) -> bool:
+    """Whether the reference autopilot has a parameter ``name``."""
+    return name in _SPECS
 
 
 def parse_assignment(text: str) -> tuple[str, float]:

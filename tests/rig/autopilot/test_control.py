@@ -92,6 +92,27 @@ def test_rate_integrator_frozen_on_ground_and_limited():
     assert control.integral == pytest.approx([0.3, 0.3, 0.3])
 
 
+@pytest.mark.parametrize(("cutoff_hz", "dt"), [(2.0, 1e-3), (2.0, 4e-3), (0.0, 1e-3)])
+def test_yaw_torque_is_low_passed_at_mc_yaw_tq_cutoff(cutoff_hz, dt):
+    """PX4's first-order AlphaFilter on the yaw torque alone: after n steps of a unit yaw
+    torque, 1 − (1 − α)ⁿ with α = dt/(dt + 1/(2π·f_c)); roll and pitch pass unfiltered, and
+    a cutoff of 0 turns it off. P only, so the unfiltered torque is the error itself."""
+    gains = {"MC_ROLLRATE_I": 0.0, "MC_PITCHRATE_I": 0.0, "MC_YAWRATE_I": 0.0,
+             "MC_ROLLRATE_D": 0.0, "MC_PITCHRATE_D": 0.0, "MC_ROLLRATE_P": 0.1,
+             "MC_PITCHRATE_P": 0.1, "MC_YAWRATE_P": 0.1, "MC_YAW_TQ_CUTOFF": cutoff_hz}  # fmt: skip
+    control = RateController(Parameters(gains))
+    steps = round(0.25 / dt)
+    for _ in range(steps):
+        torque = control.update(np.zeros(3), np.full(3, 10.0), np.zeros(3), dt, False)
+    alpha = dt / (dt + 1.0 / (2.0 * math.pi * cutoff_hz)) if cutoff_hz else 1.0
+    assert torque[:2] == pytest.approx([1.0, 1.0], abs=1e-12)
+    assert torque[2] == pytest.approx(1.0 - (1.0 - alpha) ** steps, abs=1e-12)
+    if cutoff_hz:  # a quarter second at 2 Hz is about three time constants (0.080 s): 0.96
+        assert 0.9 < torque[2] < 0.99
+    control.reset_integral()
+    assert control.update(np.zeros(3), np.zeros(3), np.zeros(3), dt, False)[2] == 0.0
+
+
 def test_attitude_error_law_is_px4s():
     """A pure roll error e gives roll rate P·2·sin(e/2); a pure yaw error is weighted and
     the gain compensated, so small yaw errors see MC_YAW_P."""
