@@ -166,7 +166,7 @@ class RateController:
     ``MC_*_INT_LIM``. The yaw torque then goes through PX4's first-order low-pass at
     ``MC_YAW_TQ_CUTOFF`` (``MulticopterRateControl``, v1.15 on): yaw acts through the
     rotors' speed differences, and at high frequency their spin-up reaction torque
-    (J_rotor·dω/dt) outweighs the drag torque, so an unfiltered yaw loop is fast enough to
+    (J_rotor·dω/dt) outweighs the drag torque, so an unfiltered yaw loop keeps enough gain to
     limit-cycle (at 25 Hz on the F450 with the IMU at 250 Hz).
     """
 
