@@ -600,8 +600,12 @@ class FlightController:
             yaw_feed_forward = self.setpoint.yawspeed_radps if self.setpoint else 0.0
             self.rates_sp = self.attitude_control.update(q, self.q_sp, yaw_feed_forward)
         rates = self._rates_filter
+        # The integral holds from the land detector's second stage on, as PX4's
+        # MulticopterRateControl passes it `_maybe_landed || _landed`: on the ground the rate
+        # errors are the ground's doing, and integrating them tilts the motors apart.
+        on_ground = self.landed or self.land_detector.maybe_landed
         self.torque_sp = self.rate_control.update(
-            rates.rates_radps, self.rates_sp, rates.angular_accel_radps2, dt_s, self.landed
+            rates.rates_radps, self.rates_sp, rates.angular_accel_radps2, dt_s, on_ground
         )
         self.motors = self.allocator.allocate(self.torque_sp, self.collective_thrust)
         unallocated = self.allocator.unallocated[:3]
