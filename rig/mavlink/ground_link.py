@@ -188,14 +188,20 @@ class GroundLink:
                 f"{name} at t={time_s:.3f} s: {self._pending.name} is still waiting for "
                 f"{self._pending.step.waiting_for}"
             )
-        self._drain()
         self._pending = _Pending(conversation, next(conversation), name, time_s, sent=False)
-        if not self.autopilot_heard:
-            udp = self.ports.onboard_remote_udp
-            return f"held until the autopilot's first HEARTBEAT on UDP {udp}"
-        self._send(self._pending.step.send)
-        self._pending.sent = True
-        return "sent"
+        if self._send_first_if_heard(time_s):
+            return "sent"
+        return f"held until the autopilot's first HEARTBEAT on UDP {self.ports.onboard_remote_udp}"
+
+    def _send_first_if_heard(self, time_s: float) -> bool:
+        """Send the pending conversation's first message once the autopilot has been heard."""
+        pending = self._pending
+        assert pending is not None
+        self._drain()  # a HEARTBEAT queued since the last frame is what we wait for
+        if self.autopilot_heard:
+            self._send(pending.step.send)
+            pending.sent, pending.started_s = True, time_s
+        return pending.sent
 
     @property
     def autopilot_heard(self) -> bool:
@@ -212,19 +218,14 @@ class GroundLink:
         if pending is None:
             self._drain()
             return None
-        if not pending.sent:
-            self._drain()
-            if not self.autopilot_heard:
-                if time_s - pending.started_s > AUTOPILOT_HEARD_TIMEOUT_SIM_S:
-                    raise GroundLinkError(
-                        f"{pending.name}: no HEARTBEAT from the autopilot on UDP "
-                        f"{self.ports.onboard_remote_udp} within "
-                        f"{AUTOPILOT_HEARD_TIMEOUT_SIM_S:g} s of simulated time (its onboard "
-                        "MAVLink link never started)"
-                    )
-                return None
-            self._send(pending.step.send)
-            pending.sent, pending.started_s = True, time_s
+        if not pending.sent and not self._send_first_if_heard(time_s):
+            if time_s - pending.started_s > AUTOPILOT_HEARD_TIMEOUT_SIM_S:
+                raise GroundLinkError(
+                    f"{pending.name}: no HEARTBEAT from the autopilot on UDP "
+                    f"{self.ports.onboard_remote_udp} within {AUTOPILOT_HEARD_TIMEOUT_SIM_S:g} s "
+                    "of simulated time (its onboard MAVLink link never started)"
+                )
+            return None
         while (answer := self._receive_matching(pending.step, 0.0)) is not None:
             try:
                 pending.step = pending.conversation.send(answer)
