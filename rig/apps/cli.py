@@ -175,6 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     console.print(
         f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "
         f"(RTF {result.real_time_factor:.2f}x, {result.frames} frames)\n"
+        f"autopilot:     {result.autopilot}\n"
         f"rig log:       {result.rig_log}\n"
         f"autopilot log: {result.autopilot_log or '(written by the autopilot, e.g. PX4)'}",
         highlight=False,

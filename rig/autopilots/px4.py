@@ -6,17 +6,21 @@ Nothing of PX4 is vendored: the user's own ``build/px4_sitl_default``-shaped fol
 work dir ``RUN/px4`` (its parameters, dataman and ``log/``), as airframe 10016, PX4's generic
 quad X that starts ``simulator_mavlink``, with the rig's parameters on top.
 
-The rig's parameters reach PX4 through PX4's own hook: ``rcS`` sources ``px4-rc.params``
-from ``PATH`` after the airframe file ("user defined params for instances"), so the rig
-writes one into ``RUN/px4/bin`` and puts that folder first in PX4's ``PATH``. The same
-folder holds the ``px4-<module>`` command links that ``rcS`` calls (a build copied without
-its symlinks has plain files there).
+The rig's parameters reach PX4 through the hook its release's ``rcS`` has
+(:class:`ParameterHook`, read from the build): up to v1.15 a ``px4-rc.params`` sourced from
+``PATH`` after the airframe file, which the rig writes into ``RUN/px4/bin`` and puts first
+in PX4's ``PATH``; from v1.16 ``PX4_PARAM_<NAME>`` environment variables. The same folder
+holds the ``px4-<module>`` command links that ``rcS`` calls (a build copied without its
+symlinks has plain files there).
 
-Lockstep at any IMU rate (verified against PX4 v1.14's binary and source, README "Fly
-PX4"): PX4 answers a HIL_SENSOR with HIL_ACTUATOR_CONTROLS only when its rate controller
-ran for that sample and its lockstep components (the simulator and the logger, which
-waits for EKF2) have all progressed. So ``IMU_GYRO_RATEMAX`` and ``IMU_INTEG_RATE`` must
-both equal the simulator's IMU rate; ``IMU_INTEG_RATE`` stops at 1000 Hz.
+Lockstep at any IMU rate, the same rule from v1.14 to v1.17 (their source and binaries,
+docs/px4.md): PX4's ``simulator_mavlink`` sends HIL_ACTUATOR_CONTROLS when
+``pwm_out_sim`` publishes its outputs, which follows the rate controller, which runs on
+``vehicle_angular_velocity`` at most at ``IMU_GYRO_RATEMAX``; before sending it waits for
+every lockstep component (the logger, and each work queue with work queued, EKF2's on
+``vehicle_imu`` at ``IMU_INTEG_RATE``). So ``IMU_GYRO_RATEMAX`` and ``IMU_INTEG_RATE``
+must both equal the simulator's IMU rate, and ``IMU_INTEG_RATE`` stops at 1000 Hz. With
+PX4's defaults (400 and 200 Hz) only Gazebo's 250 Hz is answered frame by frame.
 
 PX4 runs on one CPU (:func:`px4_cpu`) when the rig may use two or more. Its modules are
 threads that wake each other in a chain every lockstep frame; spread over the cores, each
@@ -31,6 +35,7 @@ hardware (calibrations, drivers, ports, outputs) or what SITL and the rig need (
 
 from __future__ import annotations
 
+import enum
 import json
 import lzma
 import math
@@ -93,14 +98,38 @@ def cpus_of_pinned_px4() -> Iterator[int]:
 
 
 class Px4NotFound(RigError):
-    """``--px4``/``$PX4_DIR`` names no PX4 SITL build."""
+    """``--px4``/``$PX4_DIR`` names no PX4 SITL build the rig can fly."""
+
+
+#: The oldest PX4 release whose simulator API and start-up script the rig knows.
+OLDEST_RELEASE = (1, 14)
+#: A PX4 checkout's build keeps its version here (``src/lib/version``'s generated header).
+_GIT_VERSION_HEADER = Path("src/lib/version/build_git_version.h")
+#: PX4's version tag as its build embeds it ("v1.14.0", "v1.17.0-alpha1", "v1.15.2-12-gab12").
+_TAG = re.compile(rb"\bv(\d+)\.(\d+)\.(\d+)[0-9A-Za-z.+\-]*")
+
+
+class ParameterHook(enum.Enum):
+    """How a build's start-up script (``etc/init.d-posix/rcS``) takes parameters from
+    outside, which changed between releases (PX4 commit 9e8b530, v1.16)."""
+
+    #: v1.14, v1.15: ``rcS`` sources ``px4-rc.params`` from ``PATH`` after the airframe.
+    RC_PARAMS_FILE = "px4-rc.params"
+    #: v1.16 on: ``rcS`` sets every ``PX4_PARAM_<NAME>`` environment variable, before the
+    #: airframe, whose ``param set-default`` lines then leave them alone.
+    ENVIRONMENT = "PX4_PARAM_<NAME>"
 
 
 @dataclass(frozen=True)
 class Px4Build:
-    """A ``build/px4_sitl_default``-shaped folder: ``bin/px4`` and ``etc/init.d-posix/rcS``."""
+    """A ``build/px4_sitl_default``-shaped folder: ``bin/px4`` and ``etc/init.d-posix/rcS``,
+    with the release it was built from and the way its ``rcS`` takes parameters."""
 
     root: Path
+    #: PX4's version tag ("v1.17.0-alpha1"); "unknown" when the build does not carry one.
+    tag: str
+    release: tuple[int, int] | None
+    hook: ParameterHook
 
     @property
     def binary(self) -> Path:
@@ -110,20 +139,27 @@ class Px4Build:
     def etc(self) -> Path:
         return self.root / "etc"
 
+    @property
+    def description(self) -> str:
+        """What a run's summary says of the build it flew."""
+        return f"PX4 {self.tag} ({self.root}; parameters through {self.hook.value})"
+
 
 def find_px4(explicit: Path | None = None) -> Px4Build | None:
     """The build named by ``explicit`` (``--px4``), else by ``$PX4_DIR``, else None (the user
     starts PX4 by hand). A PX4-Autopilot checkout is accepted for its
-    ``build/px4_sitl_default``. A folder that holds no PX4 fails in one line."""
+    ``build/px4_sitl_default``. A folder that holds no PX4, or a PX4 older than
+    :data:`OLDEST_RELEASE`, fails in one line."""
     given = explicit if explicit is not None else os.environ.get(PX4_DIR_ENV) or None
     if given is None:
         return None
     source = "--px4" if explicit is not None else f"${PX4_DIR_ENV}"
     folder = Path(given).expanduser()
     for root in (folder, folder / "build" / "px4_sitl_default"):
-        build = Px4Build(root.resolve())
-        if os.access(build.binary, os.X_OK) and (build.etc / "init.d-posix" / "rcS").is_file():
-            return build
+        root = root.resolve()
+        binary, rcs = root / "bin" / "px4", root / "etc" / "init.d-posix" / "rcS"
+        if os.access(binary, os.X_OK) and rcs.is_file():
+            return _read_build(root, rcs, f"{source} = {given}")
     raise Px4NotFound(
         f"{source} = {given}: no PX4 SITL build there (expected bin/px4 and "
         "etc/init.d-posix/rcS, or build/px4_sitl_default/ holding them; build one with "
@@ -131,14 +167,60 @@ def find_px4(explicit: Path | None = None) -> Px4Build | None:
     )
 
 
-def check_imu_rate(imu_hz: int) -> None:
-    """Refuse, before the run, an IMU rate at which PX4 v1.14 cannot keep lockstep."""
+def _read_build(root: Path, rcs: Path, named: str) -> Px4Build:
+    tag, release = _release(root)
+    oldest = "v{}.{}".format(*OLDEST_RELEASE)
+    if release is not None and release < OLDEST_RELEASE:
+        raise Px4NotFound(f"{named}: PX4 {tag} is older than {oldest}, the oldest release the "
+                          "rig flies (its simulator API and start-up script differ)")  # fmt: skip
+    script = rcs.read_text(errors="replace")
+    if "px4-rc.params" in script:
+        hook = ParameterHook.RC_PARAMS_FILE
+    elif "PX4_PARAM_" in script:
+        hook = ParameterHook.ENVIRONMENT
+    else:
+        raise Px4NotFound(
+            f"{named}: {rcs} reads neither px4-rc.params nor PX4_PARAM_<NAME> variables, so "
+            f"the rig cannot give this PX4 ({tag}) its parameters; is it a PX4 SITL build of "
+            f"{oldest} or later?"
+        )
+    return Px4Build(root, tag, release, hook)
+
+
+def _release(root: Path) -> tuple[str, tuple[int, int] | None]:
+    """PX4's version tag and (major, minor): from a checkout build's generated version
+    header, else from the tag the binary carries. Every build also holds the made-up tags
+    of PX4's versioning self-test (v1.2.3, v1.8.2-beta4, v11.45.99-1.2.3, v255.255.255-11):
+    only a v1.10..v9.x tag is taken for the build's own."""
+    header = root / _GIT_VERSION_HEADER
+    if header.is_file():
+        text = header.read_bytes()
+        anchor = text.find(b"PX4_GIT_TAG_STR")
+        found = _TAG.search(text, anchor) if anchor >= 0 else None
+        candidates = [found] if found else []
+    else:
+        candidates = list(_TAG.finditer((root / "bin" / "px4").read_bytes()))
+    for match in candidates:
+        release = (int(match.group(1)), int(match.group(2)))
+        if (1, 10) <= release < (10, 0):
+            return match.group(0).decode(), release
+    return "unknown", None
+
+
+def check_imu_rate(imu_hz: int, build: Px4Build | None = None) -> None:
+    """Refuse, before the run, an IMU rate at which PX4 cannot keep lockstep: one outside
+    the range the build's ``IMU_INTEG_RATE`` takes (v1.14-v1.17: 100..1000 Hz)."""
     low, high = IMU_INTEG_RATE_RANGE_HZ
+    if build is not None:
+        spec = build_parameters(build).get("IMU_INTEG_RATE")
+        if spec is not None and spec.low is not None and spec.high is not None:
+            low, high = int(spec.low), int(spec.high)
     if not low <= imu_hz <= high:
         nearest = min(max(imu_hz, low), high)
+        release = "PX4 v1.14-v1.17" if build is None else f"PX4 {build.tag}"
         raise RigError(
             f"rates.imu_hz = {imu_hz}: PX4 answers every lockstep frame only when "
-            f"IMU_INTEG_RATE equals the IMU rate, and PX4 v1.14 allows {low}..{high} Hz; "
+            f"IMU_INTEG_RATE equals the IMU rate, and {release} allows {low}..{high} Hz; "
             f"the nearest rate that works is {nearest} Hz"
         )
 
@@ -183,11 +265,26 @@ RIG_PARAMETERS: dict[str, float] = {
 
 
 def px4_parameters(vehicle: Vehicle, hover_throttle: float, imu_hz: int,
-                   explicit: tuple[str, ...]) -> dict[str, float]:  # fmt: skip
+                   explicit: tuple[str, ...],
+                   build: Px4Build | None) -> tuple[dict[str, float], tuple[str, ...]]:  # fmt: skip
     """Everything the rig sets in PX4: its own needs, lockstep, the vehicle's airframe, and
-    then the user's ``--param NAME=VALUE`` texts, which win name by name."""
+    then the user's ``--param NAME=VALUE`` texts, which win name by name.
+
+    With the build known, the rig's own names the build lacks are left out and returned,
+    so PX4 never prints a "not found" for them; a ``--param`` the build lacks fails in one
+    line.
+    """
     airframe = airframe_parameters(vehicle, hover_throttle)
-    return RIG_PARAMETERS | lockstep_parameters(imu_hz) | airframe | parse_assignments(explicit)
+    own = RIG_PARAMETERS | lockstep_parameters(imu_hz) | airframe
+    users = parse_assignments(explicit)
+    if build is None:
+        return own | users, ()
+    known = build_parameters(build)
+    for name in users:
+        if name not in known:
+            raise RigError(f"--param {name}: not a parameter of PX4 {build.tag} ({build.root})")
+    lacking = tuple(name for name in own if name not in known)
+    return {name: value for name, value in own.items() if name in known} | users, lacking
 
 
 def parse_assignments(texts: tuple[str, ...]) -> dict[str, float]:
@@ -274,8 +371,8 @@ def build_parameters(build: Px4Build) -> dict[str, ParameterSpec]:
         return {entry["name"]: _spec(entry) for entry in entries}
     except (OSError, lzma.LZMAError, ValueError, KeyError, TypeError) as error:
         raise Px4NotFound(
-            f"{path}: cannot read the build's parameter metadata ({error}); a PX4 replay "
-            "needs it to know which of the log's parameters this PX4 has"
+            f"{path}: cannot read the build's parameter metadata ({error}); the rig needs "
+            "it to know which parameters this PX4 has"
         ) from None
 
 
@@ -322,8 +419,11 @@ def _not_for_sitl(name: str, value: float, spec: ParameterSpec | None) -> str | 
 class Px4Sitl:
     """One PX4 process for one run: its work dir, parameters, console and ULog.
 
-    ``build`` None prepares the work dir and parameters only; :meth:`command` then tells
-    the user how to start PX4 by hand.
+    The parameters are written for both of PX4's hooks (:class:`ParameterHook`):
+    ``bin/px4-rc.params`` and ``px4-params.env`` (``export PX4_PARAM_<NAME>=VALUE``), and a
+    PX4 the rig starts gets the environment its build reads. ``build`` None prepares the
+    work dir and parameters only; :meth:`command` then tells the user how to start PX4 by
+    hand, with whichever release they have.
     """
 
     def __init__(self, build: Px4Build | None, run_dir: Path, instance: int,
@@ -344,9 +444,16 @@ class Px4Sitl:
         if self.work_dir.exists():
             shutil.rmtree(self.work_dir)
         self.bin_dir.mkdir(parents=True)
-        lines = ["#!/bin/sh", "# Written by the rig: sourced by PX4's rcS after the airframe."]
-        lines += [f"param set {name} {_px4_number(value)}" for name, value in params.items()]
-        (self.bin_dir / "px4-rc.params").write_text("\n".join(lines) + "\n")
+        self.environment = {f"PX4_PARAM_{name}": _px4_number(value)
+                            for name, value in params.items()}  # fmt: skip
+        self.environment_path = self.work_dir / "px4-params.env"
+        script = ["#!/bin/sh", "# Written by the rig: sourced by PX4's rcS after the airframe "
+                  "(PX4 v1.14, v1.15)."]  # fmt: skip
+        script += [f"param set {name} {_px4_number(value)}" for name, value in params.items()]
+        (self.bin_dir / "px4-rc.params").write_text("\n".join(script) + "\n")
+        exports = ["# Written by the rig: PX4's rcS sets each PX4_PARAM_<NAME> (PX4 v1.16 on)."]
+        exports += [f"export {name}={value}" for name, value in self.environment.items()]
+        self.environment_path.write_text("\n".join(exports) + "\n")
         if build is not None:
             self._link_commands(build)
 
@@ -363,6 +470,7 @@ class Px4Sitl:
         """The shell command that starts this PX4 (printed for a PX4 started by hand)."""
         root = str(self.build.root) if self.build is not None else px4_root
         return (
+            f". {shlex.quote(str(self.environment_path.resolve()))} && "
             f"PATH={shlex.quote(str(self.bin_dir.resolve()))}:$PATH "
             f"PX4_SYS_AUTOSTART={AIRFRAME} {root}/bin/px4 -d -i {self.instance} "
             f"-w {shlex.quote(str(self.work_dir.resolve()))} {root}/etc"
@@ -380,6 +488,8 @@ class Px4Sitl:
 
         search_path = f"{self.bin_dir.resolve()}:{os.environ.get('PATH', '')}"
         environment = dict(os.environ, PX4_SYS_AUTOSTART=str(AIRFRAME), PATH=search_path)
+        if self.build.hook is ParameterHook.ENVIRONMENT:
+            environment |= self.environment
         with self.console_path.open("wb") as console:
             self._process = subprocess.Popen(
                 [str(self.bin_dir.resolve() / "px4"), "-d", "-i", str(self.instance),

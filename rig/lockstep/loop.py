@@ -202,6 +202,9 @@ class RunResult:
     frames: int
     link: LinkStats
     budget: FrameBudget
+    #: The autopilot flown: ``PX4 v1.17.0 (DIR; parameters through …)``, a hand-started
+    #: PX4, or the reference autopilot.
+    autopilot: str = "the reference autopilot"
 
     @property
     def real_time_factor(self) -> float:
@@ -236,9 +239,8 @@ def run_scenario(
     progress: Callable[[Progress], None] | None = None,
 ) -> RunResult:
     """Fly ``scenario`` closed-loop; returns where the logs are, raises :class:`RigError`."""
-    if options.autopilot == "px4":
-        check_imu_rate(scenario.rates.imu_hz)  # before anything starts
-        find_px4(options.px4_dir)  # a --px4 or $PX4_DIR that holds no PX4 fails here
+    if options.autopilot == "px4":  # before anything starts: no PX4 there, a rate it refuses
+        check_imu_rate(scenario.rates.imu_hz, find_px4(options.px4_dir))
     run_dir = claim_run_dir(options.out_dir or default_run_dir(scenario), options.force)
     loop = _Loop(scenario, options, run_dir, progress)
     try:
@@ -344,9 +346,15 @@ class _Loop:
         self._delivered: ChipReadout  # the latest chip readout, for the progress report
         self.ports = Ports(options.instance)
         if options.autopilot == "px4":
-            params = px4_parameters(vehicle, self.model.hover_throttle(), self.rates.imu_hz,
-                                    options.autopilot_params)  # fmt: skip
-            self._px4 = Px4Sitl(find_px4(options.px4_dir), run_dir, options.instance, params)
+            build = find_px4(options.px4_dir)
+            params, lacking = px4_parameters(vehicle, self.model.hover_throttle(),
+                                             self.rates.imu_hz, options.autopilot_params,
+                                             build)  # fmt: skip
+            if lacking:
+                assert build is not None
+                self.log.event(self.time_us, f"not set in PX4 {build.tag}, which has no such "
+                               f"parameter: {', '.join(lacking)}", "warn")  # fmt: skip
+            self._px4 = Px4Sitl(build, run_dir, options.instance, params)
         else:
             # The airframe's parameters PX4 gets that the reference autopilot has too (rotor
             # geometry, hover thrust), then the user's, which win name by name.
@@ -570,12 +578,24 @@ class _Loop:
         px4 = self._px4
         assert px4 is not None
         self._closers.append(px4.stop)
+        hz = self.rates.imu_hz
         if px4.build is not None:
             px4.start()
             where = "" if px4.cpu is None else f" on CPU {px4.cpu}"
-            self.log.event(self.time_us, f"started PX4{where}: {px4.command()}")
+            self.log.event(self.time_us, f"started {px4.build.description}{where}: "
+                           f"{px4.command()}")  # fmt: skip
+            link.stall_hint = (f"; PX4 {px4.build.tag} was given IMU_GYRO_RATEMAX = "
+                               f"IMU_INTEG_RATE = {hz} through {px4.build.hook.value}, see "
+                               f"its console {px4.console_path}")  # fmt: skip
             link.accept(f"PX4 (its console: {px4.console_path})")
             return
+        link.stall_hint = (
+            f"; a PX4 started by hand answers every frame at IMU {hz} Hz only with "
+            f"IMU_GYRO_RATEMAX = IMU_INTEG_RATE = {hz}: start it with the command the rig "
+            f"printed (it sets them), or in PX4's shell `param set IMU_GYRO_RATEMAX {hz}`, "
+            f"`param set IMU_INTEG_RATE {hz}`, `param save` and restart it; with PX4's "
+            "defaults fly rates.imu_hz = 250"
+        )
         command = px4.command()
         self.log.event(self.time_us, f"waiting for PX4 SITL on {link.endpoint}: {command}")
         if self.options.on_waiting is not None:
@@ -656,7 +676,15 @@ class _Loop:
             frames=self.frames,
             link=self.link.stats,
             budget=self._budget(wall_end - self._wall_start),
+            autopilot=self._autopilot_description(),
         )
+
+    def _autopilot_description(self) -> str:
+        if self._px4 is None:
+            return "the reference autopilot"
+        if self._px4.build is None:
+            return "PX4 started by hand"
+        return self._px4.build.description
 
     def _budget(self, wall_s: float) -> FrameBudget:
         frames = max(self.frames, 1)

@@ -120,6 +120,8 @@ class SimulatorLink:
         self.peer_heartbeat: mavlink.MAVLink_heartbeat_message | None = None
         self.lockstep = False
         self.peer_exit = peer_exit
+        #: Appended to a stall's message: what the autopilot needs to answer every frame.
+        self.stall_hint = ""
         self._latest: ActuatorControls | None = None
         self._sent_us = 0  # time_usec of the newest frame sent
         self._first_sent_us: int | None = None  # the clock need not start at 0 (a replay)
@@ -269,6 +271,7 @@ class SimulatorLink:
                     f"t={time_us / 1e6:.6f} s within {self.timeouts.answer_s:g} s of wall "
                     f"time (the rig sent the frame and is waiting; last answer {last}; "
                     f"{self.stats.malformed} malformed messages){self._exit_note()}"
+                    f"{self.stall_hint}"
                 )
             self._receive(min(remaining, 0.25))
         self._awaited_us = None

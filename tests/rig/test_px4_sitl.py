@@ -1,5 +1,7 @@
 """The real PX4 SITL through the rig: the rig starts the user's build (``$PX4_DIR``; CI
-points it at ``../shared/px4_sitl``), keeps lockstep at every IMU rate, and PX4 flies.
+points it at the newest release it has, v1.17), keeps lockstep at every IMU rate, and PX4
+flies. A short subset (lockstep at each rate, one take-off-hover-land on the RTL chips)
+also flies each older build in ``$PX4_OLDER_DIRS`` (CI: v1.14).
 
 Every test that needs PX4 skips, with the reason, where no build is given. Numbers come
 from the rig's ground truth (``rig.ulg``) and PX4's own ULog (``px4.ulg``).
@@ -19,6 +21,8 @@ import pyulog
 
 from rig.autopilots.px4 import (
     PX4_DIR_ENV,
+    ParameterHook,
+    Px4Build,
     Px4Sitl,
     airframe_parameters,
     cpus_of_pinned_px4,
@@ -33,12 +37,33 @@ from rig.scenarios.scenario import scenario_from_dict
 pytestmark = pytest.mark.closed_loop
 
 
+#: Older PX4 builds (``os.pathsep``-separated) that the short subset flies too.
+PX4_OLDER_DIRS_ENV = "PX4_OLDER_DIRS"
+_NO_PX4 = f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl_v1_17)"
+
+
 @pytest.fixture(scope="module")
 def px4_dir() -> Path:
     build = find_px4()
     if build is None:
-        pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl)")
+        pytest.skip(_NO_PX4)
     return build.root
+
+
+def _every_build() -> list:
+    folders = [os.environ.get(PX4_DIR_ENV, ""),
+               *os.environ.get(PX4_OLDER_DIRS_ENV, "").split(os.pathsep)]  # fmt: skip
+    return [pytest.param(Path(f), id=Path(f).name) for f in folders if f] or [
+        pytest.param(None, id="no-px4")
+    ]
+
+
+@pytest.fixture(scope="module", params=_every_build())
+def any_px4(request) -> Px4Build:
+    """$PX4_DIR's build, then each of $PX4_OLDER_DIRS'."""
+    if request.param is None:
+        pytest.skip(_NO_PX4)
+    return find_px4(request.param)
 
 
 def fly_px4(tmp_path, free_instance, px4_dir, name, duration_s, commands=(), **scenario):
@@ -53,10 +78,12 @@ def fly_px4(tmp_path, free_instance, px4_dir, name, duration_s, commands=(), **s
 
 
 @pytest.mark.parametrize("imu_hz", [250, 400, 500, 1000])
-def test_lockstep_holds_at_every_imu_rate(tmp_path, free_instance, px4_dir, imu_hz):
-    """20 s simulated at each IMU rate with zero stalls: from PX4's first answer on, every
-    frame is answered by the HIL_ACTUATOR_CONTROLS stamped with its own time_usec."""
-    result = fly_px4(tmp_path, free_instance, px4_dir, f"lockstep_{imu_hz}", 20.0,
+def test_lockstep_holds_at_every_imu_rate(tmp_path, free_instance, any_px4, imu_hz):
+    """20 s simulated at each IMU rate with zero stalls, on every release: from PX4's first
+    answer on, every frame is answered by the HIL_ACTUATOR_CONTROLS stamped with its own
+    time_usec, and PX4 ran with the lockstep parameters the rig gave it through the hook
+    its release reads (px4-rc.params up to v1.15, PX4_PARAM_<NAME> from v1.16)."""
+    result = fly_px4(tmp_path, free_instance, any_px4.root, f"lockstep_{imu_hz}", 20.0,
                      rates={"imu_hz": imu_hz})  # fmt: skip
     link = result.link
     assert result.frames == 20 * imu_hz
@@ -92,16 +119,17 @@ def test_px4_logs_each_imu_sample_as_the_1_2_1_mean_of_the_rigs(tmp_path, free_i
             assert errors[1] > 10 * errors[0], (field, axis, errors)  # the trapezoid is not it
 
 
-def test_imu_rate_px4_cannot_follow_is_refused_before_the_run(tmp_path):
+def test_imu_rate_px4_cannot_follow_is_refused_before_the_run(tmp_path, monkeypatch):
     """Above IMU_INTEG_RATE's 1000 Hz PX4 cannot answer every frame: one line, the reason and
     the nearest rate that works, before any folder or process exists."""
+    monkeypatch.delenv(PX4_DIR_ENV, raising=False)
     document = {"name": "fast", "vehicle": "f450_high_precision", "duration_s": 1.0, "seed": 1,
                 "rates": {"imu_hz": 2000}}  # fmt: skip
     out = tmp_path / "never"
     with pytest.raises(RigError, match=r"imu_hz = 2000: .*IMU_INTEG_RATE.*nearest rate that works "
                                        r"is 1000 Hz"):  # fmt: skip
         run_scenario(scenario_from_dict(document),
-                     RunOptions(autopilot="px4", px4_dir=tmp_path, out_dir=out))  # fmt: skip
+                     RunOptions(autopilot="px4", out_dir=out))  # fmt: skip
     assert not out.exists()
 
 
@@ -111,6 +139,77 @@ def test_a_px4_dir_without_px4_fails_in_one_line(tmp_path, monkeypatch):
         find_px4()
     with pytest.raises(RigError, match=r"^--px4 = .*: no PX4 SITL build there"):
         find_px4(tmp_path / "missing")
+
+
+#: What every PX4 binary holds besides its own tag: its versioning self-test's made-up ones.
+_SELF_TEST_TAGS = b"\0v1.2.3\0v11.45.99-1.2.3rc3-7-g7e282f57\0v1.8.2beta4-dirty\0v255.255.255-11\0"
+
+
+def _fake_build(root, binary=b"", rcs="", header=None) -> Path:
+    (root / "bin").mkdir(parents=True)
+    (root / "bin/px4").write_bytes(b"\x7fELF" + _SELF_TEST_TAGS + binary)
+    (root / "bin/px4").chmod(0o755)
+    (root / "etc/init.d-posix").mkdir(parents=True)
+    (root / "etc/init.d-posix/rcS").write_text(rcs)
+    if header is not None:
+        (root / "src/lib/version").mkdir(parents=True)
+        (root / "src/lib/version/build_git_version.h").write_text(header)
+    return root
+
+
+_RC_PARAMS = "#user defined params for instances can be in PATH\n. px4-rc.params\n"
+_ENV_PARAMS = '    "PX4_PARAM_"*) param set "${name#PX4_PARAM_}" "$value" ;;\n'
+
+
+@pytest.mark.parametrize(
+    ("binary", "header", "rcs", "tag", "hook"),
+    [
+        (b"\0localhost\0v1.14.0-dirty\0master\0", None, _RC_PARAMS, "v1.14.0-dirty",
+         ParameterHook.RC_PARAMS_FILE),
+        (b"\0v1.15.4\0", None, _RC_PARAMS, "v1.15.4", ParameterHook.RC_PARAMS_FILE),
+        (b"\0v1.17.0-alpha1\0", None, _ENV_PARAMS, "v1.17.0-alpha1", ParameterHook.ENVIRONMENT),
+        (b"", '#define PX4_GIT_TAG_STR  "v1.16.0-rc2-14-g0b6e4687"\n', _ENV_PARAMS,
+         "v1.16.0-rc2-14-g0b6e4687", ParameterHook.ENVIRONMENT),
+        (b"\0custom\0", None, _ENV_PARAMS, "unknown", ParameterHook.ENVIRONMENT),
+    ],
+)  # fmt: skip
+def test_a_build_is_read_for_its_release_and_the_way_it_takes_parameters(
+    tmp_path, binary, header, rcs, tag, hook
+):
+    """The release from the tag the binary carries (a checkout's build: its generated
+    version header), never from PX4's self-test tags; the hook from the build's own rcS."""
+    build = find_px4(_fake_build(tmp_path / "build/px4_sitl_default", binary, rcs, header)
+                     .parent.parent)  # fmt: skip
+    assert (build.tag, build.hook) == (tag, hook)
+    assert build.description == f"PX4 {tag} ({build.root}; parameters through {hook.value})"
+
+
+def test_a_px4_older_than_v1_14_or_without_a_parameter_hook_fails_in_one_line(tmp_path):
+    old = _fake_build(tmp_path / "old", b"\0v1.13.3\0", _RC_PARAMS)
+    with pytest.raises(RigError, match=r"^--px4 = .*/old: PX4 v1.13.3 is older than v1.14, the "
+                                       r"oldest release the rig flies"):  # fmt: skip
+        find_px4(old)
+    odd = _fake_build(tmp_path / "odd", b"\0v1.15.0\0", "param set-default SDLOG_MODE 1\n")
+    with pytest.raises(RigError, match=r"reads neither px4-rc.params nor PX4_PARAM_<NAME> "
+                                       r"variables.*\(v1.15.0\)"):  # fmt: skip
+        find_px4(odd)
+
+
+def test_the_parameters_are_written_for_either_hook_and_a_hand_start_sources_them(tmp_path):
+    """The hand-start command works for any release: it exports the PX4_PARAM_<NAME>
+    variables (v1.16 on) and puts px4-rc.params first in PATH (v1.14, v1.15)."""
+    sitl = Px4Sitl(None, tmp_path, 2, {"IMU_INTEG_RATE": 1000, "MPC_XY_VEL_MAX": 8.5})
+    assert (sitl.bin_dir / "px4-rc.params").read_text().splitlines()[2:] == [
+        "param set IMU_INTEG_RATE 1000", "param set MPC_XY_VEL_MAX 8.5"]  # fmt: skip
+    assert sitl.environment_path.read_text().splitlines()[1:] == [
+        "export PX4_PARAM_IMU_INTEG_RATE=1000", "export PX4_PARAM_MPC_XY_VEL_MAX=8.5"]  # fmt: skip
+    command = sitl.command()
+    sourced, started = command.split(" && ")
+    assert sourced == f". {sitl.environment_path.resolve()}"
+    assert started.startswith(f"PATH={sitl.bin_dir.resolve()}:$PATH PX4_SYS_AUTOSTART=10016 ")
+    environment = subprocess.run(["sh", "-c", f"{sourced} && env"],
+                                 capture_output=True, text=True, check=True).stdout  # fmt: skip
+    assert "PX4_PARAM_MPC_XY_VEL_MAX=8.5" in environment.splitlines()
 
 
 def test_no_px4_given_means_the_user_starts_it(monkeypatch):
@@ -129,6 +228,7 @@ def test_a_run_folder_used_again_gives_px4_a_clean_work_dir(tmp_path):
     assert sorted(p.relative_to(stale).as_posix() for p in stale.rglob("*")) == [
         "bin",
         "bin/px4-rc.params",
+        "px4-params.env",
     ]
     assert "param set MPC_XY_VEL_MAX 8.5" in (sitl.bin_dir / "px4-rc.params").read_text()
 
@@ -209,6 +309,7 @@ class Hover:
             self.estimate_error_m[axis] = estimate - truth[axis][hovering]
         setpoint_z = np.interp(t, sp_t, sp["z"]) - offset["z"]
         self.truth_minus_setpoint_m = truth["z"][hovering] - setpoint_z
+        self.height_m = float(-truth["z"][hovering].mean())
         after_ground = est_t > ground_s[1]
         self.resets = {name: len(np.unique(est[name][after_ground])) - 1
                        for name in ("xy_reset_counter", "z_reset_counter")}  # fmt: skip
@@ -221,13 +322,17 @@ def _takeoff_hover_land(arm_s, land_s, altitude_m=2.5):
 
 
 @pytest.mark.cosim
-def test_takeoff_hover_land_through_the_rtl_chips_at_1khz(tmp_path, free_instance, px4_dir):
-    """PX4 on the RTL chips at IMU 1 kHz (1 µs PWM capture): ready for take-off within 10 s,
-    then over 8 s of hover its estimate stays within 0.2 m of the truth and the truth
-    within ±0.15 m of its setpoint, with no EKF2 reset in flight; it lands and disarms.
-    Its GPS came through the u-blox core's UART: each fix 9 ms after the receiver sent it
-    (a NAV-PVT at 115200 baud, then the next frame), and PX4 holds a 3D fix."""
-    result = fly_px4(tmp_path, free_instance, px4_dir, "rtl_1khz", 36.0,
+def test_takeoff_hover_land_through_the_rtl_chips_at_1khz(tmp_path, free_instance, any_px4):
+    """PX4 on the RTL chips at IMU 1 kHz (1 µs PWM capture), on every release: ready for
+    take-off within 10 s, then over 8 s of hover its estimate stays within 0.2 m of the
+    truth and the truth within ±0.15 m of its setpoint, with no EKF2 reset in flight; it
+    lands and disarms. Its GPS came through the u-blox core's UART: each fix 9 ms after the
+    receiver sent it (a NAV-PVT at 115200 baud, then the next frame), and PX4 holds a 3D fix.
+
+    The height is PX4's MIS_TAKEOFF_ALT (2.5 m) from v1.15 on. PX4 v1.14 holds where its
+    take-off was accepted, up to NAV_MC_ALT_RAD (0.8 m) short: its Hold mode, entered when
+    the take-off completes, re-sets the hold altitude to the vehicle's (docs/px4.md)."""
+    result = fly_px4(tmp_path, free_instance, any_px4.root, "rtl_1khz", 36.0,
                      _takeoff_hover_land(10.0, 28.0), sensor_layer="rtl",
                      rates={"imu_hz": 1000})  # fmt: skip
     rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
@@ -239,6 +344,14 @@ def test_takeoff_hover_land_through_the_rtl_chips_at_1khz(tmp_path, free_instanc
         )
     assert np.abs(hover.truth_minus_setpoint_m).max() < 0.15
     assert hover.resets == {"xy_reset_counter": 0, "z_reset_counter": 0}
+    target_m, accepted_m = 2.5, px4_log.initial_parameters["NAV_MC_ALT_RAD"]
+    short_m = target_m - hover.height_m
+    if any_px4.release >= (1, 15):
+        assert abs(short_m) < 0.3, f"PX4 {any_px4.tag} hovers {short_m:.2f} m short"
+    else:
+        assert 0.3 < short_m < accepted_m + 0.15, f"PX4 {any_px4.tag} {short_m:.2f} m short"
+        held = _hold_altitude_short_of_takeoff_m(px4_log)
+        assert 0.3 < held <= accepted_m, held
     t, armed = _topic(px4_log, "actuator_armed")
     assert armed["armed"][_inside(t, (20.0, 27.0))].all()
     assert not armed["armed"][-1]
@@ -250,6 +363,17 @@ def test_takeoff_hover_land_through_the_rtl_chips_at_1khz(tmp_path, free_instanc
     assert (gps["fix_type"][gps_t > 5.0] >= 3).all()
     # Every fix arrived: 5 Hz, the rate PX4's CFG-RATE (200 ms) asks of the receiver.
     assert np.diff(gps_t[gps_t > 5.0]).max() < 0.25
+
+
+def _hold_altitude_short_of_takeoff_m(px4_log) -> float:
+    """How far below the take-off's target (AMSL) PX4's navigator set the Hold that
+    followed it: the first loiter set-point after the take-off's."""
+    _, triplet = _topic(px4_log, "position_setpoint_triplet")
+    kind, alt = triplet["current.type"], triplet["current.alt"]
+    takeoff = np.flatnonzero(kind == 3)  # SETPOINT_TYPE_TAKEOFF
+    after = np.flatnonzero((kind == 2) & (np.arange(len(kind)) > takeoff[-1]))  # LOITER
+    hold = alt[after][np.abs(alt[after] - alt[takeoff[-1]]) > 1e-3]
+    return float(alt[takeoff[-1]] - hold[0])
 
 
 def test_gps_loss_px4_fails_safe_as_documented(tmp_path, free_instance, px4_dir):
