@@ -50,8 +50,8 @@ def fly_bare(build: Px4Build, *, instance: int, imu_hz: int, arm_s: float, simul
     frame_us = 1_000_000 // imu_hz
     ports = Ports(instance)
     with tempfile.TemporaryDirectory() as folder:
-        px4 = Px4Sitl(build, Path(folder), instance,
-                      px4_parameters(vehicle, model.hover_throttle(), imu_hz, {}))  # fmt: skip
+        params, _ = px4_parameters(vehicle, model.hover_throttle(), imu_hz, (), build)
+        px4 = Px4Sitl(build, Path(folder), instance, params)
         link = SimulatorLink(ports, LinkTimeouts(connect_s=60, answer_s=30),
                              peer_exit=px4.exit_description)  # fmt: skip
         ground = GroundLink(ports, environment.home)

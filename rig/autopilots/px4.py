@@ -6,12 +6,11 @@ Nothing of PX4 is vendored: the user's own ``build/px4_sitl_default``-shaped fol
 work dir ``RUN/px4`` (its parameters, dataman and ``log/``), as airframe 10016, PX4's generic
 quad X that starts ``simulator_mavlink``, with the rig's parameters on top.
 
-The rig's parameters reach PX4 through the hook its release's ``rcS`` has
-(:class:`ParameterHook`, read from the build): up to v1.15 a ``px4-rc.params`` sourced from
-``PATH`` after the airframe file, which the rig writes into ``RUN/px4/bin`` and puts first
-in PX4's ``PATH``; from v1.16 ``PX4_PARAM_<NAME>`` environment variables. The same folder
-holds the ``px4-<module>`` command links that ``rcS`` calls (a build copied without its
-symlinks has plain files there).
+The rig's parameters reach PX4 after its airframe file, through scripts that ``rcS``
+sources from ``PATH`` (:class:`ParameterHook`, read from the build): the rig writes them
+into ``RUN/px4/bin`` and puts that folder first in PX4's ``PATH``. The same folder holds the
+``px4-<module>`` command links that ``rcS`` calls (a build copied without its symlinks has
+plain files there).
 
 Lockstep at any IMU rate, the same rule from v1.14 to v1.17 (their source and binaries,
 docs/px4.md): PX4's ``simulator_mavlink`` sends HIL_ACTUATOR_CONTROLS when
@@ -110,14 +109,21 @@ _TAG = re.compile(rb"\bv(\d+)\.(\d+)\.(\d+)[0-9A-Za-z.+\-]*")
 
 
 class ParameterHook(enum.Enum):
-    """How a build's start-up script (``etc/init.d-posix/rcS``) takes parameters from
-    outside, which changed between releases (PX4 commit 9e8b530, v1.16)."""
+    """Where a build's start-up script (``etc/init.d-posix/rcS``) lets the rig set
+    parameters after the airframe's, which changed between releases (PX4 commit 9e8b530,
+    v1.16, dropped ``px4-rc.params``).
+
+    v1.16's own way, ``PX4_PARAM_<NAME>`` environment variables, is applied *before* the
+    airframe: a value equal to PX4's built-in default is then not kept as set, and the
+    airframe's ``param set-default`` replaces it (``IMU_GYRO_RATEMAX 400`` became 800
+    through ``rc.mc_defaults``, and lockstep at 400 Hz stalled). So the rig does not use it.
+    """
 
     #: v1.14, v1.15: ``rcS`` sources ``px4-rc.params`` from ``PATH`` after the airframe.
     RC_PARAMS_FILE = "px4-rc.params"
-    #: v1.16 on: ``rcS`` sets every ``PX4_PARAM_<NAME>`` environment variable, before the
-    #: airframe, whose ``param set-default`` lines then leave them alone.
-    ENVIRONMENT = "PX4_PARAM_<NAME>"
+    #: v1.16 on: ``rcS`` sources ``px4-rc.simulator`` from ``PATH`` after the airframe; the
+    #: rig's own runs the build's, then sets the parameters.
+    SIMULATOR_SCRIPT = "px4-rc.simulator"
 
 
 @dataclass(frozen=True)
@@ -176,11 +182,11 @@ def _read_build(root: Path, rcs: Path, named: str) -> Px4Build:
     script = rcs.read_text(errors="replace")
     if "px4-rc.params" in script:
         hook = ParameterHook.RC_PARAMS_FILE
-    elif "PX4_PARAM_" in script:
-        hook = ParameterHook.ENVIRONMENT
+    elif re.search(r"^\s*\. px4-rc\.simulator\s*$", script, re.MULTILINE):
+        hook = ParameterHook.SIMULATOR_SCRIPT
     else:
         raise Px4NotFound(
-            f"{named}: {rcs} reads neither px4-rc.params nor PX4_PARAM_<NAME> variables, so "
+            f"{named}: {rcs} sources neither px4-rc.params nor px4-rc.simulator, so "
             f"the rig cannot give this PX4 ({tag}) its parameters; is it a PX4 SITL build of "
             f"{oldest} or later?"
         )
@@ -419,11 +425,9 @@ def _not_for_sitl(name: str, value: float, spec: ParameterSpec | None) -> str | 
 class Px4Sitl:
     """One PX4 process for one run: its work dir, parameters, console and ULog.
 
-    The parameters are written for both of PX4's hooks (:class:`ParameterHook`):
-    ``bin/px4-rc.params`` and ``px4-params.env`` (``export PX4_PARAM_<NAME>=VALUE``), and a
-    PX4 the rig starts gets the environment its build reads. ``build`` None prepares the
-    work dir and parameters only; :meth:`command` then tells the user how to start PX4 by
-    hand, with whichever release they have.
+    The parameters are written for both of PX4's hooks (:class:`ParameterHook`), so a PX4
+    of any release finds its own first in ``PATH``. ``build`` None prepares the work dir
+    and parameters only; :meth:`command` then tells the user how to start PX4 by hand.
     """
 
     def __init__(self, build: Px4Build | None, run_dir: Path, instance: int,
@@ -444,16 +448,15 @@ class Px4Sitl:
         if self.work_dir.exists():
             shutil.rmtree(self.work_dir)
         self.bin_dir.mkdir(parents=True)
-        self.environment = {f"PX4_PARAM_{name}": _px4_number(value)
-                            for name, value in params.items()}  # fmt: skip
-        self.environment_path = self.work_dir / "px4-params.env"
-        script = ["#!/bin/sh", "# Written by the rig: sourced by PX4's rcS after the airframe "
-                  "(PX4 v1.14, v1.15)."]  # fmt: skip
-        script += [f"param set {name} {_px4_number(value)}" for name, value in params.items()]
-        (self.bin_dir / "px4-rc.params").write_text("\n".join(script) + "\n")
-        exports = ["# Written by the rig: PX4's rcS sets each PX4_PARAM_<NAME> (PX4 v1.16 on)."]
-        exports += [f"export {name}={value}" for name, value in self.environment.items()]
-        self.environment_path.write_text("\n".join(exports) + "\n")
+        settings = [f"param set {name} {_px4_number(value)}" for name, value in params.items()]
+        rig = "# Written by the rig: rcS sources it from PATH after the airframe"
+        scripts = {
+            "px4-rc.params": [f"{rig} (PX4 v1.14, v1.15)."],
+            "px4-rc.simulator": [f"{rig} (PX4 v1.16 on), in place of the build's own, which it "
+                                 "runs first.", ". ${R}etc/init.d-posix/px4-rc.simulator"],
+        }  # fmt: skip
+        for name, lines in scripts.items():
+            (self.bin_dir / name).write_text("\n".join(["#!/bin/sh", *lines, *settings]) + "\n")
         if build is not None:
             self._link_commands(build)
 
@@ -470,7 +473,6 @@ class Px4Sitl:
         """The shell command that starts this PX4 (printed for a PX4 started by hand)."""
         root = str(self.build.root) if self.build is not None else px4_root
         return (
-            f". {shlex.quote(str(self.environment_path.resolve()))} && "
             f"PATH={shlex.quote(str(self.bin_dir.resolve()))}:$PATH "
             f"PX4_SYS_AUTOSTART={AIRFRAME} {root}/bin/px4 -d -i {self.instance} "
             f"-w {shlex.quote(str(self.work_dir.resolve()))} {root}/etc"
@@ -488,8 +490,6 @@ class Px4Sitl:
 
         search_path = f"{self.bin_dir.resolve()}:{os.environ.get('PATH', '')}"
         environment = dict(os.environ, PX4_SYS_AUTOSTART=str(AIRFRAME), PATH=search_path)
-        if self.build.hook is ParameterHook.ENVIRONMENT:
-            environment |= self.environment
         with self.console_path.open("wb") as console:
             self._process = subprocess.Popen(
                 [str(self.bin_dir.resolve() / "px4"), "-d", "-i", str(self.instance),

@@ -158,7 +158,7 @@ def _fake_build(root, binary=b"", rcs="", header=None) -> Path:
 
 
 _RC_PARAMS = "#user defined params for instances can be in PATH\n. px4-rc.params\n"
-_ENV_PARAMS = '    "PX4_PARAM_"*) param set "${name#PX4_PARAM_}" "$value" ;;\n'
+_SIMULATOR = "if ! replay tryapplyparams\nthen\n\t. px4-rc.simulator\nfi\n"
 
 
 @pytest.mark.parametrize(
@@ -167,10 +167,10 @@ _ENV_PARAMS = '    "PX4_PARAM_"*) param set "${name#PX4_PARAM_}" "$value" ;;\n'
         (b"\0localhost\0v1.14.0-dirty\0master\0", None, _RC_PARAMS, "v1.14.0-dirty",
          ParameterHook.RC_PARAMS_FILE),
         (b"\0v1.15.4\0", None, _RC_PARAMS, "v1.15.4", ParameterHook.RC_PARAMS_FILE),
-        (b"\0v1.17.0-alpha1\0", None, _ENV_PARAMS, "v1.17.0-alpha1", ParameterHook.ENVIRONMENT),
-        (b"", '#define PX4_GIT_TAG_STR  "v1.16.0-rc2-14-g0b6e4687"\n', _ENV_PARAMS,
-         "v1.16.0-rc2-14-g0b6e4687", ParameterHook.ENVIRONMENT),
-        (b"\0custom\0", None, _ENV_PARAMS, "unknown", ParameterHook.ENVIRONMENT),
+        (b"\0v1.17.0-alpha1\0", None, _SIMULATOR, "v1.17.0-alpha1", ParameterHook.SIMULATOR_SCRIPT),
+        (b"", '#define PX4_GIT_TAG_STR  "v1.16.0-rc2-14-g0b6e4687"\n', _SIMULATOR,
+         "v1.16.0-rc2-14-g0b6e4687", ParameterHook.SIMULATOR_SCRIPT),
+        (b"\0custom\0", None, _SIMULATOR, "unknown", ParameterHook.SIMULATOR_SCRIPT),
     ],
 )  # fmt: skip
 def test_a_build_is_read_for_its_release_and_the_way_it_takes_parameters(
@@ -190,26 +190,21 @@ def test_a_px4_older_than_v1_14_or_without_a_parameter_hook_fails_in_one_line(tm
                                        r"oldest release the rig flies"):  # fmt: skip
         find_px4(old)
     odd = _fake_build(tmp_path / "odd", b"\0v1.15.0\0", "param set-default SDLOG_MODE 1\n")
-    with pytest.raises(RigError, match=r"reads neither px4-rc.params nor PX4_PARAM_<NAME> "
-                                       r"variables.*\(v1.15.0\)"):  # fmt: skip
+    with pytest.raises(RigError, match=r"sources neither px4-rc.params nor px4-rc.simulator, "
+                                       r"so the rig cannot give this PX4 \(v1.15.0\)"):  # fmt: skip
         find_px4(odd)
 
 
-def test_the_parameters_are_written_for_either_hook_and_a_hand_start_sources_them(tmp_path):
-    """The hand-start command works for any release: it exports the PX4_PARAM_<NAME>
-    variables (v1.16 on) and puts px4-rc.params first in PATH (v1.14, v1.15)."""
+def test_the_parameters_are_written_for_either_hook_after_the_airframe(tmp_path):
+    """Both scripts go first in PX4's PATH, so a PX4 started by hand, of any release, finds
+    its own; the one for v1.16 on runs the build's own simulator script, then sets them."""
     sitl = Px4Sitl(None, tmp_path, 2, {"IMU_INTEG_RATE": 1000, "MPC_XY_VEL_MAX": 8.5})
-    assert (sitl.bin_dir / "px4-rc.params").read_text().splitlines()[2:] == [
-        "param set IMU_INTEG_RATE 1000", "param set MPC_XY_VEL_MAX 8.5"]  # fmt: skip
-    assert sitl.environment_path.read_text().splitlines()[1:] == [
-        "export PX4_PARAM_IMU_INTEG_RATE=1000", "export PX4_PARAM_MPC_XY_VEL_MAX=8.5"]  # fmt: skip
-    command = sitl.command()
-    sourced, started = command.split(" && ")
-    assert sourced == f". {sitl.environment_path.resolve()}"
-    assert started.startswith(f"PATH={sitl.bin_dir.resolve()}:$PATH PX4_SYS_AUTOSTART=10016 ")
-    environment = subprocess.run(["sh", "-c", f"{sourced} && env"],
-                                 capture_output=True, text=True, check=True).stdout  # fmt: skip
-    assert "PX4_PARAM_MPC_XY_VEL_MAX=8.5" in environment.splitlines()
+    settings = ["param set IMU_INTEG_RATE 1000", "param set MPC_XY_VEL_MAX 8.5"]
+    assert (sitl.bin_dir / "px4-rc.params").read_text().splitlines()[2:] == settings
+    assert (sitl.bin_dir / "px4-rc.simulator").read_text().splitlines()[2:] == [
+        ". ${R}etc/init.d-posix/px4-rc.simulator", *settings]  # fmt: skip
+    assert sitl.command().startswith(f"PATH={sitl.bin_dir.resolve()}:$PATH "
+                                     "PX4_SYS_AUTOSTART=10016 ")  # fmt: skip
 
 
 def test_no_px4_given_means_the_user_starts_it(monkeypatch):
@@ -228,7 +223,7 @@ def test_a_run_folder_used_again_gives_px4_a_clean_work_dir(tmp_path):
     assert sorted(p.relative_to(stale).as_posix() for p in stale.rglob("*")) == [
         "bin",
         "bin/px4-rc.params",
-        "px4-params.env",
+        "bin/px4-rc.simulator",
     ]
     assert "param set MPC_XY_VEL_MAX 8.5" in (sitl.bin_dir / "px4-rc.params").read_text()
 
@@ -468,7 +463,7 @@ def test_every_px4_thread_runs_on_the_one_cpu_the_rig_chose(tmp_path, free_insta
     (cpu,) = set(allowed.values())
     assert int(cpu) in os.sched_getaffinity(0)
     messages = [m.message for m in pyulog.ULog(str(out / "rig.ulg")).logged_messages]
-    assert any(m.startswith(f"started PX4 on CPU {cpu}: ") for m in messages)
+    assert any(m.startswith("started PX4 ") and f" on CPU {cpu}: " in m for m in messages)
 
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: PX4 is not pinned")

@@ -171,8 +171,9 @@ def qgc_parameter_hash(params: list) -> int:
     return crc
 
 
-def check_as_px4_answers(answers: Answers, parameter_count: int) -> None:
-    """The shape of PX4 v1.14's answers, step by step."""
+def check_as_px4_answers(answers: Answers, parameter_count: int,
+                         release: tuple[int, int] = (1, 14)) -> None:  # fmt: skip
+    """The shape of PX4's answers, step by step (the reference autopilot answers as v1.14)."""
     for name, (result, seconds) in answers.acks.items():
         assert result is not None, f"{name}: no COMMAND_ACK"
         assert seconds < PROMPT_S, (name, seconds)
@@ -180,10 +181,13 @@ def check_as_px4_answers(answers: Answers, parameter_count: int) -> None:
     assert answers.acks["AUTOPILOT_VERSION"][0] == accepted
     version = answers.autopilot_version
     assert version.capabilities & PX4_CAPABILITIES == PX4_CAPABILITIES
-    assert version.flight_sw_version >> 16 == 0x010E  # 1.14
+    assert version.flight_sw_version >> 16 == release[0] << 8 | release[1]
     assert answers.acks["PROTOCOL_VERSION"][0] == accepted
-    assert answers.protocol_version == (200, 100, 200)
-    assert answers.acks["AVAILABLE_MODES"][0] == mavlink.MAV_RESULT_DENIED  # not in v1.14
+    version_now, version_min, version_max = answers.protocol_version
+    assert (version_now, version_min) == (200, 100)
+    assert version_max == 200 if release < (1, 15) else version_max >= 200
+    modes = mavlink.MAV_RESULT_DENIED if release < (1, 15) else accepted  # came with v1.15
+    assert answers.acks["AVAILABLE_MODES"][0] == modes
     for name in ("COMPONENT_METADATA", "COMPONENT_INFORMATION"):
         assert answers.acks[name][0] in (accepted, mavlink.MAV_RESULT_DENIED)
     first = answers.params[0]
@@ -235,4 +239,4 @@ def test_px4_answers_qgc_connect_alike(tmp_path, free_instance):
         pytest.skip(f"no PX4 SITL build: set {PX4_DIR_ENV} (CI points it at ../shared/px4_sitl)")
     answers = _connect(tmp_path, free_instance(), speed=1.0, autopilot="px4",
                        px4_dir=build.root)  # fmt: skip
-    check_as_px4_answers(answers, answers.params[0].param_count)
+    check_as_px4_answers(answers, answers.params[0].param_count, build.release)
