@@ -129,6 +129,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     # src/modules/ekf2/params_*.yaml: the noise figures of the position/velocity filter
     _p("EKF2_ACC_NOISE", 0.35, 0.01, 1.0, "m/s^2", "Accelerometer noise for prediction"),
     _p("EKF2_ACC_B_NOISE", 0.003, 0.0, 0.01, "m/s^3", "Accelerometer bias random walk"),
+    _p("EKF2_GYR_NOISE", 0.015, 0.0001, 0.1, "rad/s", "Rate gyro noise for prediction"),
+    _p("EKF2_PREDICT_US", 10000, 1000, 20000, "us", "EKF prediction period"),
     _p("EKF2_GPS_P_NOISE", 0.5, 0.01, 10.0, "m", "GPS horizontal position noise"),
     _p("EKF2_GPS_V_NOISE", 0.3, 0.01, 5.0, "m/s", "GPS velocity noise"),
     _p("EKF2_BARO_NOISE", 3.5, 0.01, 15.0, "m", "Barometric altitude noise"),
