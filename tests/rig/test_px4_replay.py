@@ -85,9 +85,9 @@ def stand_in_build(tmp_path_factory, log_parameters) -> Path:
     return _stand_in_build(tmp_path_factory.mktemp("px4_build"), log_parameters)
 
 
-def _stand_in_build(root: Path, log_parameters: dict) -> Path:
-    (root / "bin").mkdir()
-    (root / "bin/px4").write_bytes(b"#!/bin/sh\nexit 1\n# \0v1.14.0\0\n")
+def _stand_in_build(root: Path, log_parameters: dict, tag: bytes = b"v1.14.0") -> Path:
+    (root / "bin").mkdir(parents=True)
+    (root / "bin/px4").write_bytes(b"#!/bin/sh\nexit 1\n# \0" + tag + b"\0\n")
     (root / "bin/px4").chmod(0o755)
     (root / "etc/init.d-posix").mkdir(parents=True)
     (root / "etc/init.d-posix/rcS").write_text(". px4-rc.params\n")
@@ -567,6 +567,22 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
     assert quad.learned["MPC_MANTHR_MIN"] == 0.0
     assert "MPC_THR_HOVER=0.65" in " ".join(quad.autopilot_params)
     assert quad.summary()["parameters_learned_in_the_flight"] == quad.learned
+
+
+def test_a_sitl_of_the_logs_own_release_needs_nothing_made_up(tmp_path, log_parameters):
+    """The workarounds for what PX4 changed between versions (the mission's start hold, the
+    stick-thrust map, the yaw rate schedule) stay off on a SITL of the log's own line: the
+    X500's v1.17 and the 8S quad's v1.16 through v1.17."""
+    without = {k: v for k, v in log_parameters.items() if k != "MPC_YAWRAUTO_ACC"}
+    build = _stand_in_build(tmp_path / "x500", without, b"v1.17.0")
+    x500 = plan_replay(X500, ReplayOptions(autopilot="px4", px4_dir=build))
+    assert (x500.mission_holds, x500.learned) == ((), {})
+    assert x500.yaw_rate_limits  # the build lacks the limit: that is no version's doing
+    parameters = pyulog.ULog(str(QUAD4001), ["vehicle_status"]).initial_parameters
+    build = _stand_in_build(tmp_path / "quad", parameters, b"v1.17.0-alpha1")
+    quad = plan_replay(QUAD4001, ReplayOptions(autopilot="px4", px4_dir=build,
+                                                vehicle="quad4001_8s"))  # fmt: skip
+    assert quad.learned == {}
 
 
 def test_a_climb_rate_flight_learns_nothing(plan):
