@@ -681,9 +681,9 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             raise ReplayError(
                 f"{path}: battery_status.voltage_v at --start {start_s:g} s: {error}"
             ) from None
-    # The replay makes up for what PX4 changed between versions (against the reference
-    # autopilot, which flies as v1.14) only on a SITL older than the log's PX4 (of an
-    # unknown release: as if older).
+    # The navigator's hold at a mission's start is made up for only on a SITL older than
+    # the log's PX4 (of an unknown release: as if older); the reference autopilot flies
+    # as v1.14.
     older_sitl = True
     if px4:
         parameters, skipped, unknown, sitl = _px4_parameters(log.parameters, options)
@@ -759,7 +759,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
         mission_holds=mission_holds,
         sticks=sticks,
         firmware=log.firmware,
-        learned=_learned_parameters(log, parameters, events) if older_sitl else {},
+        learned=_learned_parameters(log, parameters, events),
         yaw_rate_limits=_yaw_rate_limits(log, parameters, start_s, end_s) if px4 else (),
         home_moves=home_moves,
         **_wind(path, vehicle_document, vehicle),

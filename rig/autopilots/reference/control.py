@@ -378,7 +378,8 @@ class PositionController:
     Position P → velocity set-point (horizontal limit, position term first); velocity PID
     (D on the velocity estimate's derivative, low-passed at ``MPC_VELD_LP`` as PX4's
     ``_vel_*_deriv``: the raw accelerometer would feed frame vibration straight into the
-    tilt set-point) → acceleration set-point; acceleration → thrust vector
+    tilt set-point) plus the trajectory's acceleration as feed-forward → acceleration
+    set-point; acceleration → thrust vector
     through the hover thrust, tilt limited to ``MPC_TILTMAX_AIR``; vertical thrust has
     priority with a horizontal margin ``MPC_THR_XY_MARG``; anti-windup vertical by clamping
     and horizontal by tracking. Set-point entries that are NaN are not controlled.
@@ -418,10 +419,12 @@ class PositionController:
         velocity_limits_mps: tuple[float, float, float],
         dt_s: float,
         freeze_integral: bool = False,
+        acceleration_sp: NDArray[np.float64] | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """One step → ``(thrust_ned, velocity_sp_used, acceleration_sp)``.
 
-        ``velocity_limits_mps`` is (horizontal, up, down).
+        ``velocity_limits_mps`` is (horizontal, up, down); ``acceleration_sp`` the
+        feed-forward (PX4 adds the PID's output to the trajectory's acceleration).
         """
         vel_from_pos = np.nan_to_num((position_sp - position_ned_m) * self.gain_pos)
         feed_forward = np.nan_to_num(velocity_sp)
@@ -438,6 +441,8 @@ class PositionController:
         acc_sp = vel_error * self.gain_vel_p + np.where(free, 0.0, self.velocity_integral)
         accel_ned_mps2 = self.velocity_derivative.update(velocity_ned_mps, dt_s)
         acc_sp -= np.where(free, 0.0, accel_ned_mps2 * self.gain_vel_d)
+        if acceleration_sp is not None:
+            acc_sp += np.nan_to_num(acceleration_sp)
         thrust = self._acceleration_to_thrust(acc_sp)
 
         if (thrust[2] >= -self.thrust_min and vel_error[2] >= 0.0) or (

@@ -18,6 +18,7 @@ estimator's errors.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 from numba import njit
@@ -237,6 +238,11 @@ class PositionEstimator:
     process noise. Without it a tilt error left by a manoeuvre (0.015 rad after the demo's
     5 m step) was learnt at the bias's 0.003 m/s³ and the estimate sat 0.5-0.8 m short of
     the GPS for 15 s.
+
+    GPS is fused where it was measured, ``EKF2_GPS_DELAY`` ago: its innovation is taken
+    against the estimate of that moment (kept for the delay), and the correction applied
+    now, as EKF2's delayed fusion horizon does. Against the latest estimate, a fix 110 ms
+    old pulled a vehicle moving at 3 m/s 0.3 m back and the hold after a step swung.
     """
 
     def __init__(self) -> None:
@@ -244,6 +250,7 @@ class PositionEstimator:
         self.acc_bias_noise = 0.003
         self.tilt_noise_mps2 = STANDARD_GRAVITY_MPS2 * 0.015
         self.predict_period_s = 0.01
+        self.gps_delay_s = 0.11
         self.gps_pos_noise_m = 0.5
         self.gps_vel_noise_mps = 0.3
         self.baro_noise_m = 3.5
@@ -256,6 +263,7 @@ class PositionEstimator:
         self.acc_noise, self.acc_bias_noise = params["EKF2_ACC_NOISE"], params["EKF2_ACC_B_NOISE"]
         self.tilt_noise_mps2 = STANDARD_GRAVITY_MPS2 * params["EKF2_GYR_NOISE"]
         self.predict_period_s = params["EKF2_PREDICT_US"] * 1e-6
+        self.gps_delay_s = params["EKF2_GPS_DELAY"] * 1e-3
         self.gps_pos_noise_m = params["EKF2_GPS_P_NOISE"]
         self.gps_vel_noise_mps = params["EKF2_GPS_V_NOISE"]
         self.baro_noise_m = params["EKF2_BARO_NOISE"]
@@ -271,6 +279,10 @@ class PositionEstimator:
         self.baro_reference_m: float | None = None
         #: NED down of the (flat) ground under a rangefinder; None before a reading.
         self.ground_down_m: float | None = None
+        #: (clock s, position, velocity) of the estimates over the last GPS delay, for GPS
+        #: fusion; the clock counts predicted time.
+        self._recent: deque[tuple[float, NDArray[np.float64], NDArray[np.float64]]] = deque()
+        self._clock_s = 0.0
 
     @property
     def position_ned_m(self) -> NDArray[np.float64]:
@@ -308,6 +320,11 @@ class PositionEstimator:
             self.x, self.p, self._transition, self._transition_t, self._process_noise,
             np.asarray(specific_force_ned_mps2, dtype=float), dt_s,
         )  # fmt: skip
+        self._clock_s += dt_s
+        recent = self._recent
+        recent.append((self._clock_s, self.x[:, 0].copy(), self.x[:, 1].copy()))
+        while len(recent) > 1 and recent[1][0] <= self._clock_s - self.gps_delay_s:
+            recent.popleft()
 
     def fuse_gps(
         self,
@@ -315,8 +332,14 @@ class PositionEstimator:
         velocity_ned_mps: NDArray[np.float64],
         use_height: bool,
     ) -> None:
-        """GPS position (horizontal, plus height when the barometer is out) and velocity."""
+        """GPS position (horizontal, plus height when the barometer is out) and velocity,
+        measured ``gps_delay_s`` ago."""
         axes = slice(0, 3) if use_height else slice(0, 2)
+        # The change of the estimate since the fix was measured, added to the fix.
+        _, position_then, velocity_then = self._recent[0] if self._recent else (0, None, None)
+        if position_then is not None:
+            position_ned_m = position_ned_m + (self.x[:, 0] - position_then)
+            velocity_ned_mps = velocity_ned_mps + (self.x[:, 1] - velocity_then)
         self._fuse(axes, 0, position_ned_m[axes], self.gps_pos_noise_m**2)
         self._fuse(slice(0, 3), 1, velocity_ned_mps, self.gps_vel_noise_mps**2)
 
@@ -342,6 +365,7 @@ class PositionEstimator:
         """Start the horizontal frame here; height keeps its baro reference."""
         self.origin = (lat_deg, lon_deg, alt_amsl_m + float(self.x[2, 0]))
         self.origin_time_us = time_us
+        self._recent.clear()  # estimates of the old frame
         self.x[:2, 0] = 0.0
         self.x[:, 1] = velocity_ned_mps
         # A reset state loses its correlations: keeping the height's correlation with a

@@ -616,6 +616,7 @@ class FlightController:
         est = self.position
         position = est.position_ned_m
         nav = self.navigator
+        nav.vehicle_ned = position
         dist_bottom = self.ground.height(time_us)
         if self._idle():
             self.setpoint = None
@@ -660,6 +661,7 @@ class FlightController:
             setpoint.velocity_ned_mps,
             setpoint.velocity_limits_mps,
             dt_s,
+            acceleration_sp=setpoint.acceleration_ned_mps2,
         )
         self.thrust_sp_ned = thrust
         self.q_sp, self.collective_thrust = thrust_to_attitude(thrust, setpoint.yaw_rad)

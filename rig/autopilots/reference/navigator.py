@@ -3,9 +3,9 @@
 Modes are PX4's ``vehicle_status.nav_state`` values and travel in HEARTBEAT as PX4's custom
 mode (``px4_custom_mode.h``: main mode in bits 16-23, sub mode in 24-31), so QGroundControl
 and MAVSDK show their usual names. Each mode yields a :class:`Setpoint` for the position
-controller; autonomous motion goes through :class:`Trajectory`, a velocity- and
-acceleration-limited path with velocity feed-forward (the role of PX4's jerk-limited
-trajectory generator, kept simpler: acceleration is limited, jerk is not).
+controller; autonomous motion goes through PX4's jerk-limited trajectory
+(:class:`~rig.autopilots.reference.trajectory.PositionSmoothing`), whose velocity and
+acceleration the controller takes as feed-forward.
 """
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from rig.autopilots.reference.params import Parameters
+from rig.autopilots.reference.trajectory import Limits, PositionSmoothing
 from rig.mavlink.px4_api import mavlink
 
 _NAN3 = np.full(3, np.nan)
@@ -154,53 +155,7 @@ class Setpoint:
     yawspeed_radps: float
     velocity_limits_mps: tuple[float, float, float]  # horizontal, up, down
     idle: bool = False  # on the ground, motors at idle, no control
-
-
-class Trajectory:
-    """A point moving towards a target with bounded speed and acceleration.
-
-    It brakes so that it stops on the target (speed ≤ √(2·a·distance)); the vehicle tracks
-    its position with its velocity as feed-forward.
-    """
-
-    def __init__(self) -> None:
-        self.position = np.zeros(3)
-        self.velocity = np.zeros(3)
-
-    def reset(self, position: NDArray[np.float64], velocity: NDArray[np.float64]) -> None:
-        self.position = np.array(position, dtype=float)
-        self.velocity = np.array(velocity, dtype=float)
-
-    def update(
-        self,
-        target: NDArray[np.float64],
-        dt_s: float,
-        speeds_mps: tuple[float, float, float],
-        accels_mps2: tuple[float, float, float],
-    ) -> None:
-        """Advance by ``dt_s``; speeds and accelerations are (horizontal, up, down)."""
-        horizontal_speed, up_speed, down_speed = speeds_mps
-        acc_hor, acc_up, acc_down = accels_mps2
-        offset = target - self.position
-        desired = np.zeros(3)
-        distance = float(math.hypot(offset[0], offset[1]))
-        if distance > 1e-3:
-            speed = min(horizontal_speed, math.sqrt(2.0 * acc_hor * distance))
-            desired[:2] = offset[:2] / distance * speed
-        if offset[2] < 0.0:
-            desired[2] = -min(up_speed, math.sqrt(2.0 * acc_down * -offset[2]))
-        else:
-            desired[2] = min(down_speed, math.sqrt(2.0 * acc_up * offset[2]))
-        change = desired - self.velocity
-        step_xy = float(math.hypot(change[0], change[1]))
-        if step_xy > acc_hor * dt_s:
-            change[:2] *= acc_hor * dt_s / step_xy
-        vertical_acc = acc_up if change[2] < 0.0 else acc_down
-        change[2] = max(-vertical_acc * dt_s, min(vertical_acc * dt_s, change[2]))
-        self.velocity = self.velocity + change
-        self.position = self.position + self.velocity * dt_s
-        if distance < 0.01 and abs(offset[2]) < 0.01:
-            self.position = np.array(target, dtype=float)
+    acceleration_ned_mps2: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
 
 
 class Navigator:
@@ -222,7 +177,9 @@ class Navigator:
         self.to_local = to_local
         self.on_item_reached = on_item_reached
         self.on_current = on_current
-        self.trajectory = Trajectory()
+        self.trajectory = PositionSmoothing()
+        #: Where the vehicle is (the estimate), which the trajectory waits for.
+        self.vehicle_ned = np.zeros(3)
         self.mission: list[MissionItem] = []
         self.mission_seq = 0
         self.home_ned = np.zeros(3)
@@ -267,24 +224,28 @@ class Navigator:
         return self._mission_finished
 
     # --- set-points -------------------------------------------------------------------
-    def _auto_limits(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    def _auto_limits(self, climb_mps: float | None = None) -> Limits:
+        """PX4 FlightTaskAuto's trajectory limits; ``climb_mps`` caps the climb (take-off)."""
         p = self.params
         cruise = self.cruise_speed_mps
         if not math.isfinite(cruise) or cruise <= 0.0:
             cruise = p["MPC_XY_CRUISE"]
-        speeds = (min(cruise, p["MPC_XY_VEL_MAX"]), p["MPC_Z_V_AUTO_UP"], p["MPC_Z_V_AUTO_DN"])
-        accels = (p["MPC_ACC_HOR"], p["MPC_ACC_UP_MAX"], p["MPC_ACC_DOWN_MAX"])
-        return speeds, accels
+        up = p["MPC_Z_V_AUTO_UP"] if climb_mps is None else min(p["MPC_Z_V_AUTO_UP"], climb_mps)
+        return Limits(
+            speed_xy=min(cruise, p["MPC_XY_VEL_MAX"]), speed_up=up, speed_down=p["MPC_Z_V_AUTO_DN"],
+            accel_xy=p["MPC_ACC_HOR"], accel_up=p["MPC_ACC_UP_MAX"],
+            accel_down=p["MPC_ACC_DOWN_MAX"], jerk=p["MPC_JERK_AUTO"],
+            max_error_xy=p["MPC_XY_ERR_MAX"],
+        )  # fmt: skip
 
-    def _track(self, target, dt_s, speeds=None) -> Setpoint:
-        auto_speeds, accels = self._auto_limits()
-        speeds = speeds or auto_speeds
-        self.trajectory.update(np.asarray(target, dtype=float), dt_s, speeds, accels)
-        limits = (self.params["MPC_XY_VEL_MAX"], self.params["MPC_Z_VEL_MAX_UP"],
+    def _track(self, target, dt_s, limits: Limits | None = None) -> Setpoint:
+        self.trajectory.update(np.asarray(target, dtype=float), self.vehicle_ned, dt_s,
+                               limits or self._auto_limits())  # fmt: skip
+        speeds = (self.params["MPC_XY_VEL_MAX"], self.params["MPC_Z_VEL_MAX_UP"],
                   self.params["MPC_Z_VEL_MAX_DN"])  # fmt: skip
         return Setpoint(
-            self.trajectory.position.copy(), self.trajectory.velocity.copy(),
-            self.yaw_sp_rad, 0.0, limits,
+            self.trajectory.position, self.trajectory.velocity, self.yaw_sp_rad, 0.0, speeds,
+            acceleration_ned_mps2=self.trajectory.acceleration,
         )  # fmt: skip
 
     def _turn_towards(self, position, target, dt_s: float) -> None:
@@ -301,9 +262,8 @@ class Navigator:
         return self._track(self.hold_ned, dt_s)
 
     def takeoff(self, dt_s: float) -> Setpoint:
-        speeds, _ = self._auto_limits()
-        speeds = (speeds[0], min(speeds[1], self.params["MPC_TKO_SPEED"]), speeds[2])
-        return self._track(self.takeoff_target_ned, dt_s, speeds)
+        limits = self._auto_limits(climb_mps=self.params["MPC_TKO_SPEED"])
+        return self._track(self.takeoff_target_ned, dt_s, limits)
 
     def land(self, position, dt_s: float, dist_bottom_m: float | None = None) -> Setpoint:
         """Hold the horizontal position and descend, slowing between MPC_LAND_ALT1/2 and,
@@ -320,7 +280,7 @@ class Navigator:
             speed = min(speed, p["MPC_LAND_CRWL"])
         self.trajectory.update(
             np.array([self.hold_ned[0], self.hold_ned[1], self.trajectory.position[2]]),
-            dt_s, *self._auto_limits(),
+            self.vehicle_ned, dt_s, self._auto_limits(),
         )  # fmt: skip
         position_sp = np.array([self.trajectory.position[0], self.trajectory.position[1], np.nan])
         velocity_sp = np.array([self.trajectory.velocity[0], self.trajectory.velocity[1], speed])

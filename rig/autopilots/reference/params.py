@@ -103,6 +103,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("MPC_Z_V_AUTO_UP", 3.0, 0.5, 8.0, "m/s", "Ascent velocity in autonomous modes"),
     _p("MPC_Z_V_AUTO_DN", 1.5, 0.5, 4.0, "m/s", "Descent velocity in autonomous modes"),
     _p("MPC_ACC_HOR", 3.0, 2.0, 15.0, "m/s^2", "Horizontal acceleration in autonomous modes"),
+    _p("MPC_JERK_AUTO", 4.0, 1.0, 80.0, "m/s^3", "Jerk limit in autonomous modes"),
+    _p("MPC_XY_ERR_MAX", 2.0, 0.1, 10.0, "m", "Maximum horizontal error allowed by the trajectory"),
     _p("MPC_YAWRAUTO_MAX", 60.0, 5.0, 360.0, "deg/s", "Max yaw rate in autonomous modes"),
     # src/modules/mc_pos_control/multicopter_position_mode_params.yaml
     _p("MPC_ACC_UP_MAX", 4.0, 2.0, 15.0, "m/s^2", "Maximum upwards acceleration"),
@@ -133,6 +135,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("EKF2_PREDICT_US", 10000, 1000, 20000, "us", "EKF prediction period"),
     _p("EKF2_GPS_P_NOISE", 0.5, 0.01, 10.0, "m", "GPS horizontal position noise"),
     _p("EKF2_GPS_V_NOISE", 0.3, 0.01, 5.0, "m/s", "GPS velocity noise"),
+    _p("EKF2_GPS_DELAY", 110.0, 0.0, 300.0, "ms", "GPS measurement delay relative to IMU"),
     _p("EKF2_BARO_NOISE", 3.5, 0.01, 15.0, "m", "Barometric altitude noise"),
     _p("EKF2_REQ_EPH", 3.0, 2.0, 100.0, "m", "Required GPS horizontal accuracy to start"),
     _p("EKF2_REQ_NSATS", 6, 4, 12, "", "Required satellite count to start"),

@@ -77,8 +77,9 @@ def test_barometric_altitude_isa():
 
 
 def test_position_filter_follows_constant_acceleration_and_learns_bias():
-    """1 m/s² north with a 0.2 m/s² accelerometer bias, GPS at 10 Hz: after 20 s the
-    position is within 0.5 m and the bias within 0.05 m/s²."""
+    """1 m/s² north with a 0.2 m/s² accelerometer bias, GPS at 10 Hz measured
+    EKF2_GPS_DELAY (110 ms) before it arrives: after 20 s the position is within 0.5 m
+    and the bias within 0.05 m/s²."""
     rng = np.random.default_rng(5)
     est = PositionEstimator()
     est.configure(Parameters())
@@ -89,8 +90,9 @@ def test_position_filter_follows_constant_acceleration_and_learns_bias():
         t = k * dt
         est.predict(accel + np.array([0.2, 0, 0]) - GRAVITY_NED, dt)
         if k % 100 == 0:
-            p = np.array([0.5 * t * t, 0, 0]) + rng.standard_normal(3) * 0.3
-            v = np.array([t, 0, 0]) + rng.standard_normal(3) * 0.1
+            measured = t - 0.11
+            p = np.array([0.5 * measured**2, 0, 0]) + rng.standard_normal(3) * 0.3
+            v = np.array([measured, 0, 0]) + rng.standard_normal(3) * 0.1
             est.fuse_gps(p, v, use_height=True)
     t = 20.0
     assert est.position_ned_m == pytest.approx([0.5 * t * t, 0, 0], abs=0.5)
@@ -132,10 +134,10 @@ def test_a_tilt_error_does_not_pull_the_position_off_the_gps(imu_hz):
     """The cause of the demo's 0.5-0.8 m estimate error after its 5 m step: the filter
     learnt a tilt error of 0.015 rad (0.15 m/s² north) at the accelerometer bias's pace and
     drifted from the GPS meanwhile (0.57 m at 250 Hz, 0.73 m at 1 kHz). With the tilt's
-    variance in the error state, as EKF2 carries it, it stays within 2 cm of a GPS that
+    variance in the error state, as EKF2 carries it, it stays within 5 cm of a GPS that
     reads the truth."""
     worst_m, _ = _hold_through_a_tilt_error(imu_hz, tilt_rad=0.015)
-    assert worst_m < 0.02
+    assert worst_m < 0.05
 
 
 def test_the_filter_trusts_the_gps_alike_at_every_imu_rate():
