@@ -237,10 +237,19 @@ def lockstep_parameters(imu_hz: int) -> dict[str, float]:
     return {"IMU_GYRO_RATEMAX": imu_hz, "IMU_INTEG_RATE": imu_hz}
 
 
+#: A NAV-PVT frame (8 bytes of framing, 92 of payload, 10 bits a byte) on the UART at the
+#: 115 200 Bd PX4's u-blox driver sets: what a fix waits after the receiver sends it (ms).
+NAV_PVT_TRANSFER_MS = (8 + 92) * 10 / 115_200 * 1e3
+
+
 def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, float]:
     """What a PX4 airframe file for ``vehicle`` sets, as PX4's Gazebo airframes do for the
     x500: rotor geometry (``CA_ROTORi_PX/PY/KM``, PX4 motor order, KM the torque/thrust
-    ratio, + for CCW), the hover thrust and the battery cells.
+    ratio, + for CCW), the hover thrust and the battery cells; and, as a real vehicle's
+    configuration does, the GPS's delay (``EKF2_GPS_DELAY``: the receiver's latency and
+    the NAV-PVT's transfer). PX4 SITL's start-up sets that delay to 10 ms from v1.16 on
+    (Gazebo's GPS has none); trusting a 119 ms old fix as 10 ms old, v1.17's estimate
+    trailed a 5 m step by 0.48 m and the vehicle overshot it by 1.07 m.
 
     PX4 normalizes its allocation matrix, so KM's sign and the rotors' relative positions
     shape the mixer, not KM's magnitude. ``hover_throttle`` is the model's ESC throttle at
@@ -256,6 +265,7 @@ def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, fl
         params |= {f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": spin * ratio}
     params["MPC_THR_HOVER"] = round(float(hover_throttle), 3)
     params["BAT1_N_CELLS"] = vehicle.battery.cell_count
+    params["EKF2_GPS_DELAY"] = round(vehicle.gps.latency_s * 1e3 + NAV_PVT_TRANSFER_MS, 1)
     return params
 
 
