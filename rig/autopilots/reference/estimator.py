@@ -219,6 +219,10 @@ class GyroRestCalibration:
         return mean if still else None
 
 
+#: EKF2's process noise of the barometer's bias (m/s/√Hz, ``baro_bias_nsd``).
+_BARO_BIAS_NSD = 0.13
+
+
 class PositionEstimator:
     """Local NED position and velocity from accelerometer, GPS and barometer.
 
@@ -239,6 +243,12 @@ class PositionEstimator:
     5 m step) was learnt at the bias's 0.003 m/s³ and the estimate sat 0.5-0.8 m short of
     the GPS for 15 s.
 
+    Height is the GPS's when ``EKF2_HGT_REF`` is 1 (PX4's default), the barometer's
+    otherwise. With GPS as the reference the barometer still smooths the height, less its
+    bias, which a one-state filter learns from the difference of the two as EKF2's does
+    (``baro_height_control.cpp``: process noise 0.13 m/s/√Hz); the barometer alone as the
+    reference let its drift through (0.43 m over the demo).
+
     GPS is fused where it was measured, ``EKF2_GPS_DELAY`` ago: its innovation is taken
     against the estimate of that moment (kept for the delay), and the correction applied
     now, as EKF2's delayed fusion horizon does. Against the latest estimate, a fix 110 ms
@@ -251,6 +261,7 @@ class PositionEstimator:
         self.tilt_noise_mps2 = STANDARD_GRAVITY_MPS2 * 0.015
         self.predict_period_s = 0.01
         self.gps_delay_s = 0.11
+        self.gps_height_reference = True
         self.gps_pos_noise_m = 0.5
         self.gps_vel_noise_mps = 0.3
         self.baro_noise_m = 3.5
@@ -264,6 +275,7 @@ class PositionEstimator:
         self.tilt_noise_mps2 = STANDARD_GRAVITY_MPS2 * params["EKF2_GYR_NOISE"]
         self.predict_period_s = params["EKF2_PREDICT_US"] * 1e-6
         self.gps_delay_s = params["EKF2_GPS_DELAY"] * 1e-3
+        self.gps_height_reference = params["EKF2_HGT_REF"] == 1
         self.gps_pos_noise_m = params["EKF2_GPS_P_NOISE"]
         self.gps_vel_noise_mps = params["EKF2_GPS_V_NOISE"]
         self.baro_noise_m = params["EKF2_BARO_NOISE"]
@@ -277,6 +289,10 @@ class PositionEstimator:
         self.origin: tuple[float, float, float] | None = None  # lat, lon deg; alt AMSL m
         self.origin_time_us = 0
         self.baro_reference_m: float | None = None
+        #: The barometer's height error (m, positive: it reads low) and its variance.
+        self.baro_bias_m = 0.0
+        self.baro_bias_var = self.baro_noise_m**2
+        self._baro_clock_s = 0.0
         #: NED down of the (flat) ground under a rangefinder; None before a reading.
         self.ground_down_m: float | None = None
         #: (clock s, position, velocity) of the estimates over the last GPS delay, for GPS
@@ -334,20 +350,31 @@ class PositionEstimator:
     ) -> None:
         """GPS position (horizontal, plus height when the barometer is out) and velocity,
         measured ``gps_delay_s`` ago."""
-        axes = slice(0, 3) if use_height else slice(0, 2)
         # The change of the estimate since the fix was measured, added to the fix.
         _, position_then, velocity_then = self._recent[0] if self._recent else (0, None, None)
         if position_then is not None:
             position_ned_m = position_ned_m + (self.x[:, 0] - position_then)
             velocity_ned_mps = velocity_ned_mps + (self.x[:, 1] - velocity_then)
-        self._fuse(axes, 0, position_ned_m[axes], self.gps_pos_noise_m**2)
+        self._fuse(slice(0, 2), 0, position_ned_m[:2], self.gps_pos_noise_m**2)
+        if use_height:  # EKF2: 1.5 times the horizontal noise, a typical vacc/hacc
+            self._fuse(slice(2, 3), 0, position_ned_m[2:], (1.5 * self.gps_pos_noise_m) ** 2)
         self._fuse(slice(0, 3), 1, velocity_ned_mps, self.gps_vel_noise_mps**2)
 
-    def fuse_baro(self, altitude_m: float) -> None:
+    def fuse_baro(self, altitude_m: float, learn_bias: bool = False) -> None:
+        """A barometric altitude; ``learn_bias`` while another height (GPS) is fused."""
         if self.baro_reference_m is None:
             self.baro_reference_m = altitude_m + self.x[2, 0]
         down = self.baro_reference_m - altitude_m
-        self._fuse(slice(2, 3), 0, np.array([down]), self.baro_noise_m**2)
+        noise_var = self.baro_noise_m**2
+        innovation_down = down - self.baro_bias_m
+        if learn_bias:
+            elapsed_s = self._clock_s - self._baro_clock_s
+            self.baro_bias_var = min(self.baro_bias_var + _BARO_BIAS_NSD**2 * elapsed_s, noise_var)
+            gain = self.baro_bias_var / (self.baro_bias_var + noise_var + self.p[2, 0, 0])
+            self.baro_bias_m += gain * (down - self.x[2, 0] - self.baro_bias_m)
+            self.baro_bias_var *= 1.0 - gain
+        self._baro_clock_s = self._clock_s
+        self._fuse(slice(2, 3), 0, np.array([innovation_down]), noise_var + self.baro_bias_var)
 
     def fuse_range(self, dist_bottom_m: float, aid: bool) -> None:
         """A rangefinder's height above the ground. Until the aid applies (PX4's conditions,

@@ -432,8 +432,9 @@ class FlightController:
         self.position.predict(quat_to_dcm(self.attitude.q) @ sensors.accel_mps2, dt_s)
         baro_ok = self.monitors["baro"].healthy(time_us)
         if sensors.baro_pressure_pa is not None and baro_ok:
-            self.position.fuse_baro(pressure_altitude_m(sensors.baro_pressure_pa))
-        self._use_gps_height = not baro_ok
+            learn_bias = self.position.gps_height_reference and self._gps_good
+            self.position.fuse_baro(pressure_altitude_m(sensors.baro_pressure_pa), learn_bias)
+        self._use_gps_height = not baro_ok or self.position.gps_height_reference
         gps = sensors.gps
         if gps is None:
             self._gps_good = self._gps_good and self.monitors["gps"].healthy(time_us)

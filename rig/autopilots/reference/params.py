@@ -136,6 +136,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("EKF2_GPS_P_NOISE", 0.5, 0.01, 10.0, "m", "GPS horizontal position noise"),
     _p("EKF2_GPS_V_NOISE", 0.3, 0.01, 5.0, "m/s", "GPS velocity noise"),
     _p("EKF2_GPS_DELAY", 110.0, 0.0, 300.0, "ms", "GPS measurement delay relative to IMU"),
+    _p("EKF2_HGT_REF", 1, 0, 1, "", "Height reference: 0 barometer, 1 GPS"),
     _p("EKF2_BARO_NOISE", 3.5, 0.01, 15.0, "m", "Barometric altitude noise"),
     _p("EKF2_REQ_EPH", 3.0, 2.0, 100.0, "m", "Required GPS horizontal accuracy to start"),
     _p("EKF2_REQ_NSATS", 6, 4, 12, "", "Required satellite count to start"),
