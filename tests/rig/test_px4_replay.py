@@ -569,7 +569,9 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
     assert quad.summary()["parameters_learned_in_the_flight"] == quad.learned
 
 
-def test_a_sitl_of_the_logs_own_release_holds_at_the_missions_start_by_itself(tmp_path, log_parameters):
+def test_a_sitl_of_the_logs_own_release_holds_at_the_missions_start_by_itself(
+    tmp_path, log_parameters
+):
     """v1.14's navigator starts a mission at once, where the X500's v1.17 held the vehicle
     0.41 s first: the replay flies that hold only on a SITL older than the log's PX4."""
     build = _stand_in_build(tmp_path / "x500", log_parameters, b"v1.17.0")
