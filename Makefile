@@ -40,7 +40,7 @@ fuzz: $(STAMP)
 
 # The paper's section-4 study on the real X500 flight (README "How credible is this rig?"):
 # the flight replayed by the high- (x500_v2) and low-precision (x500_v2_low_precision) models,
-# the 1-DOF pitch bench sweep, then the two reports. With PX4_DIR set (CI: ../shared/px4_sitl)
+# the 1-DOF pitch bench sweep, then the two reports. With PX4_DIR set
 # PX4 SITL, the firmware that flew it, replays the whole flight with the log's own parameters
 # as its pilot flew it (one replay per model serves every test); without it the reference
 # autopilot replays it through each of its loops.
