@@ -682,9 +682,10 @@ class _Loop:
     def _autopilot_description(self) -> str:
         if self._px4 is None:
             return "the reference autopilot"
+        lockstep = f"lockstep IMU_GYRO_RATEMAX = IMU_INTEG_RATE = {self.rates.imu_hz} Hz"
         if self._px4.build is None:
-            return "PX4 started by hand"
-        return self._px4.build.description
+            return f"PX4 started by hand ({lockstep} needed)"
+        return f"{self._px4.build.description}, {lockstep}"
 
     def _budget(self, wall_s: float) -> FrameBudget:
         frames = max(self.frames, 1)
