@@ -94,8 +94,9 @@ def test_lockstep_holds_at_every_imu_rate(tmp_path, free_instance, any_px4, imu_
     px4_log = pyulog.ULog(str(result.autopilot_log))
     assert px4_log.initial_parameters["IMU_INTEG_RATE"] == imu_hz
     assert px4_log.initial_parameters["IMU_GYRO_RATEMAX"] == imu_hz
-    assert result.autopilot == (f"{any_px4.description}, lockstep IMU_GYRO_RATEMAX = "
-                                f"IMU_INTEG_RATE = {imu_hz} Hz")  # the run's summary says so
+    assert result.autopilot == (
+        f"{any_px4.description}, lockstep IMU_GYRO_RATEMAX = IMU_INTEG_RATE = {imu_hz} Hz"
+    )  # the run's summary says so
 
 
 def test_px4_logs_each_imu_sample_as_the_1_2_1_mean_of_the_rigs(tmp_path, free_instance, px4_dir):
