@@ -7,10 +7,12 @@ from pathlib import Path
 
 import pytest
 
+from rig.autopilots.px4 import Px4Build, find_px4
 from rig.errors import AutopilotNotConnected
 from rig.mavlink.px4_api import Ports
 from rig.mavlink.simulator_link import LinkTimeouts, SimulatorLink
 from tests.instances import free_test_instance, worker_instances
+from tests.rig.px4_flights import NO_PX4, every_build
 
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 #: Short bounds so a broken test fails in seconds, not minutes.
@@ -61,3 +63,22 @@ def start_double() -> Iterator[Callable[..., subprocess.Popen]]:
 def free_instance() -> Callable[[], int]:
     """Call it for a rig instance whose ports are free (other suites use low instances)."""
     return free_test_instance  # 60..99; campaigns default to 20..59
+
+
+@pytest.fixture(scope="module")
+def px4_dir() -> Path:
+    """$PX4_DIR's PX4 SITL build (CI: the newest release it has); the test skips without."""
+    build = find_px4()
+    if build is None:
+        pytest.skip(NO_PX4)
+    return build.root
+
+
+@pytest.fixture(scope="module", params=every_build())
+def any_px4(request) -> Px4Build:
+    """$PX4_DIR's build, then each of $PX4_OLDER_DIRS' (the short subset's releases)."""
+    if request.param is None:
+        pytest.skip(NO_PX4)
+    build = find_px4(request.param)
+    assert build is not None
+    return build

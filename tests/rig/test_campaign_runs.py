@@ -29,7 +29,7 @@ KILLED, FROZEN = 3, 6  # case indices whose autopilot the test sabotages
 def campaign(tmp_path: Path):
     scenario = tmp_path / "short_hover.toml"
     scenario.write_text(
-        'name = "short_hover"\nvehicle = "f450_high_precision"\nduration_s = 3.0\nseed = 1\n'
+        'name = "short_hover"\nvehicle = "f450_high_precision"\nduration_s = 4.0\nseed = 1\n'
         "[rates]\nimu_hz = 250\n"
         '[[commands]]\nat_s = 0.2\naction = "arm"\n'
         '[[commands]]\nat_s = 0.3\naction = "takeoff"\naltitude_m = 2.0\n'
@@ -45,7 +45,7 @@ def campaign(tmp_path: Path):
             "axes": {
                 # m0_weak's two efficiencies make it two levels of the fault axis
                 "fault": ["none", "m0_lost", "m0_weak"],
-                "fault_onset_s": [1.5],
+                "fault_onset_s": [2.5],
                 "seed": [1, 2],
             },
             "faults": {
@@ -165,7 +165,7 @@ def test_seeds_change_the_numbers(pool_run):
     tilts = {
         tuple(dict(r.labels).values()): r.metrics.get("max_tilt_deg") for r in read_results(out)
     }
-    assert tilts[("none", "1.5", "1")] != tilts[("none", "1.5", "2")]
+    assert tilts[("none", "2.5", "1")] != tilts[("none", "2.5", "2")]
 
 
 def test_dask_local_cluster_gives_the_same_results_as_the_pool(pool_run, tmp_path):
@@ -188,7 +188,7 @@ def test_report_shows_axes_envelope_and_failed_cases(pool_run):
     assert report["statuses"]["hung"] == 1
     assert {row["value"] for row in report["axes"]["seed"]} == {"1", "2"}
     envelope = {(c["fault"], c["onset_s"]): (c["survived"], c["cases"]) for c in report["envelope"]}
-    assert envelope[("m0_lost", "1.5")] == (0, 2)
+    assert envelope[("m0_lost", "2.5")] == (0, 2)
     assert sum(cases for _, cases in envelope.values()) == 8
     assert {row["index"] for row in report["not_ok"]} >= {KILLED, FROZEN}
     assert "data:image/png;base64," in html_path.read_text()

@@ -198,8 +198,8 @@ def test_a_flood_of_garbage_leaves_the_flight_and_its_commands_alone(
         command(api, "version", mavlink.MAV_CMD_REQUEST_MESSAGE,
                 mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)  # fmt: skip
         deadline = time.monotonic() + 10.0
-        while height_m() < 2.2:
-            assert time.monotonic() < deadline, "no take-off to 2.2 m within 10 s"
+        while height_m() < 2.3:  # of 2.5: PX4's trajectory closes the last metre slowly
+            assert time.monotonic() < deadline, "no take-off to 2.3 m within 10 s"
         command(gcs, "land", mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan, math.nan, math.nan,
                 math.nan)  # fmt: skip
         gcs.wait_for("HEARTBEAT", lambda m: not m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED,
