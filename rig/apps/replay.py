@@ -681,13 +681,8 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
             raise ReplayError(
                 f"{path}: battery_status.voltage_v at --start {start_s:g} s: {error}"
             ) from None
-    # The navigator's hold at a mission's start is made up for only on a SITL older than
-    # the log's PX4 (of an unknown release: as if older); the reference autopilot flies
-    # as v1.14.
-    older_sitl = True
     if px4:
-        parameters, skipped, unknown, sitl = _px4_parameters(log.parameters, options)
-        older_sitl = sitl is None or log.release is None or sitl < log.release
+        parameters, skipped, unknown = _px4_parameters(log.parameters, options)
     else:
         parameters, skipped, unknown = _parameters(log.parameters)
     real_arm_s, disarm_s = log.arming(start_s, end_s)
@@ -714,7 +709,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions = ReplayOptions()) 
     home_moves = log.home_moves(home, real_arm_s, disarm_s or end_s) if px4 else ()
     if any(e.commanded and e.nav_state == NAV_STATE_MISSION for e in events):
         mission, mission_notes = log.flown_mission(home, bool(home_moves))
-        mission_holds = log.mission_start_holds(events) if older_sitl else ()
+        mission_holds = log.mission_start_holds(events)
     heading_resets = log.heading_resets(start_s, end_s)
     sticks = None
     if px4:
@@ -915,10 +910,9 @@ def _with_px4_imu_rate(options: ReplayOptions, logged: Mapping[str, float]) -> R
 
 def _px4_parameters(
     logged: dict[str, float | int], options: ReplayOptions
-) -> tuple[dict[str, float | int], tuple[SkippedParameter, ...], int, tuple[int, int] | None]:
-    """The log's parameters PX4 SITL takes, the skipped ones with why, how many this build
-    does not have, and the build's release; the build (--px4, $PX4_DIR) is needed for its
-    parameter list."""
+) -> tuple[dict[str, float | int], tuple[SkippedParameter, ...], int]:
+    """The log's parameters PX4 SITL takes, the skipped ones with why, and how many this
+    build does not have; the build (--px4, $PX4_DIR) is needed for its parameter list."""
     try:
         build = find_px4(options.px4_dir)
         known = None if build is None else build_parameters(build)
@@ -930,12 +924,10 @@ def _px4_parameters(
             "decides which of the log's parameters PX4 takes"
         )
     applied, skipped = sitl_parameters(logged, known)
-    assert build is not None
     return (
         {name: logged[name] for name in applied},
         tuple(SkippedParameter(*entry) for entry in skipped),
         sum(1 for name in logged if name not in known),
-        build.release,
     )
 
 
@@ -988,9 +980,6 @@ class _FlightLog:
             raise ReplayError(f"{path}: the ULog holds no logged data")
         self.parameters: dict[str, float | int] = dict(ulog.initial_parameters)
         self.firmware = firmware_name(ulog.msg_info_dict)
-        packed = int(ulog.msg_info_dict.get("ver_sw_release", 0) or 0)
-        #: The log's PX4 release line (major, minor), None when its header does not say.
-        self.release = (packed >> 24 & 0xFF, packed >> 16 & 0xFF) if packed else None
         # A topic's first sample may be its last one before the logger started (published
         # at boot: the 8S quad's actuator_outputs at 0.6 s, logging from 104.9 s); the
         # header's start time bounds the logged span (0 in some logs, the X500's).

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.closed_loop
 #: This worker's instances (tests.instances): campaigns of two workers never share one.
 CAMPAIGN_INSTANCES = worker_instances(20, 40)
 
-CASE_TIMEOUT_S = 15.0
+CASE_TIMEOUT_S = 25.0
 KILLED, FROZEN = 3, 6  # case indices whose autopilot the test sabotages
 
 

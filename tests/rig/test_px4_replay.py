@@ -495,20 +495,15 @@ def test_px4_arms_switches_modes_and_climbs_as_the_real_flight(flown):
     out, real, px4, _ = flown
     flown_changes, real_changes = _armed_modes(px4, WINDOW_END_S), _armed_modes(real, WINDOW_END_S)
     assert [mode for _, mode in real_changes] == [POSCTL, MISSION, POSCTL]
-    summary = json.loads((out / "replay.json").read_text())
-    if summary["mission_holds"]:
-        # A SITL older than the log's PX4 (v1.14) starts a mission at once: the real
-        # navigator's loiter before the mission's item 0 is flown as Hold, from the log's
-        # switch to Mission; the mission's item 1 then becomes current at the real time.
-        assert [mode for _, mode in flown_changes] == [POSCTL, HOLD, MISSION, POSCTL]
-        assert flown_changes[1][0] == pytest.approx(real_changes[1][0], abs=0.1)
-        assert flown_changes[2][0] == pytest.approx(real_changes[1][0] + MISSION_HOLD_S,
-                                                    abs=0.1)  # fmt: skip
-        del flown_changes[2]
-    else:  # the log's own line holds by itself, in Mission
-        assert [mode for _, mode in flown_changes] == [POSCTL, MISSION, POSCTL]
+    # The real navigator's loiter before the mission's item 0 is flown as Hold, from the
+    # log's switch to Mission (v1.14 and this v1.17 SITL both start a mission at once);
+    # the mission's item 1 then becomes current at the real time.
+    assert [mode for _, mode in flown_changes] == [POSCTL, HOLD, MISSION, POSCTL]
+    assert flown_changes[1][0] == pytest.approx(real_changes[1][0], abs=0.1)
+    assert flown_changes[2][0] == pytest.approx(real_changes[1][0] + MISSION_HOLD_S, abs=0.1)
     assert _item_current_s(px4, 1) == pytest.approx(_item_current_s(real, 1), abs=0.1)
-    del flown_changes[1], real_changes[1]
+    del flown_changes[1:3], real_changes[1]
+    summary = json.loads((out / "replay.json").read_text())
     assert flown_changes[0][0] == pytest.approx(ARMED_S, abs=0.1)
     for flown_change, real_change in zip(flown_changes, real_changes, strict=True):
         assert flown_change[0] == pytest.approx(real_change[0], abs=0.5)
@@ -573,17 +568,6 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
     assert quad.learned["MPC_MANTHR_MIN"] == 0.0
     assert "MPC_THR_HOVER=0.65" in " ".join(quad.autopilot_params)
     assert quad.summary()["parameters_learned_in_the_flight"] == quad.learned
-
-
-def test_a_sitl_of_the_logs_own_release_holds_at_the_missions_start_by_itself(
-    tmp_path, log_parameters
-):
-    """v1.14's navigator starts a mission at once, where the X500's v1.17 held the vehicle
-    0.41 s first: the replay flies that hold only on a SITL older than the log's PX4."""
-    build = _stand_in_build(tmp_path / "x500", log_parameters, b"v1.17.0")
-    x500 = plan_replay(X500, ReplayOptions(autopilot="px4", px4_dir=build))
-    assert x500.mission_holds == ()
-    assert not any("held the vehicle" in text for _, text in x500.notes)
 
 
 def test_a_climb_rate_flight_learns_nothing(plan):
