@@ -227,9 +227,8 @@ class PositionEstimator:
     """Local NED position and velocity from accelerometer, GPS and barometer.
 
     The state per axis is (position m, velocity m/s, NED acceleration error m/s²). The
-    origin is set at the first GPS fix good enough (``EKF2_REQ_*``); height is barometric,
-    relative to the first baro sample, and falls back to GPS height when the barometer is
-    lost.
+    origin is set at the first GPS fix good enough (``EKF2_REQ_*``); height starts at the
+    first baro sample (its reference below).
 
     Process noise as PX4's EKF2 has it, whatever the IMU rate. EKF2 predicts every
     ``EKF2_PREDICT_US`` (10 ms) with a velocity variance of ``(Δt·EKF2_ACC_NOISE)²`` per
@@ -348,8 +347,8 @@ class PositionEstimator:
         velocity_ned_mps: NDArray[np.float64],
         use_height: bool,
     ) -> None:
-        """GPS position (horizontal, plus height when the barometer is out) and velocity,
-        measured ``gps_delay_s`` ago."""
+        """GPS position (horizontal, plus height with ``use_height``: GPS is the height
+        reference, or the barometer is out) and velocity, measured ``gps_delay_s`` ago."""
         # The change of the estimate since the fix was measured, added to the fix.
         _, position_then, velocity_then = self._recent[0] if self._recent else (0, None, None)
         if position_then is not None:
