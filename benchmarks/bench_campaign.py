@@ -19,7 +19,7 @@ from pathlib import Path
 from dask.distributed import LocalCluster
 
 from benchmarks.figures import Figure
-from rig.apps.campaign import campaign_executor, campaign_from_dict, run_campaign
+from rig.campaign import campaign_executor, campaign_from_dict, run_campaign
 
 CASES = 4
 

@@ -9,8 +9,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from benchmarks.figures import Figure, peak_rss_mib
+from px4_logs import FlightLog
 from quad_model.vehicle import load_vehicle
-from rig.apps.identify import identify_vehicle
+from rig.identify import identify_vehicle
 
 LOG = (
     Path(__file__).resolve().parent.parent
@@ -24,12 +25,14 @@ def measure() -> dict[str, float]:
     """Times of a first and of repeated calls, and this process's peak RSS."""
     vehicle = load_vehicle("x500_v2")
     start = time.perf_counter()
-    identify_vehicle(LOG, vehicle, WINDOW_S)  # numba kernels compiled or loaded from cache
+    identify_vehicle(
+        FlightLog.read(LOG), vehicle, WINDOW_S
+    )  # numba kernels compiled or loaded from cache
     first_s = time.perf_counter() - start
     times = []
     for _ in range(REPEATS):
         start = time.perf_counter()
-        identify_vehicle(LOG, vehicle, WINDOW_S)
+        identify_vehicle(FlightLog.read(LOG), vehicle, WINDOW_S)
         times.append(time.perf_counter() - start)
     return {
         "first_s": first_s,

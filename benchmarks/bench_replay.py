@@ -15,9 +15,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from benchmarks.figures import Figure, budget_detail
-from rig.apps.replay import ReplayOptions, plan_replay, run_replay
 from rig.lockstep.loop import RunOptions
 from rig.mavlink.px4_api import free_instance
+from rig.replay import ReplayOptions, plan_replay, run_replay
 
 X500_LOG = (
     Path(__file__).resolve().parent.parent

@@ -22,23 +22,10 @@ from typing import Any
 from pyulog import ULog
 from pyulog.core import ULogException
 
-#: What ``rig replay`` writes beside the logs of its run (rig.apps.replay.Replay.summary).
+from px4_logs import firmware_name
+
+#: What ``rig replay`` writes beside the logs of its run (rig.replay.Replay.summary).
 REPLAY_SUMMARY = "replay.json"
-
-
-def firmware_name(info: Mapping[str, Any]) -> str:
-    """A PX4 log's firmware as its header names it: version, release type, git hash, board
-    (``ver_sw_release`` packs major, minor, patch and the type: 255 release, ≥ 192 rc,
-    ≥ 128 beta, ≥ 64 alpha, else a development build)."""
-    release = int(info.get("ver_sw_release", 0) or 0)
-    kind = release & 0xFF
-    suffix = ("" if kind == 255 else "rc" if kind >= 192 else "beta" if kind >= 128
-              else "alpha" if kind >= 64 else "dev")  # fmt: skip
-    version = f"v{release >> 24 & 0xFF}.{release >> 16 & 0xFF}.{release >> 8 & 0xFF}{suffix}"
-    git = str(info.get("ver_sw", ""))[:8]
-    return (
-        f"{info.get('sys_name', 'PX4')} {version} (git {git or '?'}) on {info.get('ver_hw', '?')}"
-    )
 
 
 @dataclass(frozen=True)
@@ -118,7 +105,7 @@ def provenance_of(path: Path, fmt: str) -> Provenance:
         with contextlib.redirect_stdout(io.StringIO()):  # pyulog prints what it skips
             try:
                 info = ULog(str(path), [], parse_header_only=True).msg_info_dict
-            # what pyulog raises on a damaged file (credibility.logs.read_ulog): no firmware
+            # what pyulog raises on a damaged file (px4_logs.read_ulog): no firmware
             except (ULogException, ValueError, IndexError, KeyError, struct.error, UnicodeError,
                     OSError):  # fmt: skip
                 info = {}

@@ -11,7 +11,7 @@ it stands for, so each says how in a note the reader shows.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,22 +87,16 @@ DERIVATIONS = (
 )  # fmt: skip
 
 
-def sources_of_missing(present: Iterable[str], wanted: Iterable[str]) -> tuple[str, ...]:
-    """The source topics to read for the ``wanted`` topics a log lacks."""
-    have, want = set(present), set(wanted)
-    return tuple(sorted({source for d in DERIVATIONS if d.topic in want - have
-                         for source in d.sources}))  # fmt: skip
-
-
-def derive_missing(topics: Topics, parameters: Mapping[str, float],
-                   wanted: Iterable[str]) -> tuple[str, ...]:  # fmt: skip
-    """Add each ``wanted`` topic the log lacks and can derive (``topics`` is changed in
-    place); returns the notes of what was derived."""
+def derive_missing(topics: Topics, parameters: Mapping[str, float]) -> tuple[str, ...]:
+    """Add each topic the log lacks and can derive (``topics`` is changed in place);
+    returns the notes of what was derived."""
     notes = []
-    want = set(wanted)
     for derivation in DERIVATIONS:
         sources_present = all(source in topics for source in derivation.sources)
-        if derivation.topic in want and derivation.topic not in topics and sources_present:
-            topics[derivation.topic] = derivation.derive(topics, parameters)
+        if derivation.topic not in topics and sources_present:
+            try:
+                topics[derivation.topic] = derivation.derive(topics, parameters)
+            except KeyError:  # a source without the fields it needs (a damaged log) gives none
+                continue
             notes.append(derivation.note)
     return tuple(notes)

@@ -8,6 +8,7 @@ file. Rotors are listed in PX4's order (quad X: 0 front-right CCW, 1 rear-left C
 
 import itertools
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated
 
@@ -32,6 +33,8 @@ from quad_model.frames import STANDARD_GRAVITY_MPS2
 #: Where the bundled vehicle files live (``load_vehicle("f450_high_precision")``).
 VEHICLES_DIR = Path(__file__).parent / "vehicles"
 ROTOR_COUNT = 4
+#: The bundled vehicle of each PX4 airframe (``SYS_AUTOSTART``; PX4's ROMFS init.d airframes).
+AIRFRAMES = {4019: "x500_v2"}
 
 #: Magnitudes (noise levels, coefficients, drag areas) are >= 0 per axis.
 NonNegative3 = tuple[NonNegative, NonNegative, NonNegative]
@@ -47,6 +50,24 @@ LEVEL_TABLES = (
 
 class VehicleFileError(ValueError):
     """A vehicle file is missing, unreadable, or has a bad key; the message names it."""
+
+
+def vehicle_for_airframe(parameters: Mapping[str, float], source: object) -> str:
+    """The bundled vehicle of a PX4 log's airframe (its ``SYS_AUTOSTART`` in
+    ``parameters``); a log without one, or of an airframe with no bundled vehicle, is one
+    line naming ``source`` and the way round it."""
+    autostart = parameters.get("SYS_AUTOSTART")
+    if autostart is None:
+        raise VehicleFileError(
+            f"{source}: parameter SYS_AUTOSTART is not in the log; give --vehicle NAME|PATH"
+        )
+    if int(autostart) not in AIRFRAMES:
+        known = ", ".join(f"{k} {v}" for k, v in AIRFRAMES.items())
+        raise VehicleFileError(
+            f"{source}: parameter SYS_AUTOSTART = {int(autostart)} is an airframe without a "
+            f"bundled vehicle (known: {known}); --vehicle NAME|PATH overrides it"
+        )
+    return AIRFRAMES[int(autostart)]
 
 
 @table

@@ -11,7 +11,16 @@ docstring says what it owns and what it may import; ``make lint`` checks the lay
   the user's build; the reference autopilot, a separate process);
 - :mod:`rig.logs`: ULog writing (``rig.ulg``);
 - :mod:`rig.lockstep`: the loop that ties one frame together;
-- :mod:`rig.apps`: what users run on top (``rig`` CLI, replay, identify, campaigns).
+- :mod:`rig.plots` and :mod:`rig.view`: a run's plots and its page in the browser, live
+  or played back;
+- :mod:`rig.identify`: a vehicle's parameters, the wind and the IMU's vibration from a
+  flight log;
+- :mod:`rig.replay` and :mod:`rig.campaign`: a real flight flown again, and many runs
+  swept over a campaign's axes;
+- :mod:`rig.cli`: the ``rig`` command, one module per command.
+
+Flight logs are read through :mod:`px4_logs`, the package under both the rig and
+``credibility``.
 
 :mod:`rig.errors` and :mod:`rig.processes` serve every layer.
 """

@@ -22,15 +22,13 @@ from scipy import signal
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt
 
-from credibility.errors import CredibilityError
-from credibility.logs import read_ulog
+from px4_logs import LogError, read_ulog
 from quad_model.frames import euler_from_quat
 from rig.errors import RigError
+from rig.lockstep.loop import AUTOPILOT_LOGS
 
 #: The plots, by file name (``<name>.png`` in the run folder).
 PLOTS = ("position", "attitude", "motors", "imu_psd")
-#: The autopilot logs looked for, in this order.
-AUTOPILOT_LOGS = ("px4.ulg", "autopilot.ulg")
 _AXES = ("x (north)", "y (east)", "z (down)")
 _ANGLES = ("roll", "pitch", "yaw")
 
@@ -72,7 +70,7 @@ def _read(path: Path) -> pyulog.ULog:
         raise PlotError(f"{path}: no such log (is this a run folder?)")
     try:
         ulog, _ = read_ulog(path)
-    except CredibilityError as error:
+    except LogError as error:
         raise PlotError(str(error)) from None
     return ulog
 

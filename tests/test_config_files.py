@@ -11,8 +11,8 @@ import pytest
 
 from credibility.plan import load_plan
 from quad_model.vehicle import load_vehicle
-from rig.apps.campaign import load_campaign
-from rig.apps.schemas import FILE_KINDS, write_schemas
+from rig.campaign import load_campaign
+from rig.cli.schema import FILE_KINDS, write_schemas
 from rig.scenarios.scenario import load_scenario
 
 ROOT = Path(__file__).parents[1]
@@ -20,10 +20,10 @@ ROOT = Path(__file__).parents[1]
 HOMES = {
     "scenario": ("rig/scenarios", load_scenario),
     "vehicle": ("quad_model/vehicles", load_vehicle),
-    "campaign": ("rig/apps/campaigns", load_campaign),
+    "campaign": ("rig/campaign/campaigns", load_campaign),
     "plan": ("credibility/plans", load_plan),
 }
-EXTRA_PLANS = ("rig/apps/campaigns/plans",)
+EXTRA_PLANS = ("rig/campaign/campaigns/plans",)
 
 
 def _shipped() -> list[tuple[str, Path]]:
@@ -73,7 +73,7 @@ def test_the_json_schema_refuses_what_the_loader_refuses(schemas):
 
 
 def test_rig_schema_writes_the_files_and_an_unwritable_folder_is_one_line(tmp_path, capsys):
-    from rig.apps.cli import main
+    from rig.cli import main
 
     assert main(["schema", "--out", str(tmp_path / "schemas")]) == 0
     assert sorted(p.name for p in (tmp_path / "schemas").iterdir()) == sorted(

@@ -1,6 +1,6 @@
-"""One campaign case in its own process: ``python -m rig.apps.campaign_case CASE_DIR``.
+"""One campaign case in its own process: ``python -m rig.campaign.case CASE_DIR``.
 
-Reads ``case.json`` and ``scenario.toml`` (written by :func:`rig.apps.campaign.run_case`),
+Reads ``case.json`` and ``scenario.toml`` (written by :func:`rig.campaign.executor.run_case`),
 flies it on a free SITL instance, computes the metrics from the run's logs and writes
 ``outcome.json`` (``{"error": ..., "metrics": {...}, "notes": [...]}``) atomically. A
 process of its own per case keeps ports, sockets, the autopilot and any crash inside the

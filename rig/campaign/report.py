@@ -22,19 +22,14 @@ import jinja2
 import matplotlib.pyplot as plt
 import numpy as np
 
-from rig.apps.campaign import (
-    CREDIBILITY_METRICS,
-    METRICS,
-    CaseResult,
-    read_provenance,
-    read_results,
-)
+from rig.campaign.results import CaseResult, read_provenance, read_results
+from rig.campaign.schema import CREDIBILITY_METRICS, METRICS
 
 #: How many of the slowest cases the report lists.
 SLOWEST = 5
 #: The report's page template (``templates/`` beside this module); HTML-escaped values.
 _TEMPLATES = jinja2.Environment(
-    loader=jinja2.PackageLoader("rig.apps"), autoescape=True, undefined=jinja2.StrictUndefined,
+    loader=jinja2.PackageLoader("rig.campaign"), autoescape=True, undefined=jinja2.StrictUndefined,
     trim_blocks=True, lstrip_blocks=True,
 )  # fmt: skip
 

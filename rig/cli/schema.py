@@ -8,13 +8,18 @@ pointing at one of these. The schemas come from the very tables the loaders chec
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
+
+from rich.console import Console
 
 from credibility.plan import PlanFile
 from hil_config import json_schema
 from quad_model.vehicle import Vehicle
-from rig.apps.campaign import CampaignFile
+from rig.campaign.schema import CampaignFile
+from rig.cli.command import Command
+from rig.errors import RigError
 from rig.scenarios.scenario import Scenario
 
 #: Each configuration file's kind → its top table.
@@ -40,3 +45,27 @@ def write_schemas(out_dir: Path) -> list[Path]:
         path.write_text(json.dumps(document, indent=2, ensure_ascii=False) + "\n", "utf-8")
         written.append(path)
     return written
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--out", type=Path, default=Path("schemas"), help="folder (default schemas/)"
+    )
+
+
+def _schema(args: argparse.Namespace, console: Console) -> int:
+    try:
+        written = write_schemas(args.out)
+    except OSError as error:
+        raise RigError(f"{args.out}: cannot write the schemas ({error.strerror})") from None
+    for path in written:
+        console.print(str(path), highlight=False)
+    return 0
+
+
+COMMAND = Command(
+    "schema",
+    "write the JSON Schema of each configuration file (for TOML editors)",
+    _add_arguments,
+    _schema,
+)

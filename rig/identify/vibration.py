@@ -27,15 +27,13 @@ from numpy.typing import NDArray
 from scipy import optimize, signal
 from scipy.ndimage import uniform_filter1d
 
-from credibility.errors import CredibilityError
-from credibility.logs import read_ulog
 from credibility.signals import highpass
+from px4_logs import FlightLog, motor_pwm_range
 from quad_model.frames import pwm_to_throttle
 from quad_model.model import Mount, QuadModel
 from quad_model.sensors import ImuModel
 from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, Vehicle, VibrationParams
-from rig.apps.identify import IdentificationError, hover_windows
-from rig.apps.replay import motor_pwm_range
+from rig.identify.results import IdentificationError
 from rig.scenarios.scenario import model_rate_for
 
 #: Above this the high-pass keeps vibration and drops the flight's own motion (as the
@@ -62,14 +60,6 @@ MODEL_SECONDS = 20.0
 PX4_SITL_STREAM = (0.25, 0.5, 0.25)
 #: The points whose levels are fitted; the others check the interpolation.
 FITTED_POINTS = ("idle", "hover")
-_TOPICS = (
-    "sensor_combined",
-    "actuator_motors",
-    "actuator_armed",
-    "battery_status",
-    "vehicle_land_detected",
-    "vehicle_local_position",
-)
 _TRIAD_FIELDS = ("accelerometer_m_s2", "gyro_rad")  # kernel order: accel, gyro
 
 
@@ -138,27 +128,20 @@ def stream_spectrum(
 
 
 # ------------------------------------------------------------------ the log
-def read_log_vibration(log_path: str | Path) -> LogVibration:
+def read_log_vibration(log: FlightLog) -> LogVibration:
     """The operating points of a log (stopped, idle, hover, climb, descent: those it has)."""
-    path = Path(log_path)
-    if not path.is_file():
-        raise IdentificationError(f"{path}: log file not found")
-    try:
-        ulog, _ = read_ulog(path, _TOPICS)
-    except CredibilityError as error:
-        raise IdentificationError(str(error)) from None
-    topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+    path, topics = log.path, log.topics
     for name in ("sensor_combined", "actuator_motors", "actuator_armed"):
         if name not in topics:
             raise IdentificationError(f"{path}: no topic {name!r} (vibration per operating point)")
-    params = dict(ulog.initial_parameters)
+    params = log.parameters
     stream_rate_hz = float(params.get("IMU_INTEG_RATE", 200.0))
     imu = topics["sensor_combined"]
     imu_time = imu["timestamp"] * 1e-6
     samples = np.column_stack(
         [imu[f"{field}[{axis}]"] for field in _TRIAD_FIELDS for axis in range(3)]
     ).astype(float)
-    windows = _windows(path, topics, (float(imu_time[0]), float(imu_time[-1])))
+    windows = _windows(log, (float(imu_time[0]), float(imu_time[-1])))
     pwm_range = motor_pwm_range(params, path)
     bands = bands_for(stream_rate_hz)
     motors = topics["actuator_motors"]
@@ -216,11 +199,10 @@ def _mean_voltage(topics, path: Path, start: float, end: float) -> float:
     return float(battery["voltage_v"][inside].mean())
 
 
-def _windows(
-    path: Path, topics, imu_span: tuple[float, float]
-) -> dict[str, list[tuple[float, float]]]:
+def _windows(log: FlightLog, imu_span: tuple[float, float]) -> dict[str, list[tuple[float, float]]]:
     """Each operating point's spans inside the IMU stream, SETTLE_S after it began: every
     steady hover window, the longest span of each other point."""
+    topics = log.topics
     armed = topics["actuator_armed"]
     motors = topics["actuator_motors"]
     grid = motors["timestamp"] * 1e-6
@@ -244,7 +226,7 @@ def _windows(
         if span is not None:
             windows[name] = [span]
     if position is not None and land is not None:
-        windows["hover"] = [_clip(w, imu_span) for w in hover_windows(path)]
+        windows["hover"] = [_clip(w, imu_span) for w in log.hover_windows()]
     settled = {}
     for name, spans in windows.items():
         spans = [(start + SETTLE_S, end) for start, end in filter(None, spans)]
@@ -492,18 +474,11 @@ class RawImu:
     rate_hz: float
 
 
-def read_raw_imu(log_path: str | Path) -> dict[str, RawImu]:
+def read_raw_imu(log: FlightLog) -> dict[str, RawImu]:
     """The log's raw gyro and accel FIFO samples, unpacked (``gyro``, ``accel``). A message's
     samples are laid ``dt`` apart from its ``timestamp_sample`` (the first sample's time in
     PX4's FIFO drivers); between messages the logger may have dropped a few."""
-    path = Path(log_path)
-    if not path.is_file():
-        raise IdentificationError(f"{path}: log file not found")
-    try:
-        ulog, _ = read_ulog(path, tuple(FIFO_TOPICS.values()))
-    except CredibilityError as error:
-        raise IdentificationError(str(error)) from None
-    topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+    path, topics = log.path, log.topics
     raw = {}
     for triad, topic in FIFO_TOPICS.items():
         data = topics.get(topic)
@@ -567,14 +542,14 @@ def raw_imu_at_rest(
 
 
 def write_raw_imu_tables(
-    log_path: str | Path, vehicle: Vehicle, rest_s: tuple[float, float], out_dir: Path
+    log: FlightLog, vehicle: Vehicle, rest_s: tuple[float, float], out_dir: Path
 ) -> tuple[Path, ...]:
     """``real_<triad>.parquet`` (the log's FIFO, all of it) and ``sim_<triad>.parquet`` (the
     model at rest over ``rest_s``) in ``out_dir``, columns ``timestamp`` (µs) and
     ``sensor_<triad>_fifo.x|y|z`` (SI), for a credibility plan to compare."""
     import pandas as pd  # on demand, as credibility reads tables
 
-    raw = read_raw_imu(log_path)
+    raw = read_raw_imu(log)
     modelled = raw_imu_at_rest(vehicle, raw, rest_s)
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []

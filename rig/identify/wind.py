@@ -18,19 +18,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from credibility.errors import CredibilityError
-from credibility.logs import read_ulog
+from px4_logs import FlightLog
 from quad_model.frames import STANDARD_GRAVITY_MPS2, body_to_ned
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
-from rig.apps.identify import hover_windows
 from rig.errors import RigError
-
-_TOPICS = ("vehicle_attitude", "vehicle_land_detected", "vehicle_air_data")
 
 
 class WindEstimateError(RigError):
@@ -75,18 +70,13 @@ class WindEstimate:
         }
 
 
-def estimate_wind(log_path: str | Path, vehicle: Vehicle) -> WindEstimate:
-    """The steady wind of ``log_path``'s hover windows for ``vehicle``'s drag."""
-    path = Path(log_path)
-    try:
-        ulog, _ = read_ulog(path, _TOPICS)
-    except CredibilityError as error:
-        raise WindEstimateError(str(error)) from None
-    topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+def estimate_wind(log: FlightLog, vehicle: Vehicle) -> WindEstimate:
+    """The steady wind of the log's hover windows for ``vehicle``'s drag."""
+    path, topics = log.path, log.topics
     for name in ("vehicle_attitude", "vehicle_land_detected"):
         if name not in topics:
             raise WindEstimateError(f"{path}: no topic {name!r} (the wind estimate's tilt)")
-    windows = hover_windows(path)
+    windows = log.hover_windows()
     if not windows:
         raise WindEstimateError(f"{path}: no steady hover to estimate the wind from")
     attitude = topics["vehicle_attitude"]

@@ -216,6 +216,8 @@ def default_run_dir(scenario: Scenario) -> Path:
     return RUNS_DIR / f"{scenario.name}-{stamp}"
 
 
+#: The autopilot's log in a run folder, by autopilot: PX4's, the reference autopilot's.
+AUTOPILOT_LOGS = ("px4.ulg", "autopilot.ulg")
 #: Files whose presence means a folder already holds a run.
 RUN_LOGS = ("rig.ulg", "autopilot.ulg", "px4.ulg")
 

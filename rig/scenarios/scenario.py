@@ -10,7 +10,7 @@ expected (:class:`rig.errors.ScenarioError`). The bundled scenarios live in
 
 Times are simulated seconds from the start of the run. Units are in the key names. The
 autopilot's clock (every message and log timestamp) reads ``clock_start_s`` at the start of
-the run: ``start.clock_s``, 0 unless set; :mod:`rig.apps.replay` starts it at the real log's
+the run: ``start.clock_s``, 0 unless set; :mod:`rig.replay` starts it at the real log's
 boot time.
 """
 

@@ -22,12 +22,10 @@ from pathlib import Path
 import numpy as np
 import pyulog
 
-from credibility.errors import CredibilityError
-from credibility.logs import read_ulog
+from px4_logs import LogError, read_ulog
 from quad_model.frames import pwm_to_throttle
-from rig.apps.plots import AUTOPILOT_LOGS
 from rig.errors import RigError
-from rig.lockstep.loop import Progress
+from rig.lockstep.loop import AUTOPILOT_LOGS, Progress
 
 Frame = dict[str, object]
 #: Frames per simulated second of a playback (the live view pushes at most ~25 a wall second).
@@ -159,7 +157,7 @@ def _read(path: Path, topics: Iterable[str]) -> pyulog.ULog:
         raise ViewError(f"{path}: no such log (is this a run folder?)")
     try:
         ulog, _ = read_ulog(path, list(topics))
-    except CredibilityError as error:
+    except LogError as error:
         raise ViewError(str(error)) from None
     return ulog
 

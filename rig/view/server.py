@@ -28,8 +28,8 @@ from websockets.asyncio.server import ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from rig.apps.view.frames import Frame, Recording, ViewError, live_frame
 from rig.lockstep.loop import Progress
+from rig.view.frames import Frame, Recording, ViewError, live_frame
 
 #: The view's port for instance 0 (instance i serves on VIEW_PORT + i).
 VIEW_PORT = 8765

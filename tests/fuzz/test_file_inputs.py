@@ -15,11 +15,12 @@ from hypothesis import strategies as st
 from credibility.errors import CredibilityError
 from credibility.logs import open_log
 from credibility.plan import load_plan
+from px4_logs import FlightLog, LogError
 from quad_model.vehicle import VehicleFileError, load_vehicle
-from rig.apps.campaign import load_campaign
-from rig.apps.identify import identify_vehicle
-from rig.apps.replay import plan_replay
+from rig.campaign import load_campaign
 from rig.errors import RigError
+from rig.identify import identify_vehicle
+from rig.replay import plan_replay
 from rig.scenarios.scenario import load_scenario
 from tests.fuzz.inputs import SEED_TOPICS, damaged_logs, one_line, seed_log, toml_documents
 
@@ -30,7 +31,7 @@ LOADERS = {
     "campaign": load_campaign,
     "plan": load_plan,
 }
-REFUSALS = (RigError, CredibilityError, VehicleFileError)
+REFUSALS = (RigError, CredibilityError, VehicleFileError, LogError)
 
 
 @functools.cache
@@ -51,7 +52,7 @@ def test_a_damaged_flight_log_is_read_or_refused_in_one_line(data: bytes) -> Non
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "flight.ulg"
         path.write_bytes(data)
-        for read in (open_log, plan_replay, lambda p: identify_vehicle(p, _x500())):
+        for read in (open_log, plan_replay, lambda p: identify_vehicle(FlightLog.read(p), _x500())):
             try:
                 read(path)
             except REFUSALS as error:
@@ -76,7 +77,7 @@ def test_a_topic_whose_definition_lost_its_timestamp_is_refused_in_one_line(tmp_
     at = data.index(b"vehicle_land_detected:uint64_t timestamp;")
     path = tmp_path / "flight.ulg"
     path.write_bytes(data[:at] + data[at:].replace(b"timestamp;", b"timestamq;", 1))
-    for read in (open_log, plan_replay, lambda p: identify_vehicle(p, _x500())):
+    for read in (open_log, plan_replay, lambda p: identify_vehicle(FlightLog.read(p), _x500())):
         with pytest.raises(REFUSALS) as refusal:
             read(path)
         one_line(refusal.value)

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from rig.apps.campaign import CampaignError, Criterion, campaign_from_dict, expand, load_campaign
-from rig.apps.campaign_case import credibility_metrics, tilt_from_level_deg
+from rig.campaign import CampaignError, Criterion, campaign_from_dict, expand, load_campaign
+from rig.campaign.case import credibility_metrics, tilt_from_level_deg
 from rig.errors import ScenarioError
 
 
@@ -240,7 +240,7 @@ def test_bundled_campaigns_load_and_the_credibility_example_finds_its_plan():
     assert load_campaign("motor_faults").credibility is None
     example = load_campaign("imu_noise_credibility")
     assert example.credibility.plan_path.endswith(
-        "rig/apps/campaigns/plans/quad4001_hover_vibration.toml"
+        "rig/campaign/campaigns/plans/quad4001_hover_vibration.toml"
     )
     assert (example.credibility.role, example.credibility.log) == ("sim", "rig")
     assert Criterion("eta_min", minimum=0.6) in example.criteria

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from rig.apps.campaign import (
+from rig.campaign import (
     CampaignError,
     campaign_executor,
     campaign_from_dict,
@@ -15,7 +15,7 @@ from rig.apps.campaign import (
     read_results,
     run_campaign,
 )
-from rig.apps.campaign_report import write_report
+from rig.campaign.report import write_report
 from tests.instances import worker_instances
 
 pytestmark = pytest.mark.closed_loop

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from dask.distributed import LocalCluster
 
-from rig.apps.campaign import campaign_executor, campaign_from_dict, read_results, run_campaign
-from rig.apps.campaign_report import write_report
+from rig.campaign import campaign_executor, campaign_from_dict, read_results, run_campaign
+from rig.campaign.report import write_report
 from tests.instances import worker_instances
 
 pytestmark = pytest.mark.closed_loop

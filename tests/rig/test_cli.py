@@ -8,7 +8,7 @@ import time
 import pytest
 import pyulog
 
-from rig.apps.cli import main
+from rig.cli import main
 from rig.mavlink.px4_api import free_instance as find_free_instance
 from rig.processes import restore_sigint
 from tests.instances import worker_instances
@@ -42,7 +42,7 @@ def test_unknown_vehicle_is_a_scenario_error(capsys, tmp_path):
 def test_ctrl_c_stops_cleanly_with_readable_logs(tmp_path, free_instance):
     out = tmp_path / "run"
     process = subprocess.Popen(
-        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--instance",
+        [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--instance",
          str(free_instance()), "--out", str(out)],
         stderr=subprocess.PIPE, text=True,
         preexec_fn=restore_sigint,  # as from a terminal, also when pytest runs in the background
@@ -82,7 +82,7 @@ def test_two_rigs_fly_side_by_side_with_mavsdks_port_free(tmp_path, free_instanc
                 [
                     sys.executable,
                     "-m",
-                    "rig.apps.cli",
+                    "rig",
                     "run",
                     "takeoff_hover_land",
                     "--duration",
@@ -138,7 +138,7 @@ def test_a_full_disk_ends_the_run_in_one_line_with_whole_logs(tmp_path, free_ins
     run stops with one line, and each log ends on its last whole message."""
     out = tmp_path / "run"
     process = subprocess.run(
-        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--instance",
+        [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--instance",
          str(free_instance()), "--out", str(out)],
         capture_output=True, text=True, timeout=600, preexec_fn=_limit_file_size(3 << 20),
     )  # fmt: skip
@@ -160,7 +160,7 @@ def test_a_rig_started_in_the_background_still_stops_its_autopilot_cleanly(tmp_p
     was killed before it wrote its last buffer (a 1-hour soak lost its last 2 s)."""
     out = tmp_path / "run"
     process = subprocess.run(
-        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--duration", "3",
+        [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--duration", "3",
          "--instance", str(free_instance()), "--out", str(out)],
         capture_output=True, text=True, timeout=300,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),

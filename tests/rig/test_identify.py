@@ -1,4 +1,4 @@
-"""rig.apps.identify: known inertia, motor lag and hover throttle recovered from a rig flight
+"""rig.identify: known inertia, motor lag and hover throttle recovered from a rig flight
 (at the autopilot's own 250 Hz and resampled to the real log's 50 Hz), the real X500 log
 against the vehicle files, and one-line errors."""
 
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from pyulog import ULog
 
+from px4_logs import FlightLog, LogError
 from quad_model.environment import (
     DRY_AIR_GAS_CONSTANT,
     PX4_DEFAULT_HOME,
@@ -22,17 +23,12 @@ from quad_model.environment import (
 from quad_model.frames import STANDARD_GRAVITY_MPS2
 from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import VEHICLES_DIR, load_vehicle
-from rig.apps import cli
-from rig.apps.identify import (
-    ALIASING_BIAS,
-    IdentificationError,
-    _identify_battery,
-    _identify_rotor_line,
-    _Log,
-    identification_toml,
-    identify_vehicle,
-)
+from rig import cli
 from rig.autopilots.reference.flight_log import TOPICS as AUTOPILOT_TOPICS
+from rig.identify import IdentificationError, identification_toml, identify_vehicle
+from rig.identify.battery import identify_battery
+from rig.identify.rate_plant import ALIASING_BIAS
+from rig.identify.rotor_line import identify_rotor_line
 from rig.lockstep.loop import RunOptions, run_scenario
 from rig.logs.ulog_writer import ULogWriter
 from rig.mavlink.simulator_link import LinkTimeouts
@@ -153,7 +149,7 @@ def test_recovers_inertia_motor_lag_and_hover_at_the_autopilots_rate(synthetic_f
     (≈ 0.013) carried over is ≈ ±8-16 rad/s (measured -3 to -4 rad/s); 3 σ."""
     folder, truth, autopilot_log, rig_log = synthetic_flight
     log = _px4_style_log(autopilot_log, rig_log, folder / "px4_250hz.ulg", rate_hz=250.0)
-    result = identify_vehicle(log, truth)
+    result = identify_vehicle(FlightLog.read(log), truth)
     assert result.sample_rate_hz == pytest.approx(250.0, rel=0.01)
     assert result.notes == ()
     for index, name in enumerate(("roll", "pitch")):
@@ -188,7 +184,7 @@ def test_recovers_inertia_within_the_aliasing_bound_at_50_hz(synthetic_flight):
     bound and the note says why."""
     folder, truth, autopilot_log, rig_log = synthetic_flight
     log = _px4_style_log(autopilot_log, rig_log, folder / "px4_50hz.ulg", rate_hz=50.0)
-    result = identify_vehicle(log, truth)
+    result = identify_vehicle(FlightLog.read(log), truth)
     assert result.sample_rate_hz == pytest.approx(50.0, rel=0.01)
     assert "folds into the band" in result.notes[0]
     for index, name in enumerate(("roll", "pitch")):
@@ -221,7 +217,7 @@ def _hover_throttle_at(vehicle, voltage_v: float, density_kgpm3: float | None = 
 def real_identification():
     log = FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
     vehicle = load_vehicle("x500_v2")
-    return identify_vehicle(log, vehicle, REAL_WINDOW_S), vehicle
+    return identify_vehicle(FlightLog.read(log), vehicle, REAL_WINDOW_S), vehicle
 
 
 def test_real_log_hover_reads_the_motor_outputs_through_the_logs_pwm_range(real_identification):
@@ -293,7 +289,7 @@ def test_the_x500_model_draws_the_logs_hover_current(real_identification):
     assert model.truth.battery_current_a == pytest.approx(real_current, rel=0.1)
 
 
-def _line_log(folded: bool) -> _Log:
+def _line_log(folded: bool, battery: dict | None = None) -> FlightLog:
     """60 s airborne with a 200 Hz accelerometer stream whose tone sits at 170 Hz per unit
     command (folded: 250 Hz per unit, above the 100 Hz Nyquist frequency), the command held
     at 0.5 in 10-20 s (the hover) and swept slowly elsewhere, the voltage constant."""
@@ -306,12 +302,16 @@ def _line_log(folded: bool) -> _Log:
     tone = 2.0 * np.sin(2 * np.pi * np.cumsum(frequency) / rate)
     accel = {f"accelerometer_m_s2[{a}]": tone + gen.normal(0.0, 0.2, t.size) for a in range(3)}
     topics = {
-        "sensor_combined": {"t": t, **accel},
-        "actuator_motors": {"t": t_cmd, **{f"control[{m}]": command for m in range(4)}},
-        "battery_status": {"t": t_cmd, "voltage_v": np.full(t_cmd.size, 14.4)},
-        "vehicle_land_detected": {"t": t_cmd, "landed": np.zeros(t_cmd.size)},
+        "sensor_combined": {"timestamp": t * 1e6, **accel},
+        "actuator_motors": {
+            "timestamp": t_cmd * 1e6,
+            **{f"control[{m}]": command for m in range(4)},
+        },
+        "battery_status": battery
+        or {"timestamp": t_cmd * 1e6, "voltage_v": np.full(t_cmd.size, 14.4)},
+        "vehicle_land_detected": {"timestamp": t_cmd * 1e6, "landed": np.zeros(t_cmd.size)},
     }
-    return _Log(Path("synthetic.ulg"), topics, {})
+    return FlightLog("synthetic.ulg", topics, {})
 
 
 def test_the_rotor_line_gives_the_hover_rotor_speed_unless_it_is_folded():
@@ -320,14 +320,14 @@ def test_the_rotor_line_gives_the_hover_rotor_speed_unless_it_is_folded():
     tone at 250 Hz per unit folds about 100 Hz and falls as the command rises: refused."""
     vehicle = load_vehicle("x500_v2")
     rho = vehicle.propulsion.reference_air_density_kgpm3
-    line, reason = _identify_rotor_line(_line_log(False), ((10.0, 20.0),), vehicle, rho)
+    line, reason = identify_rotor_line(_line_log(False), ((10.0, 20.0),), vehicle, rho)
     assert line is not None, reason
     assert line.frequency.value == pytest.approx(85.0, abs=0.3)
     assert line.correlation > 0.9
     speed = 2 * np.pi * line.frequency.value
     expected = vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (4 * speed**2)
     assert line.thrust_coefficient.value == pytest.approx(expected, rel=1e-9)
-    line, reason = _identify_rotor_line(_line_log(True), ((10.0, 20.0),), vehicle, rho)
+    line, reason = identify_rotor_line(_line_log(True), ((10.0, 20.0),), vehicle, rho)
     assert line is None
     assert "folded" in reason
     assert "75.0 Hz" in reason
@@ -345,15 +345,15 @@ def test_the_battery_fit_recovers_resistance_avionics_and_efficiency(real_identi
     volts = np.where(armed, 15.2 - 0.0006 * used - 0.05 * current, 15.0)
     topics = {
         "battery_status": {
-            "t": t,
+            "timestamp": t * 1e6,
             "voltage_v": volts,
             "current_a": current,
             "discharged_mah": used,
         },
-        "actuator_armed": {"t": t, "armed": armed.astype(float)},
+        "actuator_armed": {"timestamp": t * 1e6, "armed": armed.astype(float)},
     }
     hover = replace(result.hover, windows_s=((10.0, 20.0),), rotor_speed_radps=600.0)
-    battery, reason = _identify_battery(_Log(Path("synthetic.ulg"), topics, {}), hover, vehicle)
+    battery, reason = identify_battery(FlightLog("synthetic.ulg", topics, {}), hover, vehicle)
     assert battery is not None, reason
     assert battery.internal_resistance_ohm.value == pytest.approx(0.05, rel=1e-6)
     assert battery.avionics_power_w.value == pytest.approx(0.27 * 15.0)
@@ -417,15 +417,15 @@ def _tiny_log(path: Path, landed: bool, speed_mps: float = 2.0, rate_radps: floa
 def test_errors_are_one_line_naming_the_problem(tmp_path):
     vehicle = load_vehicle("x500_v2")
     cases = [
-        (tmp_path / "missing.ulg", "log file not found"),
+        (tmp_path / "missing.ulg", "flight log not found"),
         (tmp_path / "junk.ulg", "not a readable ULog file"),
         (_tiny_log(tmp_path / "ground.ulg", landed=True), "the vehicle never left the ground"),
         (_tiny_log(tmp_path / "moving.ulg", landed=False), "no hover window found"),
     ]
     (tmp_path / "junk.ulg").write_bytes(b"not a ulog at all")
     for path, message in cases:
-        with pytest.raises(IdentificationError) as error:
-            identify_vehicle(path, vehicle)
+        with pytest.raises((IdentificationError, LogError)) as error:
+            identify_vehicle(FlightLog.read(path), vehicle)
         assert message in str(error.value)
         assert str(path) in str(error.value)
         assert "\n" not in str(error.value)
@@ -433,11 +433,11 @@ def test_errors_are_one_line_naming_the_problem(tmp_path):
 
 def test_missing_topic_and_bad_window_are_named(tmp_path, real_identification):
     log = _tiny_log(tmp_path / "hover_only.ulg", landed=False, speed_mps=0.1, rate_radps=0.01)
-    with pytest.raises(IdentificationError, match=r"no topic 'actuator_motors' \(hover motor"):
-        identify_vehicle(log, load_vehicle("x500_v2"))
+    with pytest.raises(LogError, match=r"topic actuator_motors \(hover motor commands\) is not"):
+        identify_vehicle(FlightLog.read(log), load_vehicle("x500_v2"))
     real = real_identification[0].log
     with pytest.raises(IdentificationError, match=r"excitation window 300-320 s is not inside"):
-        identify_vehicle(real, load_vehicle("x500_v2"), (300.0, 320.0))
+        identify_vehicle(FlightLog.read(real), load_vehicle("x500_v2"), (300.0, 320.0))
 
 
 def test_cli_prints_the_table_and_fails_in_one_line(capsys, tmp_path, real_identification):
@@ -449,7 +449,7 @@ def test_cli_prints_the_table_and_fails_in_one_line(capsys, tmp_path, real_ident
     err = capsys.readouterr().err
     assert err.startswith("rig: error: ")
     assert err.count("\n") == 1
-    assert "log file not found" in err
+    assert "flight log not found" in err
 
 
 def _write_older_layout(source: Path, path: Path) -> None:
@@ -510,7 +510,7 @@ def test_an_older_px4_layout_is_identified_from_what_it_logged(tmp_path, real_id
     current, vehicle = real_identification
     older = tmp_path / "older.ulg"
     _write_older_layout(FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg", older)
-    result = identify_vehicle(older, vehicle)
+    result = identify_vehicle(FlightLog.read(older), vehicle)
     derived = [note for note in result.notes if "derived from" in note]
     assert [note.split()[0] for note in derived] == [
         "vehicle_angular_velocity", "vehicle_torque_setpoint", "vehicle_thrust_setpoint",
@@ -528,7 +528,7 @@ QUAD4001_LOG = FLIGHT_LOGS / "px4_quad4001_v6c_stab_hover_2026-03-09.ulg"
 @pytest.fixture(scope="module")
 def quad4001_identification():
     vehicle = load_vehicle("quad4001_8s")
-    return identify_vehicle(QUAD4001_LOG, vehicle), vehicle
+    return identify_vehicle(FlightLog.read(QUAD4001_LOG), vehicle), vehicle
 
 
 def test_a_log_without_gnss_finds_its_hover_from_vz_and_the_thrust(quad4001_identification):
@@ -581,10 +581,10 @@ def test_the_8s_quads_armed_idle_is_its_rest(quad4001_identification):
     """Armed at command 0 its outputs sit at 1100 µs, below its ESCs' start (min_throttle
     0.12 of the 1000-2000 µs range): the model's rotors stand, so `--vibration` takes that
     armed window as the rest for the white noise, and fits the levels in hover alone."""
-    from rig.apps import vibration
+    from rig.identify import vibration
 
     _, vehicle = quad4001_identification
-    measured = vibration.read_log_vibration(QUAD4001_LOG)
+    measured = vibration.read_log_vibration(FlightLog.read(QUAD4001_LOG))
     idle = measured.point("idle")
     assert idle.windows_s[0][0] < 106.0
     assert idle.windows_s[0][1] > 109.0
@@ -599,11 +599,10 @@ def test_a_log_without_voltage_or_a_logged_disarm_leaves_just_those_parts_out(
     bounds its shaft power (no traceback); without actuator_armed the end of the flight may
     still idle the rotors, so no avionics power is read after it."""
     result, vehicle = real_identification
-    log = _line_log(False)
-    log.topics["battery_status"] = {"t": log.topics["battery_status"]["t"],
-                                    "current_a": np.full(600, 12.0)}  # fmt: skip
+    t_cmd = np.arange(0.0, 60.0, 0.1)
+    log = _line_log(False, {"timestamp": t_cmd * 1e6, "current_a": np.full(t_cmd.size, 12.0)})
     rho = vehicle.propulsion.reference_air_density_kgpm3
-    line, reason = _identify_rotor_line(log, ((10.0, 20.0),), vehicle, rho)
+    line, reason = identify_rotor_line(log, ((10.0, 20.0),), vehicle, rho)
     assert line is not None, reason
     assert line.frequency.value == pytest.approx(85.0, abs=0.3)
     t = np.arange(0.0, 60.0, 0.2)
@@ -611,15 +610,15 @@ def test_a_log_without_voltage_or_a_logged_disarm_leaves_just_those_parts_out(
     used = np.cumsum(current) * 0.2 / 3.6
     topics = {
         "battery_status": {
-            "t": t,
+            "timestamp": t * 1e6,
             "voltage_v": 15.2 - 0.0006 * used - 0.05 * current,
             "current_a": current,
             "discharged_mah": used,
         },
-        "vehicle_land_detected": {"t": t, "landed": (t > 50.0).astype(float)},
+        "vehicle_land_detected": {"timestamp": t * 1e6, "landed": (t > 50.0).astype(float)},
     }
     hover = replace(result.hover, windows_s=((10.0, 20.0),), rotor_speed_radps=600.0)
-    battery, reason = _identify_battery(_Log(Path("synthetic.ulg"), topics, {}), hover, vehicle)
+    battery, reason = identify_battery(FlightLog("synthetic.ulg", topics, {}), hover, vehicle)
     assert battery is not None, reason
     assert battery.internal_resistance_ohm.value == pytest.approx(0.05, rel=1e-6)
     assert battery.avionics_power_w is None

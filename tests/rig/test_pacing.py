@@ -62,7 +62,7 @@ def test_bad_speed_is_one_line(text):
 
 
 def test_cli_refuses_a_bad_speed(capsys):
-    from rig.apps.cli import main
+    from rig.cli import main
 
     with pytest.raises(SystemExit) as exit_info:
         main(["run", "takeoff_hover_land", "--speed", "0"])

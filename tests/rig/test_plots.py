@@ -3,8 +3,8 @@ folder that is no run is one line."""
 
 import pytest
 
-from rig.apps.cli import main
-from rig.apps.plots import PLOTS
+from rig.cli import main
+from rig.plots import PLOTS
 
 pytestmark = pytest.mark.closed_loop
 

@@ -17,8 +17,13 @@ import pyulog
 
 from quad_model.environment import GeoPoint
 from quad_model.frames import geodetic_to_ned
-from rig.apps.cli import main
-from rig.apps.replay import (
+from rig.autopilots.px4 import PX4_DIR_ENV, build_parameters, find_px4, sitl_parameters
+from rig.cli import main
+from rig.lockstep.loop import RunOptions
+from rig.mavlink.ground_link import GroundLink
+from rig.mavlink.px4_api import Ports, mavlink
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.replay import (
     ARM_MODE_LEAD_S,
     PX4_BOOT_S,
     PX4_SETUP_S,
@@ -30,11 +35,6 @@ from rig.apps.replay import (
     plan_replay,
     run_replay,
 )
-from rig.autopilots.px4 import PX4_DIR_ENV, build_parameters, find_px4, sitl_parameters
-from rig.lockstep.loop import RunOptions
-from rig.mavlink.ground_link import GroundLink
-from rig.mavlink.px4_api import Ports, mavlink
-from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import (
     SetHome,
     SetMode,

@@ -60,7 +60,7 @@ def test_lockstep_holds_at_every_imu_rate(tmp_path, free_instance, any_px4, imu_
 
 def test_px4_logs_each_imu_sample_as_the_1_2_1_mean_of_the_rigs(tmp_path, free_instance, px4_dir):
     """What PX4 SITL logs as sensor_combined at lockstep: (x[k] + 2·x[k-1] + x[k-2])/4 of
-    the samples the rig sent, not one trapezoid. The vibration fit (rig/apps/vibration.py)
+    the samples the rig sent, not one trapezoid. The vibration fit (rig/identify/vibration.py)
     models the replay's stream so, at the X500 replay's 800 Hz."""
     result = fly_px4(tmp_path, free_instance, px4_dir, "imu_stream", 6.0, rates={"imu_hz": 800})
     sent = pyulog.ULog(str(result.rig_log), ["sensor_combined"]).get_dataset("sensor_combined")
@@ -229,7 +229,7 @@ def test_ports_leave_mavsdk_and_the_ground_station_free(tmp_path, free_instance,
 
 def _start_rig_cli(px4_dir, instance, out):
     return subprocess.Popen(
-        [sys.executable, "-m", "rig.apps.cli", "run", "takeoff_hover_land", "--autopilot", "px4",
+        [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--autopilot", "px4",
          "--px4", str(px4_dir), "--instance", str(instance), "--out", str(out)],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip

@@ -13,15 +13,16 @@ import numpy as np
 import pytest
 import pyulog
 
+from px4_logs import FlightLog, LogError
 from quad_model.environment import DRY_AIR_GAS_CONSTANT, isa_pressure_pa, isa_temperature_k
 from quad_model.frames import quat_multiply
 from quad_model.vehicle import load_vehicle
-from rig.apps.cli import main
-from rig.apps.identify import IdentificationError, identify_vehicle
-from rig.apps.replay import ReplayError, ReplayOptions, plan_replay, run_replay
 from rig.chips.pwm import PwmOutput
+from rig.cli import main
+from rig.identify import identify_vehicle
 from rig.lockstep.loop import RunOptions
 from rig.logs.ulog_writer import ULogWriter
+from rig.replay import ReplayError, ReplayOptions, plan_replay, run_replay
 from tests.instances import free_test_instance
 
 #: The X500 log's first timestamp (a stale config_overrides sample the logger wrote first).
@@ -171,7 +172,7 @@ def test_bad_battery_and_pwm_configurations_fail_with_one_line(tmp_path):
 
 def test_plan_flies_the_logs_air_and_wind(x500_path):
     """The log's air density (vehicle_air_data.rho, 1.169 kg/m³ at 184 m: a warm day) becomes
-    the ISA temperature offset that gives it at home, and the hover-tilt wind (rig.apps.wind)
+    the ISA temperature offset that gives it at home, and the hover-tilt wind (rig.identify.wind)
     the steady wind with Dryden turbulence at W20 = its speed; replay.json says both."""
     plan = plan_replay(x500_path)
     assert plan.air_density_kgpm3 == pytest.approx(1.169, abs=0.002)
@@ -247,7 +248,7 @@ def _synthetic_log(path: Path, parameters: dict, *, landed: bool = True,
 
 
 def _error(path, **options) -> str:
-    with pytest.raises(ReplayError) as error:
+    with pytest.raises((ReplayError, LogError)) as error:
         plan_replay(path, ReplayOptions(**options))
     message = str(error.value)
     assert "\n" not in message
@@ -360,7 +361,7 @@ def test_replay_runs_on_the_real_logs_clock_and_takes_off_with_it(takeoff, real_
         assert times_s.max() <= 420.0
     summary = json.loads((out / "replay.json").read_text())
     assert summary["parameters_applied"]["MC_ROLLRATE_P"] == pytest.approx(0.14)
-    assert summary["wind"]["speed_mps"] == pytest.approx(4.8, abs=0.3)  # rig.apps.wind
+    assert summary["wind"]["speed_mps"] == pytest.approx(4.8, abs=0.3)  # rig.identify.wind
     assert "cell_count = 4" in (out / "vehicle.toml").read_text()
     # lift-off: the first climb faster than 0.3 m/s (the real z estimate drifts by 0.1 m on
     # the ground, its vz does not)
@@ -507,11 +508,11 @@ def test_the_three_real_logs_are_planned_or_refused_naming_what_is_missing(
     x500 = load_vehicle("x500_v2")
     for log in (x500_path, quad4001_log):
         assert plan_replay(log, ReplayOptions(vehicle="x500_v2")).arm_s is not None
-        assert 0.2 < identify_vehicle(log, x500).hover.throttle.value < 0.7
-    with pytest.raises(ReplayError, match=r"topic vehicle_land_detected .* is not in the log$"):
+        assert 0.2 < identify_vehicle(FlightLog.read(log), x500).hover.throttle.value < 0.7
+    with pytest.raises(LogError, match=r"topic vehicle_land_detected .* is not in the log$"):
         plan_replay(auriol_log, ReplayOptions(vehicle="x500_v2"))
-    with pytest.raises(IdentificationError, match=r"no topic 'vehicle_land_detected'"):
-        identify_vehicle(auriol_log, x500)
+    with pytest.raises(LogError, match=r"topic vehicle_land_detected \(airborne span\) is not in"):
+        identify_vehicle(FlightLog.read(auriol_log), x500)
 
 
 def test_the_8s_quads_replay_starts_at_its_logs_header(quad4001_log):

@@ -17,9 +17,9 @@ import pytest
 
 from credibility.assess import Assessment, TimeResult, assess
 from credibility.plan import load_plan
-from rig.apps.replay import ReplayOptions, plan_replay, run_replay
-from rig.apps.vibration import PX4_SITL_STREAM
+from rig.identify.vibration import PX4_SITL_STREAM
 from rig.lockstep.loop import RunOptions
+from rig.replay import ReplayOptions, plan_replay, run_replay
 from tests.instances import free_test_instance
 
 REPO = Path(__file__).resolve().parents[2]
@@ -154,7 +154,7 @@ def test_the_x8s_raw_imu_at_rest_is_scored_against_the_model(auriol_log, tmp_pat
     form; the plan scores one against the other (the model, fitted to a 200 Hz stream, is
     5× too noisy here and white where the chip's noise falls off above 1 kHz)."""
     from quad_model.vehicle import load_vehicle
-    from rig.apps import cli
+    from rig import cli
 
     out = tmp_path / "x8"
     argv = ["identify", str(auriol_log), "--vehicle", "x500_v2", "--raw-imu", str(out)]

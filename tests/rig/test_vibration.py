@@ -1,4 +1,4 @@
-"""rig.apps.vibration: the X500 vehicle file's vibration against the real log's IMU stream at
+"""rig.identify.vibration: the X500 vehicle file's vibration against the real log's IMU stream at
 each operating point, the fit recovering known levels, and the window detection."""
 
 import tomllib
@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from px4_logs import FlightLog
 from quad_model.vehicle import load_vehicle
-from rig.apps import cli
-from rig.apps.vibration import (
+from rig import cli
+from rig.identify.vibration import (
     FITTED_POINTS,
     fit_vibration,
     model_spectrum,
@@ -37,7 +38,7 @@ CHECKED_FACTOR = 1.8
 
 @pytest.fixture(scope="module")
 def measured():
-    return read_log_vibration(X500_LOG)
+    return read_log_vibration(FlightLog.read(X500_LOG))
 
 
 def test_operating_points_of_the_x500_log(measured):

@@ -23,11 +23,11 @@ import pyulog
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from rig.apps.cli import main
-from rig.apps.view import ViewServer, load_recording, mode_name
+from rig.cli import main
 from rig.lockstep.loop import Progress, RunOptions, RunResult, run_scenario
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
+from rig.view import ViewServer, load_recording, mode_name
 from tests.instances import free_test_instance
 
 CHROMIUM = Path("/usr/bin/chromium")

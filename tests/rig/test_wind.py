@@ -1,4 +1,4 @@
-"""rig.apps.wind: the hover-tilt wind estimate against the drag balance it inverts, and on the
+"""rig.identify.wind: the hover-tilt wind estimate against the drag balance it inverts, and on the
 real X500 flight (its EKF2 estimated no wind: cs_wind 0, estimator_states wind 0)."""
 
 import math
@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from px4_logs import FlightLog, LogError
 from quad_model.frames import STANDARD_GRAVITY_MPS2
 from quad_model.vehicle import ROTOR_COUNT, load_vehicle
-from rig.apps.wind import WindEstimateError, _wind_from_tilt, estimate_wind
+from rig.identify.wind import _wind_from_tilt, estimate_wind
 
 X500_LOG = (
     Path(__file__).resolve().parents[2] / "data/flight_logs/px4_x500v2_v6xrt_flight_2026-03-20.ulg"
@@ -42,7 +43,7 @@ def test_the_x500_flights_wind():
     """Four hover windows, the thrust axis against its attitude on the ground: about 5 m/s
     from the north-north-east, the windows and the level reference spread ±2 m/s (4.2 m/s
     with Gazebo's thrust coefficient, whose faster rotors carried more rotor drag)."""
-    wind = estimate_wind(X500_LOG, load_vehicle("x500_v2"))
+    wind = estimate_wind(FlightLog.read(X500_LOG), load_vehicle("x500_v2"))
     assert len(wind.windows_s) == 4
     assert wind.speed_mps == pytest.approx(4.8, abs=0.3)
     assert wind.from_deg == pytest.approx(19.0, abs=10.0)
@@ -54,5 +55,5 @@ def test_the_x500_flights_wind():
 def test_an_unreadable_log_gives_one_line(tmp_path):
     path = tmp_path / "empty.ulg"
     path.write_bytes(b"not a ulog")
-    with pytest.raises(WindEstimateError, match=r"empty\.ulg: not a readable ULog"):
-        estimate_wind(path, load_vehicle("x500_v2"))
+    with pytest.raises(LogError, match=r"empty\.ulg: not a readable ULog"):
+        estimate_wind(FlightLog.read(path), load_vehicle("x500_v2"))
