@@ -14,8 +14,9 @@ from rich.console import Console
 from rich.live import Live
 from rich.text import Text
 
+from rig.autopilots import Autopilot
 from rig.errors import RigError
-from rig.lockstep.loop import AUTOPILOTS, Progress, RunOptions, RunResult
+from rig.lockstep.loop import Progress, RunOptions, RunResult
 from rig.lockstep.pacing import parse_speed
 from rig.mavlink.px4_api import Ports
 from rig.mavlink.simulator_link import LinkTimeouts
@@ -43,7 +44,8 @@ def add_run_options(parser: argparse.ArgumentParser, *, scenario: bool = True) -
     parser.add_argument("--instance", type=int, default=0, help="SITL instance i: ports +i")
     parser.add_argument("--out", type=Path, default=None,
                         help="run folder (default runs/<name>-<UTC time>)")  # fmt: skip
-    parser.add_argument("--autopilot", choices=AUTOPILOTS, default="reference",
+    parser.add_argument("--autopilot", type=Autopilot, choices=list(Autopilot),
+                        default=Autopilot.REFERENCE,
                         help="reference (embedded) or px4 (PX4 SITL)")  # fmt: skip
     parser.add_argument("--px4", type=Path, default=None, metavar="DIR",
                         help="PX4 SITL build (bin/px4 + etc/) the rig starts; default "

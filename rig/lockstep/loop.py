@@ -36,8 +36,6 @@ and the error propagates as one line.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
@@ -57,14 +55,8 @@ from quad_model.frames import ned_to_geodetic, yaw_quat
 from quad_model.model import Mount, VehicleTruth
 from quad_model.sensors import SensorReadings
 from quad_model.vehicle import VehicleFileError
-from rig.autopilots.px4 import (
-    Px4Sitl,
-    airframe_parameters,
-    check_imu_rate,
-    find_px4,
-    px4_parameters,
-)
-from rig.autopilots.reference.params import is_parameter
+from rig.autopilots import Autopilot
+from rig.autopilots.px4 import check_imu_rate, find_px4
 from rig.chips.layer import (
     BypassSensorLayer,
     ChipFrame,
@@ -75,22 +67,19 @@ from rig.chips.layer import (
 )
 from rig.chips.pwm import Pulse, PwmOutput, throttle_from_capture
 from rig.errors import RigError, ScenarioError
+from rig.lockstep.autopilots import autopilot_run
 from rig.lockstep.pacing import Pacer
 from rig.logs.rig_log import RigLog
 from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.sim_messages import distance_sensor, hil_gps, hil_sensor, hil_state_quaternion
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
-from rig.processes import exit_description, restore_sigint, stop_process_group
 from rig.scenarios.faults import FaultInjector, describe
 from rig.scenarios.scenario import Rates, Scenario
 from rig.scenarios.script import Action, CommandScript
 
-AUTOPILOTS = ("reference", "px4")
 #: ``RunOptions.sensor_layer`` that skips the chips (benchmarks only, not a scenario's).
 BYPASS = "bypass"
-#: Seconds the reference autopilot gets to close its log after SIGINT.
-AUTOPILOT_STOP_GRACE_S = 5.0
 #: Where runs land unless ``--out`` says otherwise (ignored by git).
 RUNS_DIR = Path("runs")
 #: The rangefinder physics is sampled once per cycle of PX4's LIDAR-Lite driver (20 Hz),
@@ -113,7 +102,7 @@ _MOUNTS = {
 class RunOptions:
     """How to run a scenario (everything the scenario file does not say)."""
 
-    autopilot: str = "reference"
+    autopilot: Autopilot = Autopilot.REFERENCE
     instance: int = 0
     out_dir: Path | None = None
     sensor_layer: str | None = None  # None: the scenario's
@@ -135,10 +124,11 @@ class RunOptions:
     force: bool = False
 
     def __post_init__(self) -> None:
-        if self.autopilot not in AUTOPILOTS:
+        if self.autopilot not in list(Autopilot):
             raise RigError(
-                f"autopilot must be one of {', '.join(AUTOPILOTS)}, not {self.autopilot!r}"
+                f"autopilot must be one of {', '.join(Autopilot)}, not {self.autopilot!r}"
             )
+        object.__setattr__(self, "autopilot", Autopilot(self.autopilot))  # a name given as text
 
 
 @dataclass(frozen=True)
@@ -241,7 +231,7 @@ def run_scenario(
     progress: Callable[[Progress], None] | None = None,
 ) -> RunResult:
     """Fly ``scenario`` closed-loop; returns where the logs are, raises :class:`RigError`."""
-    if options.autopilot == "px4":  # before anything starts: no PX4 there, a rate it refuses
+    if options.autopilot is Autopilot.PX4:  # before anything starts: no PX4, a rate it refuses
         check_imu_rate(scenario.rates.imu_hz, find_px4(options.px4_dir))
     run_dir = claim_run_dir(options.out_dir or default_run_dir(scenario), options.force)
     loop = _Loop(scenario, options, run_dir, progress)
@@ -285,8 +275,6 @@ class _Loop:
         self.last_event = ""
         self._wall_start = time.monotonic()
         self._wall_end: float | None = None
-        self._process: subprocess.Popen[bytes] | None = None
-        self._px4: Px4Sitl | None = None
         self._closers: list[Callable[[], None]] = []
         #: Wall time of each part of the frames so far (s), for :class:`FrameBudget`.
         self._spent_s = dict.fromkeys(("model", "sensor physics", "chips", "messages", "logging"),
@@ -347,44 +335,36 @@ class _Loop:
         self._capture: tuple[tuple[float, ...], tuple[bool, ...]] | None = None
         self._delivered: ChipReadout  # the latest chip readout, for the progress report
         self.ports = Ports(options.instance)
-        if options.autopilot == "px4":
-            build = find_px4(options.px4_dir)
-            params, lacking = px4_parameters(vehicle, self.model.hover_throttle(),
-                                             self.rates.imu_hz, options.autopilot_params,
-                                             build)  # fmt: skip
-            if lacking:
-                assert build is not None
-                self.log.event(self.time_us, f"not set in PX4 {build.tag}, which has no such "
-                               f"parameter: {', '.join(lacking)}", "warn")  # fmt: skip
-            self._px4 = Px4Sitl(build, run_dir, options.instance, params)
-        else:
-            # The airframe's parameters PX4 gets that the reference autopilot has too (rotor
-            # geometry, hover thrust), then the user's, which win name by name.
-            airframe = airframe_parameters(vehicle, self.model.hover_throttle())
-            self._reference_params = (
-                *(f"{name}={value!r}" for name, value in airframe.items() if is_parameter(name)),
-                *options.autopilot_params,
-            )
+        self.autopilot = autopilot_run(
+            options.autopilot,
+            vehicle=vehicle,
+            hover_throttle=self.model.hover_throttle(),
+            imu_hz=self.rates.imu_hz,
+            user_parameters=options.autopilot_params,
+            px4_dir=options.px4_dir,
+            run_dir=run_dir,
+            ports=self.ports,
+            argv=options.autopilot_argv,
+            event=lambda text, level: self.log.event(self.time_us, text, level),
+            on_waiting=options.on_waiting,
+        )
 
     # -- run ---------------------------------------------------------------------------
 
     def run(self) -> None:
         self.layer.start()
-        link = SimulatorLink(self.ports, self.options.timeouts, peer_exit=self._autopilot_exit)
+        link = SimulatorLink(self.ports, self.options.timeouts,
+                             peer_exit=self.autopilot.exit_description)  # fmt: skip
         self._closers.append(link.close)
         self.link = link
         ground = GroundLink(self.ports, self.scenario.environment.home)
         self._closers.append(ground.close)
         self.ground = ground
-        reference = self.options.autopilot == "reference"
-        script = CommandScript(self.scenario.script(), ground, barrier=reference,
+        barrier = self.autopilot.barrier
+        script = CommandScript(self.scenario.script(), ground, barrier=barrier,
                                clock_start_s=self.scenario.start.clock_s)  # fmt: skip
-        if reference:
-            self._start_reference_autopilot()
-            link.accept("the reference autopilot (python -m rig.autopilots.reference)",
-                        answers_every_frame=True)  # fmt: skip
-        else:
-            self._accept_px4(link)
+        self._closers.append(self.autopilot.close)
+        self.autopilot.connect(link)
         self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")
         frames_total = round(self.duration_s * 1e6) // self.frame_us
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
@@ -418,7 +398,7 @@ class _Loop:
                     self._event(result)
             if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
                 pending.extend(script.due(self.run_us))
-                pending = self._run_actions(pending, time_s, reference)
+                pending = self._run_actions(pending, time_s, barrier)
             link.send_frame(self.time_us, messages)
             # While the autopilot computes its answer, do what does not depend on it: log
             # this frame, step the model to the next one (its throttle is the PWM captured
@@ -555,14 +535,15 @@ class _Loop:
             specific_force_frd_mps2=truth.specific_force_frd_mps2,
         )  # fmt: skip
 
-    def _run_actions(self, actions: list[Action], time_s: float, reference: bool) -> list[Action]:
-        """Run due actions; returns those still waiting (PX4: one conversation at a time)."""
+    def _run_actions(self, actions: list[Action], time_s: float, barrier: bool) -> list[Action]:
+        """Run due actions; returns those still waiting (without the barrier, PX4: one
+        conversation at a time)."""
         ground = self.ground
         waiting = []
         for action in actions:
             if action.conversation is None:
                 ground.send_unacknowledged(action.unacknowledged)
-            elif reference:
+            elif barrier:
                 result = ground.converse_now(action.name, action.conversation)
                 if action.logged:
                     self._event(result)
@@ -572,63 +553,6 @@ class _Loop:
                 done = ground.start(action.name, action.conversation, time_s)
                 self._event(f"{action.name}: {done}")
         return waiting
-
-    # -- autopilot process ---------------------------------------------------------------
-
-    def _accept_px4(self, link: SimulatorLink) -> None:
-        """Start PX4 (or wait for the one the user starts) and accept its connection."""
-        px4 = self._px4
-        assert px4 is not None
-        self._closers.append(px4.stop)
-        hz = self.rates.imu_hz
-        if px4.build is not None:
-            px4.start()
-            where = "" if px4.cpu is None else f" on CPU {px4.cpu}"
-            self.log.event(self.time_us, f"started {px4.build.description}{where}: "
-                           f"{px4.command()}")  # fmt: skip
-            link.stall_hint = (f"; PX4 {px4.build.tag} was given IMU_GYRO_RATEMAX = "
-                               f"IMU_INTEG_RATE = {hz} through {px4.build.hook.value}, see "
-                               f"its console {px4.console_path}")  # fmt: skip
-            link.accept(f"PX4 (its console: {px4.console_path})")
-            return
-        link.stall_hint = (
-            f"; a PX4 started by hand answers every frame at IMU {hz} Hz only with "
-            f"IMU_GYRO_RATEMAX = IMU_INTEG_RATE = {hz}: start it with the command the rig "
-            f"printed (it sets them), or in PX4's shell `param set IMU_GYRO_RATEMAX {hz}`, "
-            f"`param set IMU_INTEG_RATE {hz}`, `param save` and restart it; with PX4's "
-            "defaults fly rates.imu_hz = 250"
-        )
-        command = px4.command()
-        self.log.event(self.time_us, f"waiting for PX4 SITL on {link.endpoint}: {command}")
-        if self.options.on_waiting is not None:
-            self.options.on_waiting(command)
-        link.accept(f"PX4 SITL instance {self.ports.instance}: {command}")
-
-    def _start_reference_autopilot(self) -> None:
-        log_path = self.run_dir / "autopilot.ulg"
-        argv = self.options.autopilot_argv or (
-            sys.executable, "-m", "rig.autopilots.reference",
-            "--instance", str(self.ports.instance), "--log", str(log_path),
-            *(arg for param in self._reference_params for arg in ("--param", param)),
-        )  # fmt: skip
-        self._process = subprocess.Popen(list(argv), start_new_session=True,
-                                         preexec_fn=restore_sigint)  # fmt: skip
-        self._closers.append(self._stop_autopilot)
-
-    def _autopilot_exit(self) -> str | None:
-        if self._px4 is not None:
-            return self._px4.exit_description()
-        return None if self._process is None else exit_description(self._process)
-
-    def _stop_autopilot(self) -> None:
-        """SIGINT first, so the autopilot closes its log; then SIGKILL if it hangs, which
-        the run's log records: the autopilot's own log then misses its last buffer."""
-        if self._process is None:
-            return
-        if stop_process_group(self._process, AUTOPILOT_STOP_GRACE_S):
-            self.log.event(self.time_us, f"the autopilot did not stop within "
-                           f"{AUTOPILOT_STOP_GRACE_S:g} s of SIGINT and was killed: its log "
-                           "may miss its last half second", "warn")  # fmt: skip
 
     # -- reporting -------------------------------------------------------------------------
 
@@ -668,7 +592,7 @@ class _Loop:
 
     def result(self) -> RunResult:
         wall_end = self._wall_end or time.monotonic()
-        autopilot_log = self.run_dir / ("px4.ulg" if self._px4 is not None else "autopilot.ulg")
+        autopilot_log = self.autopilot.log_path
         return RunResult(
             run_dir=self.run_dir,
             rig_log=self.log.path,
@@ -678,16 +602,8 @@ class _Loop:
             frames=self.frames,
             link=self.link.stats,
             budget=self._budget(wall_end - self._wall_start),
-            autopilot=self._autopilot_description(),
+            autopilot=self.autopilot.description(),
         )
-
-    def _autopilot_description(self) -> str:
-        if self._px4 is None:
-            return "the reference autopilot"
-        lockstep = f"lockstep IMU_GYRO_RATEMAX = IMU_INTEG_RATE = {self.rates.imu_hz} Hz"
-        if self._px4.build is None:
-            return f"PX4 started by hand ({lockstep} needed)"
-        return f"{self._px4.build.description}, {lockstep}"
 
     def _budget(self, wall_s: float) -> FrameBudget:
         frames = max(self.frames, 1)

@@ -5,13 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from rig.autopilots import Autopilot
 from rig.errors import RigError
-from rig.lockstep.loop import (
-    AUTOPILOTS,
-)
-from rig.scenarios.scenario import (
-    SensorLayer,
-)
+from rig.scenarios.scenario import SensorLayer
 
 DRIVES = ("velocity", "attitude", "rates")
 
@@ -32,5 +28,5 @@ class ReplayOptions:
     seed: int = 0
     sensor_layer: SensorLayer = SensorLayer.TLM
     imu_hz: int | None = None  # None: Rates' default (1000 Hz); with PX4 see PX4_IMU_HZ
-    autopilot: str = AUTOPILOTS[0]
+    autopilot: Autopilot = Autopilot.REFERENCE
     px4_dir: Path | None = None  # PX4's build (--px4); None: $PX4_DIR

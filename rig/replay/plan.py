@@ -4,6 +4,7 @@ the tracks or the pilot's commands, the wind and the air (:func:`plan_replay`)."
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ from quad_model.vehicle import (
     vehicle_for_airframe,
     vehicle_from_dict,
 )
+from rig.autopilots import Autopilot
 from rig.autopilots.px4 import (
     RIG_PARAMETERS,
     STICK_PARAMETERS,
@@ -37,9 +39,6 @@ from rig.autopilots.px4 import (
 from rig.chips.pwm import PwmOutput
 from rig.errors import RigError
 from rig.identify.wind import WindEstimate, WindEstimateError, estimate_wind
-from rig.lockstep.loop import (
-    AUTOPILOTS,
-)
 from rig.mavlink.ground_link import MissionItem
 from rig.replay.options import DRIVES, ReplayError, ReplayOptions
 from rig.replay.parameters import (
@@ -107,6 +106,33 @@ PX4_SETUP_S = 1.0
 
 
 @dataclass(frozen=True)
+class PilotInputs:
+    """What a PX4 replay flies as the log's pilot and ground station did (the reference
+    autopilot flies the log's set-point tracks instead, :attr:`Replay.tracks`)."""
+
+    #: The log's arm, mode switches and disarm (:meth:`ReplayLog.timeline`).
+    events: tuple[FlightEvent, ...]
+    #: The pilot's sticks (``manual_control_setpoint``); None: the log has none.
+    sticks: SetpointTrack | None
+    #: The mission as flown, and what the replay did to it.
+    mission: tuple[MissionItem, ...] = ()
+    mission_notes: tuple[str, ...] = ()
+    #: Per switch to Mission (log seconds): how long the real navigator held the vehicle
+    #: where it was before the mission's first item; flown as Hold (``mission_start_holds``).
+    mission_holds: tuple[tuple[float, float], ...] = ()
+    #: (log s, °/s): MPC_YAWRAUTO_MAX set in flight, the real planner's yaw rate in auto
+    #: modes (:func:`yaw_rate_limits`); empty where the log's PX4 had no acceleration limit.
+    yaw_rate_limits: tuple[tuple[float, float], ...] = ()
+    #: (log s, home): where and when the real PX4 moved its home while armed
+    #: (:meth:`ReplayLog.home_moves`); each is set with DO_SET_HOME.
+    home_moves: tuple[tuple[float, GeoPoint], ...] = ()
+
+
+#: Run seconds after which each autopilot can arm: PX4 boots before the log's start.
+READY_S = {Autopilot.REFERENCE: AUTOPILOT_READY_S, Autopilot.PX4: PX4_BOOT_S}
+
+
+@dataclass(frozen=True)
 class Replay:
     """The replay's configuration, read from the log (:func:`plan_replay`).
 
@@ -143,14 +169,8 @@ class Replay:
     start_height_m: float = 0.0
     #: Run seconds flown before the log's start: PX4's boot, an airborne start's take-off.
     lead_in_s: float = 0.0
-    #: A PX4 replay's: the log's events, its mission as flown, the pilot's sticks.
-    events: tuple[FlightEvent, ...] = ()
-    mission: tuple[MissionItem, ...] = ()
-    mission_notes: tuple[str, ...] = ()
-    #: Per switch to Mission (log seconds): how long the real navigator held the vehicle
-    #: where it was before the mission's first item; flown as Hold (``mission_start_holds``).
-    mission_holds: tuple[tuple[float, float], ...] = ()
-    sticks: SetpointTrack | None = None
+    #: A PX4 replay's pilot inputs; None: the reference autopilot flies the tracks.
+    pilot: PilotInputs | None = None
     firmware: str = ""  # the log's PX4, as its header says
     #: The wind flown: the log's hover tilt through the vehicle's drag (rig.identify.wind);
     #: None, with the reason in ``wind_note``, when the log gives none.
@@ -163,24 +183,18 @@ class Replay:
     #: A PX4 replay's parameters the log's firmware learned in flight rather than read from
     #: its parameters (:func:`learned_parameters`), set after the log's own.
     learned: dict[str, float] = field(default_factory=dict)
-    #: (log s, °/s): MPC_YAWRAUTO_MAX set in flight, the real planner's yaw rate in auto
-    #: modes (:func:`yaw_rate_limits`); empty where the log's PX4 had no acceleration limit.
-    yaw_rate_limits: tuple[tuple[float, float], ...] = ()
-    #: (log s, home): where and when the real PX4 moved its home while armed
-    #: (:meth:`ReplayLog.home_moves`); a PX4 replay sets each with DO_SET_HOME.
-    home_moves: tuple[tuple[float, GeoPoint], ...] = ()
     #: (log s, rad): the log's estimator heading resets after --start
     #: (:meth:`ReplayLog.heading_resets`), taken into the start heading.
     heading_resets: tuple[tuple[float, float], ...] = ()
 
     @property
     def px4(self) -> bool:
-        return self.options.autopilot == "px4"
+        return self.pilot is not None
 
     @property
     def ready_s(self) -> float:
         """Run seconds after which the autopilot can arm (an airborne start's lead-in)."""
-        return PX4_BOOT_S if self.px4 else AUTOPILOT_READY_S
+        return READY_S[self.options.autopilot]
 
     @property
     def commands(self) -> tuple[ScriptCommand, ...]:
@@ -190,8 +204,8 @@ class Replay:
         then the track from ``lead_in_s`` on. PX4 flies :meth:`_pilots_commands` instead."""
         if self.arm_s is None:
             return ()
-        if self.px4:
-            return self._pilots_commands()
+        if self.pilot is not None:
+            return self._pilots_commands(self.pilot)
         origin = self.start_s - self.lead_in_s  # log second of run second 0
         tracks = {kind: delayed(track, self.lead_in_s) for kind, track in self.tracks.items()}
         commands: list[ScriptCommand] = [Arm(at_s=self.arm_s - origin)]
@@ -209,23 +223,23 @@ class Replay:
             commands.append(Disarm(at_s=self.disarm_s - origin, may_refuse=True))
         return tuple(sorted(commands, key=lambda c: c.at_s))
 
-    def _pilots_commands(self) -> tuple[ScriptCommand, ...]:
+    def _pilots_commands(self, pilot: PilotInputs) -> tuple[ScriptCommand, ...]:
         """The flight as its pilot and ground station flew it (PX4): the sticks from PX4's
         boot on, the mission uploaded while PX4 boots, the mode it armed in just before the
         arm, then every commanded event at its log time (an airborne start: after the
         lead-in's arm and take-off, the mode in force at --start)."""
         origin = self.start_s - self.lead_in_s
         commands: list[ScriptCommand] = []
-        if self.sticks is not None:
-            commands.append(Track(at_s=0.0, track=self._lead_in_sticks()))
-        if self.mission:
-            commands.append(UploadMission(at_s=PX4_SETUP_S, items=self.mission))
+        if pilot.sticks is not None:
+            commands.append(Track(at_s=0.0, track=self._lead_in(pilot.sticks)))
+        if pilot.mission:
+            commands.append(UploadMission(at_s=PX4_SETUP_S, items=pilot.mission))
         if self.start_height_m:
             takeoff = Takeoff(at_s=self.ready_s + 0.1, altitude_m=self.start_height_m)
             commands += [Arm(at_s=self.ready_s), takeoff]
-        arms = {event.time_s for event in self.events if event.kind == "arm"}
-        holds = dict(self.mission_holds)
-        for event in self.events:
+        arms = {event.time_s for event in pilot.events if event.kind == "arm"}
+        holds = dict(pilot.mission_holds)
+        for event in pilot.events:
             if not event.commanded:
                 continue
             at_s = event.time_s - origin
@@ -247,16 +261,15 @@ class Replay:
                 commands.append(SetMode(at_s=at_s, nav_state=event.nav_state))
         commands += [
             SetParam(at_s=time_s - origin, name="MPC_YAWRAUTO_MAX", value=limit)
-            for time_s, limit in self.yaw_rate_limits
+            for time_s, limit in pilot.yaw_rate_limits
         ]
-        commands += [SetHome(at_s=time_s - origin, home=home) for time_s, home in self.home_moves]
+        commands += [SetHome(at_s=time_s - origin, home=home) for time_s, home in pilot.home_moves]
         return tuple(sorted(commands, key=lambda c: c.at_s))
 
-    def _lead_in_sticks(self) -> SetpointTrack:
+    def _lead_in(self, sticks: SetpointTrack) -> SetpointTrack:
         """The sticks on the run's clock: before the log's start the first sample is held,
         except in an airborne start's lead-in, where they rest centred until --start."""
-        assert self.sticks is not None
-        track = delayed(self.sticks, self.lead_in_s)
+        track = delayed(sticks, self.lead_in_s)
         if not self.start_height_m:
             return track
         centred = (0.0, 0.0, 0.0, 0.0)
@@ -282,8 +295,8 @@ class Replay:
     def notes(self) -> tuple[tuple[str, str], ...]:
         """Warnings for the run's log: what the replay could not take from the real flight."""
         notes = [("warn", f"replay: {warning}") for warning in self.log_warnings]
-        if self.px4:
-            notes += self._px4_notes()
+        if self.pilot is not None:
+            notes += self._px4_notes(self.pilot)
         else:
             notes += [
                 ("warn", f"replay: parameter {s.name} = {s.value:g} skipped ({s.reason})")
@@ -335,7 +348,7 @@ class Replay:
             ))  # fmt: skip
         return tuple(notes)
 
-    def _px4_notes(self) -> list[tuple[str, str]]:
+    def _px4_notes(self, pilot: PilotInputs) -> list[tuple[str, str]]:
         """The firmware and where its parameters came from, skipped ones grouped by reason,
         PX4's boot before the log, and the log's events with what the replay does of each."""
         total = len(self.parameters) + len(self.skipped)
@@ -365,19 +378,19 @@ class Replay:
             f"replay: PX4 boots {PX4_BOOT_S:g} s before the log's start "
             f"({self.start_s - self.lead_in_s:.3f} s on the log's clock) to be ready to arm",
         ))  # fmt: skip
-        notes += [("info", f"replay: {note}") for note in self.mission_notes]
+        notes += [("info", f"replay: {note}") for note in pilot.mission_notes]
         notes += [
             ("info", f"replay: after the switch to Mission at {time_s:.3f} s the real "
                      f"navigator held the vehicle where it was for {hold_s:.3f} s (a loiter) "
                      "before the mission's first item: flown as Hold, then Mission")
-            for time_s, hold_s in self.mission_holds
+            for time_s, hold_s in pilot.mission_holds
         ]  # fmt: skip
         notes += [
             ("info", f"replay: the real PX4 moved its home at {time_s:.3f} s to "
                      f"{home.alt_amsl_m:.2f} m AMSL: set then with DO_SET_HOME")
-            for time_s, home in self.home_moves
+            for time_s, home in pilot.home_moves
         ]  # fmt: skip
-        notes += [("info", f"replay: log event {event.describe()}") for event in self.events]
+        notes += [("info", f"replay: log event {event.describe()}") for event in pilot.events]
         return notes
 
     def scenario(self, vehicle_path: Path) -> Scenario:
@@ -421,6 +434,7 @@ class Replay:
 
     def summary(self) -> dict[str, Any]:
         """``replay.json``: everything the replay took from the log, skipped or assumed."""
+        pilot = self.pilot or PilotInputs(events=(), sticks=None)
         return {
             "log": str(self.log_path),
             "drive": self.drive,
@@ -441,7 +455,7 @@ class Replay:
             "parameters_unknown_count": self.unknown_parameter_count,
             "parameters_set_by_the_rig": self.rig_parameters,
             "parameters_learned_in_the_flight": self.learned,
-            "yaw_rate_limits": [list(pair) for pair in self.yaw_rate_limits],
+            "yaw_rate_limits": [list(pair) for pair in pilot.yaw_rate_limits],
             "home_moves": [
                 {
                     "time_s": time_s,
@@ -449,7 +463,7 @@ class Replay:
                     "lon_deg": home.lon_deg,
                     "alt_amsl_m": home.alt_amsl_m,
                 }
-                for time_s, home in self.home_moves
+                for time_s, home in pilot.home_moves
             ],
             "log_warnings": list(self.log_warnings),
             "start_yaw_deg": math.degrees(self.yaw_rad),
@@ -471,13 +485,13 @@ class Replay:
             "arm_s": self.arm_s,
             "disarm_s": self.disarm_s,
             "lead_in_s": self.lead_in_s,
-            "events": [asdict(event) for event in self.events],
+            "events": [asdict(event) for event in pilot.events],
             "mission": [  # yaw NaN (the autopilot's choice) as null: JSON has no NaN
                 asdict(item) | {"param4": None if math.isnan(item.param4) else item.param4}
-                for item in self.mission
+                for item in pilot.mission
             ],
-            "mission_notes": list(self.mission_notes),
-            "mission_holds": [list(hold) for hold in self.mission_holds],
+            "mission_notes": list(pilot.mission_notes),
+            "mission_holds": [list(hold) for hold in pilot.mission_holds],
             "seed": self.options.seed,
             "sensor_layer": self.options.sensor_layer,
             "imu_hz": self.options.imu_hz,
@@ -488,7 +502,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
     """Configure a replay of ``log_path`` (no flying); raises :class:`ReplayError`."""
     path = Path(log_path)
     options = _checked(options or ReplayOptions())
-    px4 = options.autopilot == "px4"
+    px4 = options.autopilot is Autopilot.PX4
     log = ReplayLog.read(path)
     start_s = log.first_s if options.start_s is None else options.start_s
     end_s = log.last_s if options.end_s is None else options.end_s
@@ -506,8 +520,8 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
     window = _window(path, options, start_s, end_s)
     if px4:
         options = with_px4_imu_rate(options, log.parameters)
-    ready_s = PX4_BOOT_S if px4 else AUTOPILOT_READY_S
-    start_height_m, lead_in_s = 0.0, (PX4_BOOT_S if px4 else 0.0)
+    ready_s = READY_S[options.autopilot]
+    start_height_m, lead_in_s = 0.0, (ready_s if px4 else 0.0)
     if not log.landed_at(start_s):
         start_height_m = log.height_at(start_s)
         lead_in_s = ready_s + start_height_m / TAKEOFF_CLIMB_MPS + LEAD_IN_SETTLE_S
@@ -542,29 +556,16 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
             f"{path}: --window starts at {window[0]:g} s, before the vehicle is "
             f"armed ({'never' if arm_s is None else f'{arm_s:.3f} s'})"
         )
-    events = log.timeline(start_s, end_s) if px4 else ()
+    home = log.home()
+    pilot = (
+        _pilot_inputs(log, parameters, start_s, end_s, real_arm_s, disarm_s, home) if px4 else None
+    )
+    events = pilot.events if pilot is not None else ()
     offboard = any(e.commanded and e.nav_state == NAV_STATE_OFFBOARD for e in events)
     tracks = {"velocity": log.track("velocity", start_s, end_s)} if not px4 or offboard else {}
     if options.drive != "velocity":
         tracks[options.drive] = log.track(options.drive, start_s, end_s)
-    home = log.home()
-    mission: tuple[MissionItem, ...] = ()
-    mission_notes: tuple[str, ...] = ()
-    mission_holds: tuple[tuple[float, float], ...] = ()
-    home_moves = log.home_moves(home, real_arm_s, disarm_s or end_s) if px4 else ()
-    if any(e.commanded and e.nav_state == NAV_STATE_MISSION for e in events):
-        mission, mission_notes = log.flown_mission(home, bool(home_moves))
-        mission_holds = log.mission_start_holds(events)
     heading_resets = log.heading_resets(start_s, end_s)
-    sticks = None
-    if px4:
-        sticks = log.sticks(start_s, end_s)
-        manual = sorted({e.nav_state for e in events if e.commanded} & STICK_MODES)
-        if sticks is None and manual:
-            raise ReplayError(
-                f"{path}: topic manual_control_setpoint (the pilot's sticks, which PX4 needs "
-                f"in mode {mode_name(manual[0])}) is not in the log"
-            )
     replay = Replay(
         log_path=path,
         drive=options.drive,
@@ -593,20 +594,51 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
         log_warnings=log.warnings,
         start_height_m=start_height_m,
         lead_in_s=lead_in_s,
-        events=events,
-        mission=mission,
-        mission_notes=mission_notes,
-        mission_holds=mission_holds,
-        sticks=sticks,
+        pilot=pilot,
         firmware=log.firmware,
         learned=learned_parameters(log, parameters, events),
-        yaw_rate_limits=yaw_rate_limits(log, parameters, start_s, end_s) if px4 else (),
-        home_moves=home_moves,
         **_wind(log, vehicle_document, vehicle),
         **_air(log, home, start_s, end_s),
     )
     replay.scenario(Path(vehicle))  # a bad rate fails here, before a run folder exists
     return replay
+
+
+def _pilot_inputs(
+    log: ReplayLog,
+    parameters: Mapping[str, float],
+    start_s: float,
+    end_s: float,
+    real_arm_s: float | None,
+    disarm_s: float | None,
+    home: GeoPoint | None,
+) -> PilotInputs:
+    """What PX4 flies from the log: its events, the sticks where a mode needs them, the
+    mission where one was flown, the yaw-rate limits and the home moves."""
+    events = log.timeline(start_s, end_s)
+    sticks = log.sticks(start_s, end_s)
+    manual = sorted({e.nav_state for e in events if e.commanded} & STICK_MODES)
+    if sticks is None and manual:
+        raise ReplayError(
+            f"{log.path}: topic manual_control_setpoint (the pilot's sticks, which PX4 needs "
+            f"in mode {mode_name(manual[0])}) is not in the log"
+        )
+    home_moves = log.home_moves(home, real_arm_s, disarm_s or end_s)
+    mission: tuple[MissionItem, ...] = ()
+    mission_notes: tuple[str, ...] = ()
+    mission_holds: tuple[tuple[float, float], ...] = ()
+    if any(e.commanded and e.nav_state == NAV_STATE_MISSION for e in events):
+        mission, mission_notes = log.flown_mission(home, bool(home_moves))
+        mission_holds = log.mission_start_holds(events)
+    return PilotInputs(
+        events=events,
+        sticks=sticks,
+        mission=mission,
+        mission_notes=mission_notes,
+        mission_holds=mission_holds,
+        yaw_rate_limits=yaw_rate_limits(log, parameters, start_s, end_s),
+        home_moves=home_moves,
+    )
 
 
 def _wind(log: FlightLog, vehicle_document: dict[str, Any], vehicle: str) -> dict[str, Any]:
@@ -640,11 +672,12 @@ def _checked(options: ReplayOptions) -> ReplayOptions:
         raise ReplayError(
             f"--sensor-layer {options.sensor_layer!r}: expected one of {', '.join(SensorLayer)}"
         )
-    if options.autopilot not in AUTOPILOTS:
+    if options.autopilot not in list(Autopilot):
         raise ReplayError(
-            f"--autopilot {options.autopilot!r}: expected one of {', '.join(AUTOPILOTS)}"
+            f"--autopilot {options.autopilot!r}: expected one of {', '.join(Autopilot)}"
         )
-    if options.autopilot != "px4":
+    options = replace(options, autopilot=Autopilot(options.autopilot))  # a name given as text
+    if options.autopilot is Autopilot.REFERENCE:
         return replace(options, imu_hz=options.imu_hz or Rates().imu_hz)
     if options.drive != "velocity" or options.window_s is not None:
         raise ReplayError(

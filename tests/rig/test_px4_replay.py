@@ -167,7 +167,7 @@ def test_the_real_px4_build_takes_most_of_the_logs_parameters(log_parameters):
 def test_the_replay_follows_the_logs_events(plan):
     """PX4 boots PX4_BOOT_S before the log, so the arm and every mode switch go out at the
     log's times; failsafe mode changes are PX4's to repeat, never commanded."""
-    described = [(round(e.time_s, 3), e.kind, e.nav_state, e.commanded) for e in plan.events]
+    described = [(round(e.time_s, 3), e.kind, e.nav_state, e.commanded) for e in plan.pilot.events]
     assert described == [
         (round(ARMED_S, 3), "arm", None, True),
         (round(ARMED_S, 3), "mode", POSCTL, True),  # the mode it armed in
@@ -210,7 +210,7 @@ def test_the_replay_follows_the_logs_events(plan):
         "replay: log event 474.362 s PX4 switched to Altitude by itself (failsafe: commanded, "
         "so the sticks act in the mode the vehicle flew): commanded"
     ) in notes
-    assert plan.mission_holds == ((pytest.approx(MISSION_S, abs=1e-3),
+    assert plan.pilot.mission_holds == ((pytest.approx(MISSION_S, abs=1e-3),
                                    pytest.approx(MISSION_HOLD_S, abs=1e-3)),)  # fmt: skip
     assert (
         "replay: after the switch to Mission at 437.862 s the real navigator held the vehicle "
@@ -230,24 +230,24 @@ def test_the_mission_is_uploaded_as_it_was_flown(plan):
     then, as logged (the replay moves its home where the real PX4 moved its own: 1.82 m up
     at the take-off), and item 0, which PX4 passed 50 ms after making it current, at the
     height the vehicle hovered at then."""
-    assert [(i.frame, i.command) for i in plan.mission] == [
+    assert [(i.frame, i.command) for i in plan.pilot.mission] == [
         (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_CMD_NAV_WAYPOINT)
     ] * 4
     # home_position.alt 185.84 m from the take-off (412.2 s) on; the vehicle at 190.00 m
     # when item 0 (logged 5 m) was passed at 438.27 s
-    assert [i.alt_m for i in plan.mission] == pytest.approx([4.16, 10.0, 5.0, 10.0], abs=0.01)
+    assert [i.alt_m for i in plan.pilot.mission] == pytest.approx([4.16, 10.0, 5.0, 10.0], abs=0.01)
     home = plan.home
     offsets = [
         geodetic_to_ned(i.lat_deg, i.lon_deg, 0.0, home.lat_deg, home.lon_deg, 0.0)[:2]
-        for i in plan.mission
+        for i in plan.pilot.mission
     ]
     assert math.hypot(*offsets[0]) < 1.0  # the first waypoint is above the take-off point
     # the first leg, north-east: 0.000262° of longitude east of home at the real site's
     # 41.9° N is 21.7 m (at the moved home's 51.9° N it would be 18.0 m)
     assert offsets[1] == pytest.approx((8.95, 21.7), abs=0.1)
     assert max(math.hypot(*o) for o in offsets) < 50.0  # SOURCES.md's legs, ~40 m
-    assert all(math.isnan(i.param4) and i.param2 == 0.0 for i in plan.mission)
-    assert plan.mission_notes == (
+    assert all(math.isnan(i.param4) and i.param2 == 0.0 for i in plan.pilot.mission)
+    assert plan.pilot.mission_notes == (
         "the log's mission had 5 items; 4 became current and could be uploaded (the log holds "
         "no more)",
         "the mission items lie 10° N, 2° E from the log's home: whole degrees, the uploader's "
@@ -266,7 +266,7 @@ def test_the_home_moves_where_the_real_px4_moved_it(plan):
     after the disarm at the real site (the uploader's offset missed it): the replay sets the
     two in flight with DO_SET_HOME at their times; Land descends and slows by the height
     above it."""
-    moves = plan.home_moves
+    moves = plan.pilot.home_moves
     assert [round(t, 3) for t, _ in moves] == [411.979, 412.221]
     assert [round(h.alt_amsl_m, 2) for _, h in moves] == [184.11, 185.84]
     for _, home in moves:  # the log's (moved) site, within centimetres of the first home
@@ -333,7 +333,7 @@ def test_only_a_loiter_the_navigator_replaced_by_the_mission_is_flown_as_hold():
 
 
 def test_the_pilots_sticks_are_the_logs(plan):
-    sticks = plan.sticks
+    sticks = plan.pilot.sticks
     assert sticks.kind == "manual"
     assert len(sticks.times_s) == 477  # 476 samples (5 Hz) and the one in force at the start
     values = np.array(sticks.values)
@@ -574,7 +574,7 @@ def test_a_climb_rate_flight_learns_nothing(plan):
     """The X500 flew POSCTL, ALTCTL, Mission and Land, where PX4 runs on its own estimate;
     this stand-in build has every parameter of the log, MPC_YAWRAUTO_ACC too."""
     assert plan.learned == {}
-    assert plan.yaw_rate_limits == ()
+    assert plan.pilot.yaw_rate_limits == ()
     assert not any(isinstance(c, SetParam) for c in plan.commands)
 
 
