@@ -56,20 +56,54 @@ def _speed(text: str) -> float:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="rig", description=__doc__.splitlines()[0])
+#: ``rig --help``'s description and epilog: plain text, as a terminal shows them.
+DESCRIPTION = """\
+The hardware-in-the-loop rig: a 5 kHz multicopter model, emulated sensor chips and an
+autopilot (the reference one, or PX4 SITL) flown in lockstep, with their logs."""
+EPILOG = """\
+examples:
+  rig hil-sim --view                      the demo flight, watched in a browser
+  rig run takeoff_hover_land              a bundled scenario (or a TOML path)
+  rig run level_step --autopilot px4 --px4 DIR
+  rig replay LOG.ulg                      a real flight through the rig
+  rig campaign motor_faults               a fault-injection campaign
+  rig schema --out schemas                the configuration files' JSON Schema
+
+Errors are one line on stderr (exit 1); Ctrl-C stops a run cleanly with its logs
+readable (exit 130; SIGTERM 143). `rig COMMAND --help` details each command."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``rig`` command line, apart from running it: the docs' CLI reference reads it."""
+    parser = argparse.ArgumentParser(
+        prog="rig",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     commands = parser.add_subparsers(dest="command", required=True)
-    run = commands.add_parser("run", help="fly a scenario file (or a bundled scenario name)")
+    run = commands.add_parser(
+        "run",
+        help="fly a scenario file (or a bundled scenario name)",
+        description="Fly a scenario closed-loop: the model, the sensor chips and the autopilot "
+        "in lockstep. The run folder gets rig.ulg, the autopilot's log and PNG plots.",
+    )
     run.add_argument("scenario", help="path to a scenario TOML, or a name in rig/scenarios/")
     _add_run_options(run)
     demo = commands.add_parser(
-        "hil-sim", help="take off, hover, step, land with RTL sensors and the reference autopilot"
+        "hil-sim",
+        help="take off, hover, step, land with RTL sensors and the reference autopilot",
+        description="The demo flight (scenario hil_sim): take off to 5 m, hover, a 5 m level "
+        "step, land, on the RTL chips, at most at real time so that it can be watched.",
     )
     _add_run_options(demo)
     replay = commands.add_parser(
         "replay",
         help="fly a real PX4 flight log through the rig: its setpoints (reference autopilot) "
         "or, with PX4, its parameters, sticks, modes and mission",
+        description="Replay a real PX4 flight on the log's own clock: the reference autopilot "
+        "flies its set-points, or PX4 SITL (--autopilot px4) flies it as its pilot did, with the "
+        "log's parameters, sticks, modes and mission. replay.json says what was applied.",
     )
     replay.add_argument("log", type=Path, help="the real flight's ULog")
     replay.add_argument("--drive", choices=DRIVES, default="velocity",
@@ -92,7 +126,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     _add_run_options(replay, scenario=False)
     campaign = commands.add_parser(
-        "campaign", help="run a campaign file (resumable), or `campaign report DIR`"
+        "campaign",
+        help="run a campaign file (resumable), or `campaign report DIR`",
+        description="Fly every case of a campaign (a base scenario swept over axes) as a rig "
+        "run, locally or on a Dask cluster; rerun to resume. 'rig campaign report DIR' remakes "
+        "the report of a results folder.",
     )
     campaign.add_argument("campaign", help="campaign TOML (or bundled name), or 'report'")
     campaign.add_argument("folder", nargs="?", type=Path, help="with 'report': the results folder")
@@ -106,14 +144,25 @@ def main(argv: list[str] | None = None) -> int:
                           help="local processes (default: the cores given)")  # fmt: skip
     campaign.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
                           help="run on this Dask cluster instead of local processes")  # fmt: skip
-    plot = commands.add_parser("plot", help="(re)make a finished run's PNG plots in its folder")
+    plot = commands.add_parser(
+        "plot",
+        help="(re)make a finished run's PNG plots in its folder",
+        description="Remake position.png, attitude.png, motors.png and imu_psd.png of a run.",
+    )
     plot.add_argument("run", type=Path, help="the run folder (holds rig.ulg)")
-    view = commands.add_parser("view", help="play a finished run back in the browser")
+    view = commands.add_parser(
+        "view",
+        help="play a finished run back in the browser",
+        description="Serve a finished run's playback on 127.0.0.1 until Ctrl-C.",
+    )
     view.add_argument("run", type=Path, help="the run folder (holds rig.ulg)")
     view.add_argument("--port", type=int, default=VIEW_PORT,
                       help=f"port on 127.0.0.1 (default {VIEW_PORT})")  # fmt: skip
     identify = commands.add_parser(
-        "identify", help="identify hover, roll/pitch plant and inertia from a flight log"
+        "identify",
+        help="identify hover, roll/pitch plant and inertia from a flight log",
+        description="Estimate a vehicle's parameters from a PX4-style ULog, each with its "
+        "uncertainty, method and window; --toml prints them as vehicle-file lines.",
     )
     identify.add_argument("log", type=Path, help="PX4-style ULog (real flight, SITL or rig)")
     identify.add_argument("--vehicle", default=None, metavar="NAME|PATH",
@@ -135,12 +184,19 @@ def main(argv: list[str] | None = None) -> int:
                           help="the replay's IMU rate the vibration is fitted at (default 800, "
                                "PX4's lockstep at the X500's IMU_GYRO_RATEMAX)")  # fmt: skip
     schema = commands.add_parser(
-        "schema", help="write the JSON Schema of each configuration file (for TOML editors)"
+        "schema",
+        help="write the JSON Schema of each configuration file (for TOML editors)",
+        description="Write <kind>.schema.json for the scenario, vehicle, campaign and plan "
+        "files; a TOML file starting with '#:schema PATH' is then checked by its editor.",
     )
     schema.add_argument(
         "--out", type=Path, default=Path("schemas"), help="folder (default schemas/)"
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     console = Console(stderr=True)
     if args.command == "schema":
         try:
