@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install hil-sim test bench soak fuzz credibility synth lint clean
+.PHONY: install hil-sim test bench soak fuzz credibility synth lint docs results clean
 
 install: $(STAMP)
 
@@ -143,6 +143,18 @@ $(STUDY)/%/.complete: $(X500_LOG) | $(STAMP)
 # (about 70 s here; figures and logs in build/synth/).
 synth: $(STAMP)
 	$(BIN)/python -m fpga_hdl.synth
+
+# The documentation site (mkdocs.yml) into build/site/: tutorials, guides, design, and the
+# pages generated from the code (CLI, configuration files, API, architecture map) and from
+# docs/results/. --strict: a broken link or reference is an error (CI runs it). The two
+# variables silence the theme's and a plugin's notices about MkDocs' future.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/python -m mkdocs build --strict
+
+# The latest `make bench` figures and `make credibility` reports into docs/results/ (commit
+# them): the site's results pages are rendered from these files, never typed by hand.
+results: $(STAMP)
+	$(BIN)/python -m docsgen.results --bench build/bench/figures.json --reports $(REPORTS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
