@@ -34,6 +34,15 @@ def packages() -> list[str]:
     return list(pyproject()["tool"]["importlinter"]["root_packages"])
 
 
+def prose(text: object) -> str:
+    """Plain text as Markdown that shows it as written: ``<name>`` outside code spans is
+    escaped, so it is not taken for an HTML tag and dropped."""
+    parts = str(text).split("`")
+    for index in range(0, len(parts), 2):  # the even parts lie outside code spans
+        parts[index] = parts[index].replace("<", "&lt;").replace(">", "&gt;")
+    return "`".join(parts)
+
+
 def table_cell(text: object) -> str:
     """Text that stays in one Markdown table cell (no pipe, no line break)."""
     return " ".join(str(text).split()).replace("|", "\\|")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-from docsgen import pyproject, table_cell
+from docsgen import prose, pyproject, table_cell
 
 #: Each CLI module's function that builds its parser without running it.
 PARSER_FUNCTION = "build_parser"
@@ -41,7 +41,7 @@ def render_cli(parsers: dict[str, argparse.ArgumentParser]) -> str:
 def _command(name: str, parser: argparse.ArgumentParser, level: int) -> list[str]:
     lines = [f"{'#' * level} `{name}`", ""]
     if parser.description:
-        lines += [parser.description, ""]
+        lines += [prose(parser.description), ""]
     usage = parser.format_usage().removeprefix("usage: ").strip()
     lines += ["```text", usage, "```", ""]
     rows = [_row(action) for action in parser._actions if not _hidden(action)]
@@ -76,7 +76,7 @@ def _row(action: argparse.Action) -> str:
         spelled = _metavar(action)
     choices = ", ".join(f"`{c}`" for c in action.choices) if action.choices else ""
     return (
-        f"| `{table_cell(spelled)}` | {table_cell(action.help or '')} | {choices} "
+        f"| `{table_cell(spelled)}` | {prose(table_cell(action.help or ''))} | {choices} "
         f"| {_default(action)} |"
     )
 

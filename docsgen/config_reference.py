@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from docsgen import pyproject, table_cell
+from docsgen import prose, pyproject, table_cell
 
 #: What each kind of file is, for its page's first line (a kind not named here still gets
 #: its page, from the schema alone).
@@ -103,7 +103,7 @@ def _table(name: str, table: Schema, top: bool) -> list[str]:
     if top and table.get("title"):
         lines += [f"Top table: `{table['title']}`.", ""]
     if table.get("description"):
-        lines += [_prose(table["description"]), ""]
+        lines += [prose(_prose(table["description"])), ""]
     if "enum" in table:
         lines += ["One of " + ", ".join(f"`{json.dumps(v)}`" for v in table["enum"]) + ".", ""]
         return lines
@@ -116,7 +116,7 @@ def _table(name: str, table: Schema, top: bool) -> list[str]:
         default = "required" if key in required else _default(field)
         lines.append(
             f"| `{key}` | {_type(field)} | {default} "
-            f"| {table_cell(_prose(field.get('description', '')))} |"
+            f"| {prose(table_cell(_prose(field.get('description', ''))))} |"
         )
     return [*lines, ""]
 

@@ -52,7 +52,8 @@ def generate() -> None:
         raise SystemExit(f"docs/{ARCHITECTURE_PAGE} lost its line {MAP_MARKER}")
     write(ARCHITECTURE_PAGE, text.replace(MAP_MARKER, architecture.render_map(ARCHITECTURE_PAGE)))
 
-    write("results/speed.md", results.render_speed(results.load_figures()))
+    speed = results.render_speed(results.load_figures(), results.benchmark_modules())
+    write("results/speed.md", speed)
     write("results/credibility.md", results.render_credibility(results.load_reports()))
     write("changelog.md", (ROOT / "CHANGELOG.md").read_text(encoding="utf-8"))
 

@@ -21,7 +21,7 @@ from typing import Any
 
 from benchmarks.figures import Figure
 from credibility.study import summary_markdown
-from docsgen import RESULTS, table_cell
+from docsgen import RESULTS, prose, table_cell
 
 FIGURES_FILE = "bench/figures.json"
 REPORTS_DIR = "credibility"
@@ -105,8 +105,15 @@ HOW_TO_RECORD = (
 )
 
 
-def render_speed(record: dict[str, Any] | None) -> str:
-    """The speed page from a figures file: per benchmark module, its stamp and figures."""
+def benchmark_modules(root: Path = RESULTS.parent.parent) -> list[str]:
+    """The benchmark modules ``make bench`` runs (``benchmarks/bench_*.py``)."""
+    return sorted(path.stem for path in (root / "benchmarks").glob("bench_*.py"))
+
+
+def render_speed(record: dict[str, Any] | None, expected: list[str] | None = None) -> str:
+    """The speed page from a figures file: per benchmark module, its stamp and figures;
+    the ``expected`` modules without figures are named, so a gap is not mistaken for a
+    module that was left out."""
     lines = [
         "# Speed",
         "",
@@ -123,6 +130,9 @@ def render_speed(record: dict[str, Any] | None) -> str:
         lines += [HOW_TO_RECORD.format(target="bench"), ""]
         return "\n".join(lines)
     lines += [HOW_TO_RECORD.format(target="bench"), ""]
+    missing = [name.removeprefix("bench_") for name in expected or [] if name not in modules]
+    if missing:
+        lines += [f"Not recorded yet: {', '.join(missing)} (`python -m benchmarks NAME`).", ""]
     for name, module in sorted(modules.items()):
         lines += [f"## {name.removeprefix('bench_')}", "", _bench_stamp(module), ""]
         lines += ["| figure | value | unit | goal | detail |", "|---|---:|---|---|---|"]
@@ -130,20 +140,26 @@ def render_speed(record: dict[str, Any] | None) -> str:
             figure = Figure(**raw)
             value = "—" if math.isnan(figure.value) else figure.shown()
             lines.append(
-                f"| {table_cell(figure.name)} | {value} | {table_cell(figure.unit)} "
-                f"| {table_cell(figure.goal)} | {table_cell(figure.detail)} |"
+                f"| {prose(table_cell(figure.name))} | {value} | {prose(table_cell(figure.unit))} "
+                f"| {prose(table_cell(figure.goal))} | {prose(table_cell(figure.detail))} |"
             )
         lines.append("")
     return "\n".join(lines)
 
 
 def _bench_stamp(module: dict[str, Any]) -> str:
-    load = module.get("load_1min")
-    return (
+    load, cpus = module.get("load_1min"), module.get("cpus")
+    stamp = (
         f"Measured {module.get('measured', 'at an unrecorded time')} at commit "
-        f"`{module.get('commit') or 'not recorded'}` on {module.get('cpus', '?')} CPUs"
+        f"`{module.get('commit') or 'not recorded'}` on {cpus or '?'} CPUs"
         + (f", load {load} over the minute before." if load is not None else ".")
     )
+    if load is not None and cpus and load > cpus:
+        stamp += (
+            f" **The machine was busy (load {load} on {cpus} CPUs): these figures understate "
+            "what the code does on a quiet one.**"
+        )
+    return stamp
 
 
 def render_credibility(reports: dict[str, dict[str, Any]]) -> str:
@@ -163,7 +179,7 @@ def render_credibility(reports: dict[str, dict[str, Any]]) -> str:
         lines += [HOW_TO_RECORD.format(target="credibility"), ""]
         return "\n".join(lines)
     lines += [HOW_TO_RECORD.format(target="credibility"), ""]
-    lines += ["## Summary", "", summary_markdown(list(reports.values())), ""]
+    lines += ["## Summary", "", prose(summary_markdown(list(reports.values()))), ""]
     for key, report in reports.items():
         plan = report["plan"]
         lines += [f"## {plan['name']} {{ #{key.replace('_', '-')} }}", ""]
@@ -174,7 +190,7 @@ def render_credibility(reports: dict[str, dict[str, Any]]) -> str:
         lines += ["| test | kind | η | at the pass mark |", "|---|---|---:|---|"]
         for test in report.get("tests", []):
             if "not_scored" in test:
-                why = table_cell(test["not_scored"].get("message", ""))
+                why = prose(table_cell(test["not_scored"].get("message", "")))
                 lines.append(f"| {test['name']} | {test['kind']} | — | not scored: {why} |")
                 continue
             passes = {True: "yes", False: "no"}.get(test.get("passes_pass_mark"), "")

@@ -59,6 +59,8 @@ def test_the_speed_page_shows_each_figure_with_its_stamp():
     assert "Measured 2026-11-29T01:02:03+00:00 at commit `abc1234` on 2 CPUs, load 0.5" in page
     assert "| one vehicle | 123 | × real time | ≥ 100× | 5 kHz \\| RK4 |" in page
     assert "| did not finish | — |  |  | see log |" in page
+    page = results_pages.render_speed(FIGURES, ["bench_px4", "bench_quad_model"])
+    assert "Not recorded yet: px4 (`python -m benchmarks NAME`)." in page
 
 
 def test_without_figures_the_speed_page_says_so_and_how_to_record_them():
@@ -199,3 +201,17 @@ def test_the_readme_is_short_and_says_the_commands():
         assert (ROOT / link).exists(), link
     assert "session" not in text.lower()
     assert "../shared" not in text
+
+
+def test_figures_from_a_busy_machine_say_so():
+    busy = {"modules": {"bench_x": {**FIGURES["modules"]["bench_quad_model"], "load_1min": 9.5}}}
+    assert "The machine was busy (load 9.5 on 2 CPUs)" in results_pages.render_speed(busy)
+    assert "busy" not in results_pages.render_speed(FIGURES)
+
+
+def test_angle_brackets_in_help_survive_markdown():
+    parser = argparse.ArgumentParser(prog="tool", description="write <plan>.html")
+    parser.add_argument("--out", help="folder (default runs/<name>; `a<b`)")
+    page = cli_reference.render_cli({"tool": parser})
+    assert "write &lt;plan&gt;.html" in page
+    assert "default runs/&lt;name&gt;; `a<b`" in page
