@@ -38,7 +38,7 @@ FUZZ_MINUTES ?= 10
 fuzz: $(STAMP)
 	$(BIN)/python -m benchmarks.fuzz --minutes $(FUZZ_MINUTES)
 
-# The paper's section-4 study on the real X500 flight (README "How credible is this rig?"):
+# The paper's section-4 study on the real X500 flight (docs/tutorials/score-a-study.md):
 # the flight replayed by the high- (x500_v2) and low-precision (x500_v2_low_precision) models,
 # the 1-DOF pitch bench sweep, then the two reports. With PX4_DIR set
 # PX4 SITL, the firmware that flew it, replays the whole flight with the log's own parameters
