@@ -4,14 +4,14 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install hil-sim test bench soak fuzz credibility synth lint clean
+.PHONY: install hil-sim test bench soak fuzz credibility synth lint docs results clean
 
 install: $(STAMP)
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,bench,docs]'
 	touch $(STAMP)
 
 # The demo flight, watched live in a browser: it prints the view's URL (127.0.0.1:8765).
@@ -38,7 +38,7 @@ FUZZ_MINUTES ?= 10
 fuzz: $(STAMP)
 	$(BIN)/python -m benchmarks.fuzz --minutes $(FUZZ_MINUTES)
 
-# The paper's section-4 study on the real X500 flight (README "How credible is this rig?"):
+# The paper's section-4 study on the real X500 flight (docs/tutorials/score-a-study.md):
 # the flight replayed by the high- (x500_v2) and low-precision (x500_v2_low_precision) models,
 # the 1-DOF pitch bench sweep, then the two reports. With PX4_DIR set
 # PX4 SITL, the firmware that flew it, replays the whole flight with the log's own parameters
@@ -143,6 +143,18 @@ $(STUDY)/%/.complete: $(X500_LOG) | $(STAMP)
 # (about 70 s here; figures and logs in build/synth/).
 synth: $(STAMP)
 	$(BIN)/python -m fpga_hdl.synth
+
+# The documentation site (mkdocs.yml) into build/site/: tutorials, guides, design, and the
+# pages generated from the code (CLI, configuration files, API, architecture map) and from
+# docs/results/. --strict: a broken link or reference is an error (CI runs it). The two
+# variables silence the theme's and a plugin's notices about MkDocs' future.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/python -m mkdocs build --strict
+
+# The latest `make bench` figures and `make credibility` reports into docs/results/ (commit
+# them): the site's results pages are rendered from these files, never typed by hand.
+results: $(STAMP)
+	$(BIN)/python -m docsgen.results --bench build/bench/figures.json --reports $(REPORTS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

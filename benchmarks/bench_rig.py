@@ -25,7 +25,7 @@ each message encoded and decoded as the rig and the reference autopilot do, so n
 simulator and Python autopilot in separate processes reach 20× at 1 kHz, whatever they
 compute. Reaching it would need the whole frame (model, sensor physics, chip words and
 register models, driver decode, MAVLink) compiled, the autopilot compiled likewise, and an
-idle core for each; see the README's speed section.
+idle core for each; see docs/guide/closed-loop.md.
 
 The peak resident memory comes from one 60 s TLM run with the reference autopilot in a
 fresh process (``python -m benchmarks.bench_rig --peak-rss`` prints it as JSON): the rig's

@@ -9,6 +9,7 @@ score is kept too, as ``NotScored`` with its reason, and every bias the method k
 
 import datetime as dt
 import importlib.metadata
+import subprocess
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -184,6 +185,8 @@ class Assessment:
     unscorable_reason: str | None
     package_version: str
     created_utc: str
+    #: The source tree's commit (" with uncommitted changes" when it differs), "" outside git.
+    commit: str = ""
 
     @property
     def scorable(self) -> bool:
@@ -214,6 +217,24 @@ class Assessment:
 
 def package_version() -> str:
     return importlib.metadata.version("hil-rig")
+
+
+def source_commit() -> str:
+    """The commit of the source tree this package runs from, so that a report says which
+    code scored it; "" when it is not a git checkout (an installed wheel) or git is absent."""
+
+    def git(*args: str) -> str:
+        try:
+            done = subprocess.run(["git", *args], cwd=Path(__file__).parent, capture_output=True,
+                                  text=True, check=False, timeout=10)  # fmt: skip
+        except (OSError, subprocess.TimeoutExpired):
+            return ""
+        return done.stdout.strip() if done.returncode == 0 else ""
+
+    commit = git("rev-parse", "--short", "HEAD")
+    if commit and git("status", "--porcelain", "--untracked-files=no"):
+        commit += " with uncommitted changes"
+    return commit
 
 
 def steps(plan: Plan) -> int:
@@ -272,6 +293,7 @@ def assess(
         unscorable_reason=reason,
         package_version=package_version(),
         created_utc=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        commit=source_commit(),
     )
 
 

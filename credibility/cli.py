@@ -79,8 +79,29 @@ def _weights_source(args: argparse.Namespace) -> str:
     return "command line " + " ".join(given)
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="credibility", description=__doc__.splitlines()[0])
+#: ``credibility --help``'s description: plain text, as a terminal shows it.
+DESCRIPTION = """\
+Score how far a simulation can be trusted against recorded real flights, with the
+normalized credibility indices of Dai, Ke, Quan and Cai: logs in (ULog, CSV, Parquet),
+an HTML and a JSON report out."""
+EPILOG = """\
+examples:
+  credibility report credibility/plans/quad4001_repeatability.toml --out out/
+  credibility report PLAN.toml --log sim=runs/RUN/rig.ulg
+  credibility summary out/*/*.json --out summary.md
+  credibility paper
+
+`credibility report --help` lists the exit codes."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``credibility`` command line, apart from running it: the docs' CLI reference reads it."""
+    parser = _Parser(
+        prog="credibility",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     commands = parser.add_subparsers(dest="command", required=True)
     report = commands.add_parser(
         "report",
@@ -117,10 +138,17 @@ def _parser() -> argparse.ArgumentParser:
     summary = commands.add_parser(
         "summary",
         help="one table over several reports: per real log, what was scored and what not, why",
+        description="One Markdown table over several reports' JSON: per real log, the outcome, "
+        "the indices, the tests scored and those its log cannot support, with the reason.",
     )
     summary.add_argument("reports", type=Path, nargs="+", help="reports' JSON (report --out)")
     summary.add_argument("--out", type=Path, default=None, help="also write it here (Markdown)")
-    commands.add_parser("paper", help="recompute the paper's tables beside its printed numbers")
+    commands.add_parser(
+        "paper",
+        help="recompute the paper's tables beside its printed numbers",
+        description="Recompute every figure of the paper's section 4 from the errors and "
+        "thresholds it prints, beside the printed numbers, with the mismatches explained.",
+    )
     return parser
 
 
@@ -204,7 +232,7 @@ def _summary(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     # A pipe gets 80 columns from rich; the paper table needs about 130.
     out = Console(highlight=False, width=None if sys.stdout.isatty() else 130)
     err = Console(stderr=True, highlight=False, soft_wrap=True)  # one message, one line

@@ -226,6 +226,7 @@ def to_dict(assessment: Assessment) -> dict[str, Any]:
         "package": "hil-rig credibility",
         "package_version": assessment.package_version,
         "created_utc": assessment.created_utc,
+        "commit": assessment.commit,
         "plan": {
             "path": str(plan.path),
             "sha256": hashlib.sha256(plan.text.encode()).hexdigest(),
@@ -570,6 +571,7 @@ def render_html(assessment: Assessment) -> str:
         sections=sections,
         package_version=assessment.package_version,
         created_utc=assessment.created_utc,
+        commit=assessment.commit,
         plan_sha256=hashlib.sha256(plan.text.encode()).hexdigest(),
         log_rows=[
             [log.role, str(log.path), log.format, Code(log.sha256)] for log in assessment.logs

@@ -3,12 +3,13 @@
 Each configuration file of the project (vehicle, scenario, credibility plan, campaign) is
 declared as a tree of frozen dataclasses made with :func:`table`, whose field types carry
 their bounds (:data:`Positive`, :data:`Vector3`, enums ...). pydantic v2 checks a parsed
-TOML document against that tree (``docs/DESIGN.md`` says why pydantic): a misspelt key, a
-wrong type, a value out of range or a NaN fails with one line that names the file, the
-key, the value and what was expected. A check that spans several keys lives in the
-table's ``__post_init__`` and raises :class:`FieldError` to name its key. Every default is
-the dataclass field's default: defined once, shown in the JSON Schema (:func:`json_schema`,
-written by ``rig schema``) that lets an editor complete and check the files.
+TOML document against that tree (``docs/design/configuration.md`` says why pydantic): a
+misspelt key, a wrong type, a value out of range or a NaN fails with one line that names
+the file, the key, the value and what was expected. A check that spans several keys lives
+in the table's ``__post_init__`` and raises :class:`FieldError` to name its key. Every
+default is the dataclass field's default: defined once, shown in the JSON Schema
+(:func:`json_schema`, written by ``rig schema``) that lets an editor complete and check
+the files.
 
 This package sits under every other one (quad_model and credibility included) and
 imports none of them.

@@ -2,7 +2,7 @@
 
 The system clock runs only while the host port is written or a chip waits to take a
 sample: :meth:`CocotbHost.cycles` toggles it from Python for a few cycles, so an idle
-bus costs no simulation time (DESIGN.md: run clocks only while a bus is active).
+bus costs no simulation time (the clocks run only while a bus is active).
 """
 
 from __future__ import annotations

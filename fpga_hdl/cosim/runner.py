@@ -49,8 +49,8 @@ SIMULATORS = ("verilator", "icarus")
 TIMESCALE = ("1ps", "1ps")
 #: Marker file written once a simulator build has finished.
 _BUILD_DONE = "cosim_build.done"
-#: Verilator flags for every build, measured on the harness (``bench_fpga_hdl``, see the
-#: README): cocotb's runner marks *every* signal public (``--public-flat-rw``), which
+#: Verilator flags for every build, measured on the harness (``bench_fpga_hdl``, on the
+#: docs' speed page): cocotb's runner marks *every* signal public (``--public-flat-rw``), which
 #: keeps Verilator from optimising anything; ``--no-public-flat-rw`` plus a control file
 #: that makes only the top level's ports public (:func:`_public_ports_vlt`) ran 2.3×
 #: faster. ``-O3``, ``--x-assign fast``, ``--x-initial fast`` (Amaranth initialises every

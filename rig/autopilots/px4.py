@@ -13,7 +13,7 @@ into ``RUN/px4/bin`` and puts that folder first in PX4's ``PATH``. The same fold
 plain files there).
 
 Lockstep at any IMU rate, the same rule from v1.14 to v1.17 (their source and binaries,
-docs/px4.md): PX4's ``simulator_mavlink`` sends HIL_ACTUATOR_CONTROLS when
+docs/guide/px4-releases.md): PX4's ``simulator_mavlink`` sends HIL_ACTUATOR_CONTROLS when
 ``pwm_out_sim`` publishes its outputs, which follows the rate controller, which runs on
 ``vehicle_angular_velocity`` at most at ``IMU_GYRO_RATEMAX``; before sending it waits for
 every lockstep component (the logger, and each work queue with work queued, EKF2's on

@@ -30,15 +30,21 @@ COMMANDS: tuple[Command, ...] = (
     schema.COMMAND,
 )
 
-DESCRIPTION = (
-    "The multicopter HIL rig: fly scenarios closed loop through emulated sensor chips with "
-    "PX4 SITL or the reference autopilot, replay real PX4 flights, run campaigns, and "
-    "identify a vehicle from its flight log."
-)
-EPILOG = (
-    "Errors are one line on stderr (exit 1); Ctrl-C stops a command with its logs readable "
-    "(exit 130). `rig COMMAND --help` describes each command."
-)
+#: ``rig --help``'s description and epilog: plain text, as a terminal shows them.
+DESCRIPTION = """\
+The hardware-in-the-loop rig: a 5 kHz multicopter model, emulated sensor chips and an
+autopilot (the reference one, or PX4 SITL) flown in lockstep, with their logs."""
+EPILOG = """\
+examples:
+  rig hil-sim --view                      the demo flight, watched in a browser
+  rig run takeoff_hover_land              a bundled scenario (or a TOML path)
+  rig run level_step --autopilot px4 --px4 DIR
+  rig replay LOG.ulg                      a real flight through the rig
+  rig campaign motor_faults               a fault-injection campaign
+  rig schema --out schemas                the configuration files' JSON Schema
+
+Errors are one line on stderr (exit 1); Ctrl-C stops a run cleanly with its logs
+readable (exit 130; SIGTERM 143). `rig COMMAND --help` details each command."""
 
 
 class Terminated(BaseException):
@@ -51,10 +57,16 @@ def _raise_terminated(signum: int, frame: object) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``rig`` parser with every command's sub-parser (also the CLI reference's source)."""
-    parser = argparse.ArgumentParser(prog="rig", description=DESCRIPTION, epilog=EPILOG)
+    parser = argparse.ArgumentParser(
+        prog="rig",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for command in COMMANDS:
-        sub = commands.add_parser(command.name, help=command.help, description=command.help)
+        sub = commands.add_parser(command.name, help=command.help,
+                                  description=command.description)  # fmt: skip
         command.add_arguments(sub)
     return parser
 

@@ -49,6 +49,9 @@ def _campaign(args: argparse.Namespace, console: Console) -> int:
 COMMAND = Command(
     "campaign",
     "run a campaign file (resumable), or `campaign report DIR`",
+    "Fly every case of a campaign (a base scenario swept over axes) as a rig run, locally or "
+    "on a Dask cluster; rerun to resume. 'rig campaign report DIR' remakes the report of a "
+    "results folder.",
     _add_arguments,
     _campaign,
     interrupted="interrupted; finished cases are saved, rerun to resume",

@@ -14,7 +14,10 @@ class Command:
     """One ``rig`` subcommand; :func:`rig.cli.main` is the one error boundary around ``run``."""
 
     name: str
+    #: One line in ``rig --help``.
     help: str
+    #: A paragraph atop ``rig NAME --help``.
+    description: str
     add_arguments: Callable[[argparse.ArgumentParser], None]
     #: Runs the parsed command; returns the exit status. Bad input raises (one line).
     run: Callable[[argparse.Namespace, Console], int]

@@ -74,6 +74,8 @@ def _identify(args: argparse.Namespace, console: Console) -> int:
 COMMAND = Command(
     "identify",
     "identify hover, roll/pitch plant and inertia from a flight log",
+    "Estimate a vehicle's parameters from a PX4-style ULog, each with its uncertainty, method "
+    "and window; --toml prints them as vehicle-file lines.",
     _add_arguments,
     _identify,
 )

@@ -22,5 +22,9 @@ def _plot(args: argparse.Namespace, console: Console) -> int:
 
 
 COMMAND = Command(
-    "plot", "(re)make a finished run's PNG plots in its folder", _add_arguments, _plot
+    "plot",
+    "(re)make a finished run's PNG plots in its folder",
+    "Remake position.png, attitude.png, motors.png and imu_psd.png of a run.",
+    _add_arguments,
+    _plot,
 )

@@ -62,6 +62,9 @@ COMMAND = Command(
     "replay",
     "fly a real PX4 flight log through the rig: its setpoints (reference autopilot) or, with "
     "PX4, its parameters, sticks, modes and mission",
+    "Replay a real PX4 flight on the log's own clock: the reference autopilot flies its "
+    "set-points, or PX4 SITL (--autopilot px4) flies it as its pilot did, with the log's "
+    "parameters, sticks, modes and mission. replay.json says what was applied.",
     _add_arguments,
     _replay,
     flies=True,

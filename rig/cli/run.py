@@ -36,11 +36,19 @@ def _run(args: argparse.Namespace, console: Console) -> int:
 
 
 RUN = Command(
-    "run", "fly a scenario file (or a bundled scenario name)", _add_scenario, _run, flies=True
+    "run",
+    "fly a scenario file (or a bundled scenario name)",
+    "Fly a scenario closed-loop: the model, the sensor chips and the autopilot in lockstep. "
+    "The run folder gets rig.ulg, the autopilot's log and PNG plots.",
+    _add_scenario,
+    _run,
+    flies=True,
 )
 HIL_SIM = Command(
     "hil-sim",
     "the demo flight: take off, hover, step, land with RTL sensors and the reference autopilot",
+    "The demo flight (scenario hil_sim): take off to 5 m, hover, a 5 m level step, land, on "
+    "the RTL chips, at most at real time so that it can be watched.",
     add_run_options,
     _run,
     flies=True,

@@ -66,6 +66,8 @@ def _schema(args: argparse.Namespace, console: Console) -> int:
 COMMAND = Command(
     "schema",
     "write the JSON Schema of each configuration file (for TOML editors)",
+    "Write <kind>.schema.json for the scenario, vehicle, campaign and plan files; a TOML file "
+    "starting with '#:schema PATH' is then checked by its editor.",
     _add_arguments,
     _schema,
 )

@@ -28,4 +28,10 @@ def _view(args: argparse.Namespace, console: Console) -> int:
     return 0
 
 
-COMMAND = Command("view", "play a finished run back in the browser", _add_arguments, _view)
+COMMAND = Command(
+    "view",
+    "play a finished run back in the browser",
+    "Serve a finished run's playback on 127.0.0.1 until Ctrl-C.",
+    _add_arguments,
+    _view,
+)

@@ -23,7 +23,7 @@ class RigInBackground:
 
     def __init__(self, tmp_path: Path, instance: int, duration_s: float, speed: float,
                  **options: object) -> None:  # fmt: skip
-        # PX4 v1.14 limit-cycles in yaw below 500 Hz on this vehicle (README, "Fly PX4"); the
+        # PX4 v1.14 limit-cycles in yaw below 500 Hz on this vehicle (docs/guide/px4.md); the
         # reference autopilot flies steady at Gazebo's 250 Hz, which keeps these tests light.
         imu_hz = 1000 if options.get("autopilot") == "px4" else 250
         scenario = scenario_from_dict({"name": "idle", "vehicle": "f450_high_precision",

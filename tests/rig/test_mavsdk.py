@@ -5,7 +5,7 @@ The clients below make the calls, in the order and with the arguments, of MAVSDK
 ``examples/takeoff_and_land.py`` and ``examples/mission.py``: wait for the connection, wait
 for ``is_global_position_ok`` and ``is_home_position_ok``, arm, fly, land. Those examples
 used to wait forever: the home position only existed after arming, and SYS_STATUS had no
-pre-arm bit. The examples themselves also run unchanged (README, "MAVSDK").
+pre-arm bit. The examples themselves also run unchanged (docs/guide/reference-autopilot.md).
 
 The take-off/land client also flies PX4 SITL (skips without ``$PX4_DIR``). PX4 v1.14 sends
 its API link to 14540+i only for instances 0..9 (``px4-rc.mavlink``: 14549 above), so that

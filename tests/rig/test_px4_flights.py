@@ -31,7 +31,8 @@ def test_takeoff_hover_land_through_the_rtl_chips_at_1khz(tmp_path, free_instanc
 
     The height is PX4's MIS_TAKEOFF_ALT (2.5 m) from v1.15 on. PX4 v1.14 holds where its
     take-off was accepted, up to NAV_MC_ALT_RAD (0.8 m) short: its Hold mode, entered when
-    the take-off completes, re-sets the hold altitude to the vehicle's (docs/px4.md)."""
+    the take-off completes, re-sets the hold altitude to the vehicle's
+    (docs/guide/px4-releases.md)."""
     result = fly_px4(tmp_path, free_instance, any_px4.root, "rtl_1khz", 36.0,
                      takeoff_hover_land(10.0, 28.0), sensor_layer="rtl",
                      rates={"imu_hz": 1000})  # fmt: skip

@@ -14,7 +14,7 @@ def test_twenty_minutes_of_px4_flight_without_a_stall(tmp_path, free_instance, p
 
     At 250 Hz, Gazebo's rate, to keep CI short (1 kHz doubles this test's 2 minutes): the
     test is about the lockstep, not the flight, which at this rate PX4 v1.14 flies in a
-    25 Hz yaw limit cycle (README, "Fly PX4"); the flight tests here run at 1 kHz."""
+    25 Hz yaw limit cycle (docs/guide/px4.md); the flight tests here run at 1 kHz."""
     duration_s = 1200.0
     result = fly_px4(tmp_path, free_instance, px4_dir, "twenty_minutes", duration_s,
                      takeoff_hover_land(10.0, duration_s - 30.0),
