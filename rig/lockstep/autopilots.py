@@ -101,7 +101,7 @@ class Px4Run:
         self._imu_hz = imu_hz
         self._event = event
         self._on_waiting = on_waiting
-        self.log_path = px4.ulg_path
+        self.log_path = px4.ulog_path
 
     def connect(self, link: SimulatorLink) -> None:
         px4, hz = self._px4, self._imu_hz

@@ -21,7 +21,8 @@ import pytest
 import pyulog
 
 from rig.errors import AutopilotStalled, ScenarioError
-from rig.lockstep.loop import AUTOPILOT_STOP_GRACE_S, RunOptions, run_scenario
+from rig.lockstep.autopilots import AUTOPILOT_STOP_GRACE_S
+from rig.lockstep.loop import RunOptions, run_scenario
 from rig.mavlink.px4_api import HilSensorFields, Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict

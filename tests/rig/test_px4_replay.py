@@ -23,18 +23,10 @@ from rig.lockstep.loop import RunOptions
 from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
-from rig.replay import (
-    ARM_MODE_LEAD_S,
-    PX4_BOOT_S,
-    PX4_SETUP_S,
-    YAW_RATE_LIMIT_FLOOR_DEG_S,
-    FlightEvent,
-    ReplayError,
-    ReplayOptions,
-    _FlightLog,
-    plan_replay,
-    run_replay,
-)
+from rig.replay import ReplayError, ReplayOptions, plan_replay, run_replay
+from rig.replay.parameters import YAW_RATE_LIMIT_FLOOR_DEG_S
+from rig.replay.plan import PX4_BOOT_S, PX4_SETUP_S
+from rig.replay.timeline import ARM_MODE_LEAD_S, FlightEvent, ReplayLog
 from rig.scenarios.scenario import (
     SetHome,
     SetMode,
@@ -284,9 +276,7 @@ def _mission_log(sequence, times_s, commands=None):
     """A flight log holding only a mission flown at ``times_s`` (items 10 m apart, 5 m above
     a home at 100 m AMSL, the vehicle hovering at 106 m), waypoints unless ``commands``."""
     count = len(sequence)
-    log = object.__new__(_FlightLog)
-    log.path = Path("synthetic.ulg")
-    log.topics = {
+    topics = {
         "navigator_mission_item": {
             "timestamp": np.array(times_s) * 1e6,
             "sequence_current": np.array(sequence),
@@ -300,7 +290,7 @@ def _mission_log(sequence, times_s, commands=None):
         "vehicle_global_position": {"timestamp": np.array([0.0]), "alt": np.array([106.0])},
         "home_position": {"timestamp": np.array([0.0]), "alt": np.array([100.0])},
     }  # fmt: skip
-    return log
+    return ReplayLog("synthetic.ulg", topics, {})
 
 
 def test_only_an_item_left_at_once_is_put_where_it_was_passed():
@@ -561,7 +551,7 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
     options = ReplayOptions(autopilot="px4", px4_dir=build, vehicle="quad4001_8s")
     quad = plan_replay(QUAD4001, options)
     assert quad.start_s == QUAD_START_S
-    assert [(e.kind, e.nav_state) for e in quad.events[:2]] == [("mode", STABILIZED), ("arm", None)]
+    assert [(e.kind, e.nav_state) for e in quad.pilot.events[:2]] == [("mode", STABILIZED), ("arm", None)]
     timed = [(type(c).__name__, c.at_s) for c in quad.commands if not isinstance(c, Track)]
     assert timed[:2] == [("SetMode", PX4_BOOT_S - ARM_MODE_LEAD_S), ("Arm", PX4_BOOT_S)]
     assert quad.learned["MPC_THR_HOVER"] == pytest.approx(0.657, abs=0.002)
@@ -594,7 +584,7 @@ def test_a_build_without_the_yaw_acceleration_limit_turns_as_the_real_planner_di
 
     # In auto modes the limit follows the real planner's yaw rate (trajectory_setpoint,
     # 5 Hz): it ramps at MPC_YAWRAUTO_ACC (20°/s² = 4°/s a sample) through each turn.
-    limits = x500.yaw_rate_limits
+    limits = x500.pilot.yaw_rate_limits
     times_s, values = np.array(limits).T
     assert times_s[0] == pytest.approx(MISSION_S, abs=1e-3)  # from the switch to Mission on
     assert values[0] == YAW_RATE_LIMIT_FLOOR_DEG_S  # not turning there

@@ -86,6 +86,7 @@ class LiveFlight:
     reports: dict[float, Progress]  # every report of the loop, by its time
     result: RunResult
     screenshot: Path
+    instance: int  # its ports are in rig.ulg's events
 
 
 @pytest.fixture(scope="module")
@@ -94,6 +95,7 @@ def live_flight(browser, tmp_path_factory) -> LiveFlight:
     folder = tmp_path_factory.mktemp("view")
     reports: dict[float, Progress] = {}
     outcome: dict[str, object] = {}
+    instance = free_test_instance()
     with ViewServer(0, name="view test") as server:
         page = browser.new_page(viewport={"width": 1280, "height": 760})
         page.goto(server.url)
@@ -105,7 +107,7 @@ def live_flight(browser, tmp_path_factory) -> LiveFlight:
 
         def fly() -> None:
             try:
-                outcome["result"] = _fly(free_test_instance(), folder / "run", report)
+                outcome["result"] = _fly(instance, folder / "run", report)
             except BaseException as error:  # reported by the test, not lost in the thread
                 outcome["error"] = error
 
@@ -135,7 +137,7 @@ def live_flight(browser, tmp_path_factory) -> LiveFlight:
     page.wait_for_function("document.getElementById('conn').dataset.state === 'ended'")
     last_shown = page.evaluate(READ_PAGE)
     page.close()
-    return LiveFlight(shown, last_shown, reports, outcome["result"], screenshot)
+    return LiveFlight(shown, last_shown, reports, outcome["result"], screenshot, instance)
 
 
 @needs_chromium
@@ -172,8 +174,9 @@ def test_live_page_gets_the_last_frame_and_says_the_run_ended(live_flight):
 @needs_chromium
 @pytest.mark.closed_loop
 def test_the_view_leaves_the_log_unchanged(live_flight, tmp_path):
-    """Same seed, same rig.ulg bytes, with or without the view (and at any speed)."""
-    plain = _fly(free_test_instance(), tmp_path / "plain", speed=math.inf)
+    """Same seed and instance (the log names its ports), same rig.ulg bytes, with or without
+    the view (and at any speed)."""
+    plain = _fly(live_flight.instance, tmp_path / "plain", speed=math.inf)
     assert plain.rig_log.read_bytes() == live_flight.result.rig_log.read_bytes()
 
 
