@@ -4,8 +4,8 @@ Each class drives one peripheral of :class:`fpga_hdl.cosim.harness.CosimHarness`
 cocotb: it sets the peripheral's inputs, flips its request toggle and awaits the
 acknowledge, so a transaction costs two Python wake-ups whatever its length, and the
 gated system clock runs only while something is in flight. The same PX4-like drivers
-run over these buses unchanged; the pin-level masters (``spi_master``, ``i2c_master``,
-``pwm_source``) stay for the interface-timing tests that probe the specification limits.
+run over these buses unchanged; the pin-level masters (``fpga_hdl.verification``) stay
+for the interface-timing tests that probe the specification limits.
 
 :class:`Harness` bundles them for a testbench or the rig's co-simulation process::
 

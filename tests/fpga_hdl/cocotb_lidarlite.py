@@ -6,7 +6,7 @@ to the TLM model.
 
 Run from ``test_lidarlite_cosim.py`` on every simulator, on the core alone built at
 SensorTop's ``SYS_CLK_HZ``. Every byte the controller reads is checked by
-:class:`~fpga_hdl.buses.i2c_master.CocotbI2cMaster` at t_VD;DAT and until SCL falls.
+:class:`~fpga_hdl.verification.i2c_master.CocotbI2cMaster` at t_VD;DAT and until SCL falls.
 """
 
 import os
@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 from cocotb.triggers import RisingEdge, Timer
 
-from fpga_hdl.buses.i2c_master import CocotbI2cMaster
 from fpga_hdl.buses.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
 from fpga_hdl.buses.transactions import I2cNack, TlmI2cBus
 from fpga_hdl.chips.lidarlite import regs
@@ -30,6 +29,7 @@ from fpga_hdl.chips.lidarlite.driver import (
 from fpga_hdl.chips.lidarlite.model import LidarLiteModel
 from fpga_hdl.chips.lidarlite.regs import LidarLiteSample, Register
 from fpga_hdl.top import SYS_CLK_HZ
+from fpga_hdl.verification.i2c_master import CocotbI2cMaster
 
 SEED = int(os.environ.get("COSIM_SEED", "20261125"))
 ADDRESS = regs.DEFAULT_ADDRESS

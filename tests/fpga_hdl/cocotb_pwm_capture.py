@@ -9,9 +9,9 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import Timer, with_timeout
 
-from fpga_hdl.buses.pwm_source import CocotbPwmSource
 from fpga_hdl.chips.pwm_capture.core import CHANNELS, timeout_ticks
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, PwmCaptureModel
+from fpga_hdl.verification.pwm_source import CocotbPwmSource
 
 TICK_HZ = 1e6
 TIMEOUT_S = 0.03

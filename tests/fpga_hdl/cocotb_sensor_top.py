@@ -13,7 +13,6 @@ import numpy as np
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
-from fpga_hdl.buses.spi_master import DEFAULT_TIMING, SpiMasterTiming
 from fpga_hdl.buses.transactions import TlmSpiBus
 from fpga_hdl.chips.mpu6000 import regs as mpu
 from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver
@@ -23,6 +22,7 @@ from fpga_hdl.chips.ms5611.driver import Ms5611Driver
 from fpga_hdl.chips.ms5611.model import Ms5611Model, raw_from_si
 from fpga_hdl.cosim.sensor_top import SensorTopPins
 from fpga_hdl.top import SYS_CLK_HZ
+from fpga_hdl.verification.spi_master import DEFAULT_TIMING, SpiMasterTiming
 
 SEED = int(os.environ.get("COSIM_SEED", "20240611"))
 

@@ -6,12 +6,12 @@ import asyncio
 import numpy as np
 import pytest
 
-from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
 from fpga_hdl.buses.transactions import TlmSpiBus
 from fpga_hdl.chips.mpu6000 import regs
 from fpga_hdl.chips.mpu6000.core import Mpu6000
 from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver, decode
 from fpga_hdl.chips.mpu6000.model import Mpu6000Model
+from fpga_hdl.verification.amaranth_spi import AmaranthSpiController, run_spi_testbench
 
 SYS_CLK_HZ = 50e6
 

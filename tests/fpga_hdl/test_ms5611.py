@@ -4,12 +4,12 @@ import asyncio
 
 import pytest
 
-from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
 from fpga_hdl.buses.transactions import TlmSpiBus
 from fpga_hdl.chips.ms5611 import regs
 from fpga_hdl.chips.ms5611.core import Ms5611
 from fpga_hdl.chips.ms5611.driver import Ms5611Driver, Ms5611Error
 from fpga_hdl.chips.ms5611.model import Ms5611Model, raw_from_si
+from fpga_hdl.verification.amaranth_spi import AmaranthSpiController, run_spi_testbench
 
 SYS_CLK_HZ = 50e6
 

@@ -1,0 +1,10 @@
+"""Testbench-side verification components: what drives and checks the gateware, never in it.
+
+- ``spi_master``, ``i2c_master``, ``pwm_source``: pin-level bus masters under cocotb that
+  implement the ``SpiBus``/``I2cBus`` protocols of ``fpga_hdl.buses.transactions``;
+- ``amaranth_spi``: the SPI master for ``amaranth.sim`` unit tests.
+
+Why apart from ``fpga_hdl.buses``: that package is gateware and the protocols the product
+ships; these are stimulus and checkers, and the import contracts keep every gateware
+layer from importing them. Imports only ``fpga_hdl.buses``.
+"""
