@@ -21,6 +21,7 @@ from fpga_hdl.chips.ist8310.core import Ist8310Core
 from fpga_hdl.chips.ist8310.driver import Ist8310Driver, decode_field_gauss, sample_from_field_gauss
 from fpga_hdl.chips.ist8310.model import Ist8310Model
 from fpga_hdl.chips.ist8310.regs import Ist8310Sample, Register
+from fpga_hdl.verification.scoreboard import Scoreboard
 
 SYS_CLK_HZ = 10e6
 
@@ -354,14 +355,13 @@ def test_rtl_and_tlm_give_identical_bytes_for_random_traffic():
 
     model = Ist8310Model()
     tlm_bus = TlmI2cBus({0x0E: model})
-    tlm, now = [], 0
-
-    for (step, write, read_len), sample in zip(traffic, samples, strict=True):
+    scoreboard, now = Scoreboard(), 0
+    for (step, write, read_len), sample, observed in zip(traffic, samples, rtl, strict=True):
         now += step
         model.now_us = now
         model.load_sample(sample)
-        tlm.append(asyncio.run(tlm_bus.write_read(0x0E, write, read_len, scl_hz=400e3)))
-    assert rtl == tlm
+        expected = asyncio.run(tlm_bus.write_read(0x0E, write, read_len, scl_hz=400e3))
+        scoreboard.check(f"i2c 0x0E write {write.hex()} read {read_len}", expected, observed)
     assert any(r and r != bytes(len(r)) for r in rtl)  # the traffic really read data
 
 
