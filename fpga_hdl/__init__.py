@@ -3,7 +3,8 @@
 - ``chips/``: one folder per chip (register map, core, model, driver);
 - ``buses/``: the bus signatures, shift engines, the MCU-side peripherals and the
   transaction-level buses;
-- ``verification/``: testbench-side bus masters (cocotb, ``amaranth.sim``);
+- ``verification/``: testbench-side bus masters (cocotb, ``amaranth.sim``) and the
+  scoreboard of the RTL-equals-TLM checks;
 - ``host/``: the host port and clock-domain crossing;
 - ``top.py``: ``SensorTop``, every chip behind one host port (the rig's FPGA);
 - ``cosim/``: the cocotb harness, runner and host access; ``build.py``: Verilog.

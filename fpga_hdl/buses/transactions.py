@@ -4,7 +4,7 @@ A driver (``mpu6000.driver``, ``ms5611.driver``, ``ist8310.driver``) is written 
 against :class:`SpiBus` or :class:`I2cBus`, the way Glasgow applets are written against
 an interface. Two kinds of bus implement each protocol:
 
-- the pin-level bus masters in ``fpga_hdl.cosim`` drive the generated Verilog under
+- the pin-level bus masters in ``fpga_hdl.verification`` drive the generated Verilog under
   cocotb (real SCLK/SCL edges, real timing);
 - the transaction-level buses here call the pure-Python chip models directly, so a
   campaign can run the same register maps without a simulator.
