@@ -2,11 +2,14 @@
 
 - ``chips/``: one folder per chip (register map, core, model, driver);
 - ``buses/``: the bus signatures, shift engines, the MCU-side peripherals and the
-  bus-master models;
+  transaction-level buses;
+- ``verification/``: testbench-side bus masters (cocotb, ``amaranth.sim``) and the
+  scoreboard of the RTL-equals-TLM checks;
 - ``host/``: the host port and clock-domain crossing;
 - ``top.py``: ``SensorTop``, every chip behind one host port (the rig's FPGA);
 - ``cosim/``: the cocotb harness, runner and host access; ``build.py``: Verilog.
 
 Layers (checked by import-linter): cosim, then build (Verilog), then the top, then the
-chips, then buses and host; fpga_hdl never imports the rig.
+chips or verification, then buses and host; no gateware imports verification, and
+fpga_hdl never imports the rig.
 """

@@ -6,8 +6,9 @@
   peripherals in gateware (the co-simulation harness puts them on the pins);
 - ``transactions``: the ``SpiBus``/``I2cBus`` protocols the drivers are written against,
   the bus errors, and the transaction-level buses over the chips' Python models;
-- the bus-master models that implement those protocols pin by pin: ``spi_master``,
-  ``i2c_master``, ``pwm_source`` under cocotb, ``amaranth_spi`` under ``amaranth.sim``.
+- ``uart``: the GPS UART's 8N1 transmitter and receiver.
 
-Imports nothing of the chips, the host port, the top or the co-simulation.
+The testbench-side bus masters that drive these pins from Python live in
+``fpga_hdl.verification``. Imports nothing of the chips, the host port, the top, the
+co-simulation or the verification components.
 """

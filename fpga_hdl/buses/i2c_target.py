@@ -10,7 +10,7 @@ bytes the controller wrote (``write_stb``) and a request for the next byte to se
 import math
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Const, Module, Signal
+from amaranth.hdl import Assert, Cat, Const, Module, Signal
 from amaranth.lib import enum, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
@@ -22,6 +22,7 @@ __all__ = [
     "STANDARD_MODE",
     "TARGET_SDA_HOLD_NS",
     "I2cTarget",
+    "I2cTargetChecker",
     "I2cTiming",
     "TargetSampling",
 ]
@@ -190,6 +191,16 @@ class I2cTarget(wiring.Component):
         7-bit target address, 0x08..0x77 (UM10204 table 4 reserves the rest).
     sys_clk_hz : float
         Frequency of the ``sync`` domain.
+    assertions : bool
+        Bind an :class:`I2cTargetChecker`: the protocol properties below as ``Assert``
+        statements on the ``sync`` clock, which ``amaranth.sim`` raises on and a formal
+        tool can prove. Off by default: an ``Assert`` becomes a ``$check`` cell, and the
+        product's Verilog must not change.
+
+        - the target changes SDA only while SCL is low (UM10204 3.1.3), but for the
+          release at a START or STOP;
+        - it pulls SDA only while addressed (``busy``);
+        - only in an ACK or read-data phase, or within the hold time leaving one.
 
     Attributes
     ----------
@@ -227,11 +238,12 @@ class I2cTarget(wiring.Component):
     read_stb: Out(1)
     read_data: In(8)
 
-    def __init__(self, *, address: int, sys_clk_hz: float) -> None:
+    def __init__(self, *, address: int, sys_clk_hz: float, assertions: bool = False) -> None:
         if not isinstance(address, int) or not 0x08 <= address <= 0x77:
             raise ValueError(f"I2C address must be a 7-bit address in 0x08..0x77, not {address!r}")
         self.address = address
         self.sampling = TargetSampling.for_clock(sys_clk_hz)
+        self.assertions = assertions
         super().__init__()
 
     def elaborate(self, platform) -> Module:
@@ -335,6 +347,21 @@ class I2cTarget(wiring.Component):
                         # UM10204 3.1.6: a NACK ends the read; SDA stays released so
                         # the controller can send STOP or a repeated START.
                         m.d.sync += state.eq(_State.IDLE)
+
+        if self.assertions:
+            m.submodules.checker = checker = I2cTargetChecker()
+            drive_phase = (
+                (state == _State.ADDRESS_ACK) | (state == _State.WRITE_ACK) | (state == _State.READ)
+            )
+            m.d.comb += [
+                checker.scl.eq(scl),
+                checker.start_stop.eq(start_cond | stop_cond),
+                checker.sda_drive.eq(sda_drive),
+                checker.sda_oe.eq(self.i2c.sda_oe),
+                checker.busy.eq(self.busy),
+                checker.drive_phase.eq(drive_phase),
+                checker.hold_pending.eq(hold_pending),
+            ]
         return m
 
     def _filtered(self, m: Module, pin: Signal, name: str) -> Signal:
@@ -350,3 +377,53 @@ class I2cTarget(wiring.Component):
         with m.Elif(~window.any()):
             m.d.sync += filtered.eq(0)
         return filtered
+
+
+class I2cTargetChecker(wiring.Component):
+    """:class:`I2cTarget`'s protocol properties as ``Assert`` statements, on its signals.
+
+    Why a component of its own: the engine binds it only with ``assertions`` on, and a
+    test can drive it alone with a sequence no engine produces, to show each property
+    fires. Every check runs on the ``sync`` clock.
+
+    Attributes
+    ----------
+    scl : In(1)
+        SCL as the engine sees it (synchronised and filtered).
+    start_stop : In(1)
+        A START or STOP is seen this cycle (the engine releases SDA at once).
+    sda_drive, sda_oe : In(1)
+        The engine's SDA pull-down before and after the ``mute`` fault.
+    busy : In(1)
+        The engine is addressed.
+    drive_phase : In(1)
+        The engine is in an address ACK, a write ACK or a read-data byte.
+    hold_pending : In(1)
+        An SDA change waits out the hold time after SCL fell.
+    """
+
+    scl: In(1)
+    start_stop: In(1)
+    sda_drive: In(1)
+    sda_oe: In(1)
+    busy: In(1)
+    drive_phase: In(1)
+    hold_pending: In(1)
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        drive_before = Signal()  # sda_drive one cycle back
+        released = Signal()  # a START or STOP released SDA at the last edge
+        m.d.sync += [drive_before.eq(self.sda_drive), released.eq(self.start_stop)]
+        m.d.sync += [
+            Assert(
+                (self.sda_drive == drive_before) | ~self.scl | released,
+                "I2C target changed SDA while SCL was high",
+            ),
+            Assert(~self.sda_oe | self.busy, "I2C target pulled SDA while not addressed"),
+            Assert(
+                ~self.sda_oe | self.drive_phase | self.hold_pending,
+                "I2C target pulled SDA outside an ACK or read-data phase",
+            ),
+        ]
+        return m

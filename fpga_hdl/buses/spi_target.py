@@ -31,14 +31,20 @@ The engine has three clock domains, all local to the chip that instantiates it:
 During the first (command) byte SDO sends zeros: neither chip defines SDO there.
 """
 
-from amaranth.hdl import Cat, ClockDomain, Module, ResetSignal, Signal
+from amaranth.hdl import Assert, Cat, ClockDomain, Module, ResetSignal, Signal
 from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from fpga_hdl.buses.signatures import BUS_FAULT, SPI
 
-__all__ = ["CS_SYNC_STAGES", "SpiTarget", "add_spi_engine", "check_sys_clk_for_spi"]
+__all__ = [
+    "CS_SYNC_STAGES",
+    "SpiTarget",
+    "SpiTargetChecker",
+    "add_spi_engine",
+    "check_sys_clk_for_spi",
+]
 
 #: Flip-flops between CS and the ``sync`` domain's ``busy`` (see :func:`check_sys_clk_for_spi`).
 CS_SYNC_STAGES = 2
@@ -72,6 +78,18 @@ class SpiTarget(wiring.Component):
     Instantiate it inside a chip core that defines a local ``spi`` clock domain driven
     by SCLK (rising edge, chip reset); the engine adds its own CS-reset domains.
 
+    Parameters
+    ----------
+    assertions : bool
+        Bind a :class:`SpiTargetChecker`: the protocol properties below as ``Assert``
+        statements, which ``amaranth.sim`` raises on and a formal tool can prove. Off by
+        default: an ``Assert`` becomes a ``$check`` cell, and the product's Verilog must
+        not change.
+
+        - SDO is driven only while CS is low (sampled by the ``sync`` clock);
+        - at each rising SCLK edge of a data byte, SDO shows bit ``7 - n`` of the byte
+          loaded at that byte's start, ``n`` the bits already received.
+
     Attributes
     ----------
     spi : In(SPI)
@@ -99,6 +117,10 @@ class SpiTarget(wiring.Component):
     rx_first: Out(1)
     tx_data: In(8)
     busy: Out(1)
+
+    def __init__(self, *, assertions: bool = False) -> None:
+        self.assertions = assertions
+        super().__init__()
 
     def elaborate(self, platform) -> Module:
         m = Module()
@@ -133,6 +155,57 @@ class SpiTarget(wiring.Component):
         m.submodules.cs_sync = FFSynchronizer(
             ~pins.cs_n, self.busy, o_domain="sync", stages=CS_SYNC_STAGES
         )
+
+        if self.assertions:
+            m.submodules.checker = checker = SpiTargetChecker()
+            m.d.comb += [
+                checker.cs_n.eq(pins.cs_n),
+                checker.miso.eq(pins.miso),
+                checker.miso_oe.eq(pins.miso_oe),
+                checker.bit_count.eq(bit_count),
+                checker.first_byte.eq(first_byte),
+                checker.loaded.eq(self.tx_data ^ self.fault.flip),
+            ]
+        return m
+
+
+class SpiTargetChecker(wiring.Component):
+    """:class:`SpiTarget`'s protocol properties as ``Assert`` statements, on its signals.
+
+    Why a component of its own: the engine binds it only with ``assertions`` on, and a
+    test can drive it alone with a sequence no engine produces, to show each property
+    fires. It runs in the engine's ``sync``, ``spi_rx`` and ``spi_tx`` domains.
+
+    Attributes
+    ----------
+    cs_n, miso, miso_oe : In(1)
+        The engine's pins.
+    bit_count : In(3)
+        Bits of the current byte received so far.
+    first_byte : In(1)
+        The current byte is the command byte.
+    loaded : In(8)
+        The byte the engine loads into SDO at a data byte's start.
+    """
+
+    cs_n: In(1)
+    miso: In(1)
+    miso_oe: In(1)
+    bit_count: In(3)
+    first_byte: In(1)
+    loaded: In(8)
+
+    def elaborate(self, platform) -> Module:
+        m = Module()
+        m.d.sync += Assert(~self.miso_oe | ~self.cs_n, "SPI target drives SDO while CS is high")
+        sent = Signal(8)  # the reference: the byte loaded at this data byte's start
+        with m.If((self.bit_count == 0) & ~self.first_byte):
+            m.d.spi_tx += sent.eq(self.loaded)
+        with m.If(~self.first_byte):
+            m.d.spi_rx += Assert(
+                self.miso == sent.bit_select(~self.bit_count, 1),  # bit 7 - n
+                "SPI target's SDO is not the loaded byte's next bit, MSB first",
+            )
         return m
 
 

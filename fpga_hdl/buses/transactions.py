@@ -4,7 +4,7 @@ A driver (``mpu6000.driver``, ``ms5611.driver``, ``ist8310.driver``) is written 
 against :class:`SpiBus` or :class:`I2cBus`, the way Glasgow applets are written against
 an interface. Two kinds of bus implement each protocol:
 
-- the pin-level bus masters in ``fpga_hdl.cosim`` drive the generated Verilog under
+- the pin-level bus masters in ``fpga_hdl.verification`` drive the generated Verilog under
   cocotb (real SCLK/SCL edges, real timing);
 - the transaction-level buses here call the pure-Python chip models directly, so a
   campaign can run the same register maps without a simulator.
@@ -15,7 +15,7 @@ Because both run the very same driver code, a test can compare the bytes they re
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -103,8 +103,7 @@ async def combined_transfer(
     part; an empty transfer is an address probe. A NACK ends the transfer with a STOP and
     raises :class:`I2cNack`, as PX4's ``I2C::transfer`` reports it.
     """
-    if read_len < 0:
-        raise ValueError(f"read_len must be >= 0, not {read_len}")
+    check_i2c_request(address, write, read_len)
     await controller.start()
     if write or not read_len:
         if not await controller.write_byte(address << 1):
@@ -147,6 +146,52 @@ def check_clock_hz(name: str, value_hz: float) -> None:
         raise ValueError(f"{name} must be a positive finite frequency in Hz, not {value_hz!r}")
 
 
+# The request checks every bus runs before its first edge, written once so a driver's
+# mistake reads the same one-line error on the TLM, the pin-level masters, the harness
+# and the compiled harness. ``depth`` arguments are a bus's buffer sizes (None: unbounded).
+
+
+def check_spi_mode(mode: int) -> None:
+    """Reject an SPI mode the chips do not speak (both take modes 0 and 3 only)."""
+    if mode not in (0, 3):
+        raise ValueError(f"SPI mode must be 0 or 3 (the chips' modes), not {mode!r}")
+
+
+def check_spi_request(
+    device: str, tx: bytes, wired: Collection[str], *, depth: int | None = None
+) -> None:
+    """Reject a transfer to a chip select not in ``wired`` or longer than ``depth`` bytes."""
+    if device not in wired:
+        raise UnknownDevice(
+            f"no SPI device {device!r} on this bus; wired: {', '.join(sorted(wired))}"
+        )
+    if depth is not None and len(tx) > depth:
+        raise ValueError(f"SPI transfer of {len(tx)} bytes exceeds the {depth}-byte buffer")
+
+
+def check_i2c_address(address: int) -> None:
+    """Reject an address that does not fit the 7 bits before the R/W bit."""
+    if not 0 <= address <= 0x7F:
+        raise ValueError(f"I2C address must be 7-bit (0x00..0x7F), not 0x{address:X}")
+
+
+def check_i2c_request(
+    address: int,
+    write: bytes,
+    read_len: int,
+    *,
+    write_depth: int | None = None,
+    read_depth: int | None = None,
+) -> None:
+    """Reject a combined transfer no bus could carry: bad address, read or write length."""
+    check_i2c_address(address)
+    if read_len < 0 or (read_depth is not None and read_len > read_depth):
+        bound = ">= 0" if read_depth is None else f"in 0..{read_depth}"
+        raise ValueError(f"read_len must be {bound}, not {read_len}")
+    if write_depth is not None and len(write) > write_depth:
+        raise ValueError(f"I2C write of {len(write)} bytes exceeds {write_depth}")
+
+
 class TlmSpiBus:
     """:class:`SpiBus` over pure-Python chip models, keyed by chip-select name."""
 
@@ -155,13 +200,8 @@ class TlmSpiBus:
 
     async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
         check_clock_hz("sclk_hz", sclk_hz)
-        try:
-            model = self.devices[device]
-        except KeyError:
-            raise UnknownDevice(
-                f"no SPI device {device!r} on this bus; wired: {', '.join(sorted(self.devices))}"
-            ) from None
-        rx = model.transfer(bytes(tx))
+        check_spi_request(device, tx, self.devices)
+        rx = self.devices[device].transfer(bytes(tx))
         if len(rx) != len(tx):
             raise BusError(f"SPI model {device!r} returned {len(rx)} bytes for {len(tx)} sent")
         return rx
@@ -172,16 +212,14 @@ class TlmI2cBus:
 
     def __init__(self, devices: Mapping[int, I2cDeviceModel]) -> None:
         for address in devices:
-            if not 0 <= address <= 0x7F:
-                raise ValueError(f"I2C address must be 7-bit (0x00..0x7F), not 0x{address:X}")
+            check_i2c_address(address)
         self.devices = dict(devices)
 
     async def write_read(
         self, address: int, write: bytes, read_len: int, *, scl_hz: float
     ) -> bytes:
         check_clock_hz("scl_hz", scl_hz)
-        if read_len < 0:
-            raise ValueError(f"read_len must be >= 0, not {read_len}")
+        check_i2c_request(address, write, read_len)
         model = self.devices.get(address)
         if model is None:
             raise I2cNack(address)

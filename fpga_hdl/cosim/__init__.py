@@ -1,1 +1,1 @@
-"""cocotb side of the co-simulation: the runner and the pin-level bus masters."""
+"""cocotb side of the co-simulation: the runner, the harness and its peripherals, host access."""

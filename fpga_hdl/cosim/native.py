@@ -53,7 +53,14 @@ from pathlib import Path
 from fpga_hdl.build import BUILD_DIR, generate_verilog
 from fpga_hdl.buses.i2c_controller import RATES_HZ, controller_rate_hz
 from fpga_hdl.buses.spi_controller import divider_for
-from fpga_hdl.buses.transactions import I2cNack, UartTransfer, UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import (
+    I2cNack,
+    UartTransfer,
+    check_clock_hz,
+    check_i2c_request,
+    check_spi_mode,
+    check_spi_request,
+)
 from fpga_hdl.buses.uart import cycles_to_us
 from fpga_hdl.buses.uart import divider_for as uart_divider
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
@@ -252,8 +259,7 @@ class NativeSpiBus:
 
     def __init__(self, model: _Model, depth: int, *, mode: int = 0,
                  sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:  # fmt: skip
-        if mode not in (0, 3):
-            raise ValueError(f"SPI mode must be 0 or 3 (the chips' modes), not {mode!r}")
+        check_spi_mode(mode)
         self._model = model
         self.depth = depth
         self.mode3 = int(mode == 3)
@@ -263,12 +269,7 @@ class NativeSpiBus:
 
     async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
         check_clock_hz("sclk_hz", sclk_hz)
-        if device not in SPI_DEVICES:
-            raise UnknownDevice(f"no SPI device {device!r} on this bus; wired: {SPI_DEVICES}")
-        if len(tx) > self.depth:
-            raise ValueError(
-                f"SPI transfer of {len(tx)} bytes exceeds the {self.depth}-byte buffer"
-            )
+        check_spi_request(device, tx, SPI_DEVICES, depth=self.depth)
         self._model.call(
             "nh_spi", SPI_DEVICES.index(device), len(tx), divider_for(self.sys_clk_hz, sclk_hz),
             self.mode3, tx, self._rx, len(tx),
@@ -293,12 +294,9 @@ class NativeI2cBus:
         self, address: int, write: bytes, read_len: int, *, scl_hz: float
     ) -> bytes:
         rate_hz = controller_rate_hz(scl_hz)
-        if not 0 <= address <= 0x7F:
-            raise ValueError(f"I2C address must be 7-bit (0x00..0x7F), not 0x{address:X}")
-        if not 0 <= read_len <= self.read_depth:
-            raise ValueError(f"read_len must be in 0..{self.read_depth}, not {read_len}")
-        if len(write) > self.write_depth:
-            raise ValueError(f"I2C write of {len(write)} bytes exceeds {self.write_depth}")
+        check_i2c_request(
+            address, write, read_len, write_depth=self.write_depth, read_depth=self.read_depth
+        )
         self._model.call(
             "nh_i2c", address, len(write), read_len, int(rate_hz == RATES_HZ[1]), write,
             len(write), self._rx, read_len, ctypes.byref(self._nack_index),

@@ -4,8 +4,8 @@ Each class drives one peripheral of :class:`fpga_hdl.cosim.harness.CosimHarness`
 cocotb: it sets the peripheral's inputs, flips its request toggle and awaits the
 acknowledge, so a transaction costs two Python wake-ups whatever its length, and the
 gated system clock runs only while something is in flight. The same PX4-like drivers
-run over these buses unchanged; the pin-level masters (``spi_master``, ``i2c_master``,
-``pwm_source``) stay for the interface-timing tests that probe the specification limits.
+run over these buses unchanged; the pin-level masters (``fpga_hdl.verification``) stay
+for the interface-timing tests that probe the specification limits.
 
 :class:`Harness` bundles them for a testbench or the rig's co-simulation process::
 
@@ -24,7 +24,14 @@ from cocotb.utils import get_sim_time
 
 from fpga_hdl.buses.i2c_controller import RATES_HZ, controller_rate_hz
 from fpga_hdl.buses.spi_controller import divider_for
-from fpga_hdl.buses.transactions import I2cNack, UartTransfer, UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import (
+    I2cNack,
+    UartTransfer,
+    check_clock_hz,
+    check_i2c_request,
+    check_spi_mode,
+    check_spi_request,
+)
 from fpga_hdl.buses.uart import cycles_to_us
 from fpga_hdl.buses.uart import divider_for as uart_divider
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
@@ -82,8 +89,7 @@ class HarnessSpiBus:
     (mode 0 or 3)."""
 
     def __init__(self, dut, *, mode: int = 0, sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:
-        if mode not in (0, 3):
-            raise ValueError(f"SPI mode must be 0 or 3 (the chips' modes), not {mode!r}")
+        check_spi_mode(mode)
         self.dut = dut
         self.sys_clk_hz = sys_clk_hz
         self.depth = len(dut.spi_tx) // 8
@@ -99,12 +105,7 @@ class HarnessSpiBus:
 
     async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
         check_clock_hz("sclk_hz", sclk_hz)
-        if device not in SPI_DEVICES:
-            raise UnknownDevice(f"no SPI device {device!r} on this bus; wired: {SPI_DEVICES}")
-        if len(tx) > self.depth:
-            raise ValueError(
-                f"SPI transfer of {len(tx)} bytes exceeds the {self.depth}-byte buffer"
-            )
+        check_spi_request(device, tx, SPI_DEVICES, depth=self.depth)
         dut = self.dut
         dut.spi_device.value = SPI_DEVICES.index(device)
         dut.spi_length.value = len(tx)
@@ -137,12 +138,9 @@ class HarnessI2cBus:
         self, address: int, write: bytes, read_len: int, *, scl_hz: float
     ) -> bytes:
         rate_hz = controller_rate_hz(scl_hz)
-        if not 0 <= address <= 0x7F:
-            raise ValueError(f"I2C address must be 7-bit (0x00..0x7F), not 0x{address:X}")
-        if not 0 <= read_len <= self.read_depth:
-            raise ValueError(f"read_len must be in 0..{self.read_depth}, not {read_len}")
-        if len(write) > self.write_depth:
-            raise ValueError(f"I2C write of {len(write)} bytes exceeds {self.write_depth}")
+        check_i2c_request(
+            address, write, read_len, write_depth=self.write_depth, read_depth=self.read_depth
+        )
         dut = self.dut
         dut.i2c_address.value = address
         dut.i2c_write_len.value = len(write)

@@ -6,11 +6,11 @@ cocotb bench on the generated ``sensor_top`` starts from the same idle bus level
 
 from __future__ import annotations
 
-from fpga_hdl.buses.i2c_master import CocotbI2cMaster
 from fpga_hdl.buses.i2c_target import I2cTiming
-from fpga_hdl.buses.spi_master import DEFAULT_TIMING, CocotbSpiMaster, SpiMasterTiming
 from fpga_hdl.cosim.host import CocotbHost
 from fpga_hdl.top import HOST_MAP, SYS_CLK_HZ
+from fpga_hdl.verification.i2c_master import CocotbI2cMaster
+from fpga_hdl.verification.spi_master import DEFAULT_TIMING, CocotbSpiMaster, SpiMasterTiming
 
 
 class SensorTopPins:

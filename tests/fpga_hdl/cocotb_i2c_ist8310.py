@@ -21,6 +21,7 @@ from fpga_hdl.chips.ist8310.model import Ist8310Model
 from fpga_hdl.chips.ist8310.regs import Ist8310Sample, Register
 from fpga_hdl.cosim.sensor_top import SensorTopPins
 from fpga_hdl.top import HOST_MAP
+from fpga_hdl.verification.scoreboard import ScoredI2cBus
 
 SEED = int(os.environ.get("COSIM_SEED", "20240612"))
 ADDRESS = regs.DEFAULT_ADDRESS
@@ -34,7 +35,8 @@ class Ist8310Bench:
         pins = SensorTopPins(dut, i2c_timing=timing)
         self.host, self.i2c = pins.host, pins.i2c
         self.model = Ist8310Model()
-        self.tlm = TlmI2cBus({ADDRESS: self.model})
+        #: Every transaction on RTL and TLM, scored byte for byte.
+        self.bus = ScoredI2cBus(self.i2c, TlmI2cBus({ADDRESS: self.model}))
         self.now_us = 1
 
     async def start(self) -> None:
@@ -53,25 +55,8 @@ class Ist8310Bench:
         await self.host.load({}, now_us=self.now_us)
 
     async def both(self, write: bytes, read_len: int, scl_hz: float = 400e3) -> bytes:
-        """The same transaction on RTL and TLM; they must agree byte for byte."""
-        rtl = await self.i2c.write_read(ADDRESS, write, read_len, scl_hz=scl_hz)
-        tlm = await self.tlm.write_read(ADDRESS, write, read_len, scl_hz=scl_hz)
-        assert rtl == tlm, f"{write.hex()}+{read_len}: RTL {rtl.hex()} != TLM {tlm.hex()}"
-        return rtl
-
-
-class PairedBus:
-    """Runs each transaction on the RTL and on the TLM; they must agree byte for byte."""
-
-    def __init__(self, bench: Ist8310Bench) -> None:
-        self.bench, self.transactions = bench, 0
-
-    async def write_read(self, address, write, read_len, *, scl_hz):
-        rtl = await self.bench.i2c.write_read(address, write, read_len, scl_hz=scl_hz)
-        tlm = await self.bench.tlm.write_read(address, write, read_len, scl_hz=scl_hz)
-        assert rtl == tlm, f"{write.hex()}+{read_len}: RTL {rtl.hex()} != TLM {tlm.hex()}"
-        self.transactions += 1
-        return rtl
+        """The same transaction on RTL and TLM, scored."""
+        return await self.bus.write_read(ADDRESS, write, read_len, scl_hz=scl_hz)
 
 
 @cocotb.test()
@@ -81,8 +66,8 @@ async def px4_driver_over_rtl_equals_tlm_and_round_trips_within_one_lsb(dut):
     rng = np.random.default_rng(SEED)
     for scl_hz in (100e3, 400e3):
         field = tuple(rng.uniform(-0.6, 0.6, 3))  # gauss, PX4 sensor frame
-        bus = PairedBus(bench)
-        driver = Ist8310Driver(bus, scl_hz=scl_hz)
+        scored_before = len(bench.bus.scoreboard)
+        driver = Ist8310Driver(bench.bus, scl_hz=scl_hz)
         assert await driver.probe()
         await driver.reset()
         await bench.sleep_us(50_000)  # PX4 waits 50 ms after SRST
@@ -96,7 +81,7 @@ async def px4_driver_over_rtl_equals_tlm_and_round_trips_within_one_lsb(dut):
         assert np.allclose(decoded, field, rtol=0, atol=0.5 / regs.LSB_PER_GAUSS_16BIT)
         assert await driver.read_field_gauss() is None  # reading the data cleared DRDY
         assert await driver.check_next_register()
-        assert bus.transactions > 12
+        assert len(bench.bus.scoreboard) - scored_before > 12
     cycles_before = bench.i2c.cycles
     await bench.both(bytes([Register.STAT1]), 7, scl_hz=400e3)
     dut._log.info(

@@ -6,7 +6,7 @@ to the TLM model.
 
 Run from ``test_lidarlite_cosim.py`` on every simulator, on the core alone built at
 SensorTop's ``SYS_CLK_HZ``. Every byte the controller reads is checked by
-:class:`~fpga_hdl.buses.i2c_master.CocotbI2cMaster` at t_VD;DAT and until SCL falls.
+:class:`~fpga_hdl.verification.i2c_master.CocotbI2cMaster` at t_VD;DAT and until SCL falls.
 """
 
 import os
@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 from cocotb.triggers import RisingEdge, Timer
 
-from fpga_hdl.buses.i2c_master import CocotbI2cMaster
 from fpga_hdl.buses.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
 from fpga_hdl.buses.transactions import I2cNack, TlmI2cBus
 from fpga_hdl.chips.lidarlite import regs
@@ -30,6 +29,8 @@ from fpga_hdl.chips.lidarlite.driver import (
 from fpga_hdl.chips.lidarlite.model import LidarLiteModel
 from fpga_hdl.chips.lidarlite.regs import LidarLiteSample, Register
 from fpga_hdl.top import SYS_CLK_HZ
+from fpga_hdl.verification.i2c_master import CocotbI2cMaster
+from fpga_hdl.verification.scoreboard import ScoredI2cBus
 
 SEED = int(os.environ.get("COSIM_SEED", "20261125"))
 ADDRESS = regs.DEFAULT_ADDRESS
@@ -47,9 +48,9 @@ class Bench:
             sys_clk_hz=SYS_CLK_HZ, timing=timing,
         )  # fmt: skip
         self.model = LidarLiteModel()
-        self.tlm = TlmI2cBus({ADDRESS: self.model})
+        #: :class:`I2cBus`: each transaction on the RTL and the TLM, scored byte for byte.
+        self.bus = ScoredI2cBus(self.i2c, TlmI2cBus({ADDRESS: self.model}))
         self.now_us = 0
-        self.transactions = 0
 
     async def cycles(self, count: int) -> None:
         """Clock the core by hand (the controller runs the clock only during transfers)."""
@@ -82,16 +83,8 @@ class Bench:
         self.dut.now_us.value = self.now_us
         self.model.now_us = self.now_us
 
-    async def write_read(self, address, write, read_len, *, scl_hz):
-        """:class:`I2cBus`: each transaction on the RTL and the TLM, byte for byte equal."""
-        rtl = await self.i2c.write_read(address, write, read_len, scl_hz=scl_hz)
-        tlm = await self.tlm.write_read(address, write, read_len, scl_hz=scl_hz)
-        assert rtl == tlm, f"{write.hex()}+{read_len}: RTL {rtl.hex()} != TLM {tlm.hex()}"
-        self.transactions += 1
-        return rtl
-
     async def both(self, write: bytes, read_len: int, scl_hz: float = 400e3) -> bytes:
-        return await self.write_read(ADDRESS, write, read_len, scl_hz=scl_hz)
+        return await self.bus.write_read(ADDRESS, write, read_len, scl_hz=scl_hz)
 
     async def status(self) -> int:
         await self.both(bytes([Register.STATUS]), 0)
@@ -104,7 +97,7 @@ async def px4_driver_over_rtl_equals_tlm_within_one_centimetre(dut):
     bench = Bench(dut)
     await bench.start()
     rng = np.random.default_rng(SEED)
-    driver = LidarLiteDriver(bench)
+    driver = LidarLiteDriver(bench.bus)
     assert await driver.probe() is LidarLiteVersion.V1_V3
     await driver.reset()
     (count,) = await driver.read_register(Register.SIG_COUNT_VAL)
@@ -131,7 +124,7 @@ async def px4_driver_over_rtl_equals_tlm_within_one_centimetre(dut):
             assert result.signal_quality == 100
         previous = result
         bench.sleep_us(50_000 - regs.ACQUISITION_TIME_US)  # PX4's 50 ms cycle
-    assert bench.transactions > 60
+    assert len(bench.bus.scoreboard) > 60
     before = bench.i2c.cycles
     await driver.collect()
     dut._log.info(

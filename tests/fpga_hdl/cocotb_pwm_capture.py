@@ -9,9 +9,10 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import Timer, with_timeout
 
-from fpga_hdl.buses.pwm_source import CocotbPwmSource
 from fpga_hdl.chips.pwm_capture.core import CHANNELS, timeout_ticks
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, PwmCaptureModel
+from fpga_hdl.verification.pwm_source import CocotbPwmSource
+from fpga_hdl.verification.scoreboard import Scoreboard
 
 TICK_HZ = 1e6
 TIMEOUT_S = 0.03
@@ -67,6 +68,7 @@ async def widths_within_one_tick_and_timeout_when_pulses_stop(dut):
             [(START_S + i / rate_hz, START_S + i / rate_hz + width_us * 1e-6) for i in range(count)]
         )
     model = PwmCaptureModel(tick_hz=TICK_HZ, timeout_s=TIMEOUT_S)
+    scoreboard = Scoreboard()
     probe_s, probes = 500e-9, 0
     end_s = RUN_S + TIMEOUT_S + 2e-3
     while probe_s < end_s:
@@ -76,7 +78,7 @@ async def widths_within_one_tick_and_timeout_when_pulses_stop(dut):
         got = read(dut)
         for ch in range(CHANNELS):
             expected = model.capture(trains[ch], at_s=probe_s)
-            assert got[ch] == expected, f"channel {ch} at {probe_s * 1e6:.1f} µs: {got[ch]}"
+            scoreboard.check(f"channel {ch} at {probe_s * 1e6:.1f} µs", expected, got[ch])
         probes += 1
         if abs(probe_s - (RUN_S - 2e-3)) < 7e-6:
             for ch, (width_us, rate_hz) in enumerate(CHANNEL_SPECS):

@@ -32,6 +32,7 @@ from fpga_hdl.chips.ublox.driver import (
 )
 from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.top import UART_CLK_HZ
+from fpga_hdl.verification.scoreboard import Scoreboard
 
 # cocotbext-uart 0.1.4 calls cocotb 2's deprecated ``setimmediatevalue`` once per source;
 # the run turns warnings into errors, so this one line of third-party noise is let through.
@@ -91,6 +92,8 @@ class Bench:
     def __init__(self, dut) -> None:
         self.dut = dut
         self.model = UbloxM8Model()
+        #: Each reply as the TXD line and as UartSink read it, against the twin's bytes.
+        self.scoreboard = Scoreboard()
         self.edges: list[tuple[int, int]] = []
         self.baud = RESET_BAUD
         self.source = self.sink = None
@@ -144,9 +147,8 @@ class Bench:
         baud = self.baud
         await Timer(round((len(expected) + 2) * 10e12 / baud), "ps")
         line, _, _ = decode_line(self.edges, self.t_mark, baud)
-        assert line == expected, f"TXD {line.hex()} != TLM {expected.hex()}"
-        read = bytes(self.sink.read_nowait())
-        assert read == expected, f"UartSink {read.hex()} != TLM {expected.hex()}"
+        self.scoreboard.check(f"TXD at {baud} Bd", expected, line)
+        self.scoreboard.check(f"UartSink at {baud} Bd", expected, bytes(self.sink.read_nowait()))
         return line
 
     async def load(self, fix: ubx.NavPvt) -> None:

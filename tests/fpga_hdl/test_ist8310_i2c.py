@@ -1,119 +1,34 @@
 # amaranth: UnusedElaboratable=no
 """amaranth.sim unit tests: the I2C target engine and the IST8310 core, against the TLM model.
 
-A small cycle-level I2C controller (below) drives the core in amaranth's simulator at
-10 MHz, with UM10204 Fast-mode minimum timings rounded up to whole cycles. It implements
-the ``I2cBus`` protocol, so PX4's driver runs over it unchanged.
+The cycle-level I2C controller of ``fpga_hdl.verification.amaranth_i2c`` drives the core
+in amaranth's simulator at 10 MHz, with UM10204 Fast-mode minimum timings rounded up to
+whole cycles. It implements the ``I2cBus`` protocol, so PX4's driver runs over it unchanged.
 """
 
 import asyncio
-import math
 
 import numpy as np
 import pytest
-from amaranth.hdl import Module, Signal
-from amaranth.sim import Simulator
 
 from fpga_hdl.buses.i2c_target import FAST_MODE, I2cTarget, TargetSampling
-from fpga_hdl.buses.transactions import I2cNack, TlmI2cBus, combined_transfer
+from fpga_hdl.buses.transactions import I2cNack, TlmI2cBus
 from fpga_hdl.chips.ist8310 import regs
 from fpga_hdl.chips.ist8310.core import Ist8310Core
 from fpga_hdl.chips.ist8310.driver import Ist8310Driver, decode_field_gauss, sample_from_field_gauss
 from fpga_hdl.chips.ist8310.model import Ist8310Model
 from fpga_hdl.chips.ist8310.regs import Ist8310Sample, Register
+from fpga_hdl.verification.amaranth_i2c import run_i2c_testbench
+from fpga_hdl.verification.scoreboard import Scoreboard
 
 SYS_CLK_HZ = 10e6
 
 
-def cycles(ns: float) -> int:
-    return math.ceil(ns * SYS_CLK_HZ / 1e9)
-
-
-class SimController:
-    """Cycle-level I2C controller for amaranth.sim: drives SCL and SDA, reads the wired-AND."""
-
-    def __init__(self, ctx, scl, sda_ctrl, sda_bus, timing=FAST_MODE) -> None:
-        self.ctx, self.scl, self.sda_ctrl, self.sda_bus = ctx, scl, sda_ctrl, sda_bus
-        self.low = cycles(timing.t_low_ns)
-        self.high = cycles(timing.t_high_ns)
-        self.setup = cycles(timing.t_su_sta_ns)
-        self.hold = cycles(timing.t_hd_sta_ns)
-        self.buf = cycles(timing.t_buf_ns)
-        self.su_dat = cycles(timing.t_su_dat_ns)
-
-    async def wait(self, n: int) -> None:
-        await self.ctx.tick().repeat(n)
-
-    async def start(self) -> None:
-        """START, or repeated START when SCL is low."""
-        ctx = self.ctx
-        if not ctx.get(self.scl):
-            ctx.set(self.sda_ctrl, 1)
-            await self.wait(self.low)
-            ctx.set(self.scl, 1)
-            await self.wait(self.setup)
-        ctx.set(self.sda_ctrl, 0)
-        await self.wait(self.hold)
-        ctx.set(self.scl, 0)
-
-    async def stop(self) -> None:
-        ctx = self.ctx
-        ctx.set(self.sda_ctrl, 0)
-        await self.wait(self.low)
-        ctx.set(self.scl, 1)
-        await self.wait(self.setup)
-        ctx.set(self.sda_ctrl, 1)
-        await self.wait(self.buf)
-
-    async def clock_bit(self, level: int) -> int:
-        """One SCL pulse sending ``level`` (1 = release); returns SDA sampled while high."""
-        ctx = self.ctx
-        ctx.set(self.sda_ctrl, level)
-        await self.wait(self.low)
-        ctx.set(self.scl, 1)
-        await self.wait(self.high)
-        bit = ctx.get(self.sda_bus)
-        ctx.set(self.scl, 0)
-        return bit
-
-    async def write_byte(self, byte: int) -> bool:
-        for i in range(7, -1, -1):
-            await self.clock_bit(byte >> i & 1)
-        return await self.clock_bit(1) == 0
-
-    async def read_byte(self, *, ack: bool) -> int:
-        byte = 0
-        for _ in range(8):
-            byte = byte << 1 | await self.clock_bit(1)
-        await self.clock_bit(0 if ack else 1)
-        return byte
-
-    async def write_read(self, address: int, write: bytes, read_len: int, *, scl_hz: float):
-        return await combined_transfer(self, address, write, read_len)
-
-
 def simulate(core: Ist8310Core, bench):
     """Run ``bench(ctx, controller, core)`` against ``core`` on an open-drain bus."""
-    m = Module()
-    m.submodules.core = core
-    scl, sda_ctrl = Signal(init=1), Signal(init=1)
-    sda_bus = Signal()
-    m.d.comb += [
-        core.i2c.scl.eq(scl),
-        sda_bus.eq(sda_ctrl & ~core.i2c.sda_oe),
-        core.i2c.sda_i.eq(sda_bus),
-    ]
-    sim = Simulator(m)
-    sim.add_clock(1 / SYS_CLK_HZ)
-    result = {}
-
-    async def testbench(ctx):
-        await ctx.tick().repeat(8)
-        result["value"] = await bench(ctx, SimController(ctx, scl, sda_ctrl, sda_bus), core)
-
-    sim.add_testbench(testbench)
-    sim.run()  # returns when the testbench does; the clock is a background process
-    return result["value"]
+    return run_i2c_testbench(
+        core, core.i2c, lambda ctx, controller: bench(ctx, controller, core), sys_clk_hz=SYS_CLK_HZ
+    )
 
 
 async def load(ctx, core: Ist8310Core, sample: Ist8310Sample) -> None:
@@ -354,14 +269,13 @@ def test_rtl_and_tlm_give_identical_bytes_for_random_traffic():
 
     model = Ist8310Model()
     tlm_bus = TlmI2cBus({0x0E: model})
-    tlm, now = [], 0
-
-    for (step, write, read_len), sample in zip(traffic, samples, strict=True):
+    scoreboard, now = Scoreboard(), 0
+    for (step, write, read_len), sample, observed in zip(traffic, samples, rtl, strict=True):
         now += step
         model.now_us = now
         model.load_sample(sample)
-        tlm.append(asyncio.run(tlm_bus.write_read(0x0E, write, read_len, scl_hz=400e3)))
-    assert rtl == tlm
+        expected = asyncio.run(tlm_bus.write_read(0x0E, write, read_len, scl_hz=400e3))
+        scoreboard.check(f"i2c 0x0E write {write.hex()} read {read_len}", expected, observed)
     assert any(r and r != bytes(len(r)) for r in rtl)  # the traffic really read data
 
 

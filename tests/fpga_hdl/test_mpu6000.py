@@ -6,12 +6,13 @@ import asyncio
 import numpy as np
 import pytest
 
-from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
 from fpga_hdl.buses.transactions import TlmSpiBus
 from fpga_hdl.chips.mpu6000 import regs
 from fpga_hdl.chips.mpu6000.core import Mpu6000
 from fpga_hdl.chips.mpu6000.driver import Mpu6000Driver, decode
 from fpga_hdl.chips.mpu6000.model import Mpu6000Model
+from fpga_hdl.verification.amaranth_spi import AmaranthSpiController, run_spi_testbench
+from fpga_hdl.verification.scoreboard import Scoreboard
 
 SYS_CLK_HZ = 50e6
 
@@ -132,9 +133,10 @@ def test_driver_round_trip_through_rtl_equals_tlm_within_quantization():
     model = Mpu6000Model()
     tlm = Mpu6000Driver(TlmSpiBus({"imu": model}))
     asyncio.run(tlm.start())
-    for (accel, gyro, temp), rtl in zip(samples, rtl_bytes, strict=True):
+    scoreboard = Scoreboard()
+    for index, ((accel, gyro, temp), rtl) in enumerate(zip(samples, rtl_bytes, strict=True)):
         model.load_sample(regs.Mpu6000Sample.from_si(accel, gyro, temp))
-        assert asyncio.run(tlm.read_raw()) == rtl
+        scoreboard.check(f"read_raw of sample {index}", asyncio.run(tlm.read_raw()), rtl)
         reading = decode(rtl, gyro_config, accel_config)
         # Loaded rounded at the finest LSB, then shifted (floored) to the ±16 g / ±2000 °/s
         # LSB: the error is under one register LSB plus half a load LSB.

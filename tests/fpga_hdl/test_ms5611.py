@@ -4,12 +4,13 @@ import asyncio
 
 import pytest
 
-from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
 from fpga_hdl.buses.transactions import TlmSpiBus
 from fpga_hdl.chips.ms5611 import regs
 from fpga_hdl.chips.ms5611.core import Ms5611
 from fpga_hdl.chips.ms5611.driver import Ms5611Driver, Ms5611Error
 from fpga_hdl.chips.ms5611.model import Ms5611Model, raw_from_si
+from fpga_hdl.verification.amaranth_spi import AmaranthSpiController, run_spi_testbench
+from fpga_hdl.verification.scoreboard import Scoreboard
 
 SYS_CLK_HZ = 50e6
 
@@ -132,7 +133,7 @@ def test_driver_round_trip_rtl_equals_tlm():
 
     tlm = Ms5611Driver(TlmSpiBus({"baro": model}), sleep_us)
     asyncio.run(tlm.start())
-    assert asyncio.run(tlm.measure()) == rtl
+    Scoreboard().check("PX4 measure()", asyncio.run(tlm.measure()), rtl)
 
 
 def test_driver_rejects_a_bad_crc():
@@ -167,9 +168,8 @@ def test_model_transfer_matches_rtl_for_every_command():
     rtl = run_on_rtl(script)
     model = Ms5611Model()
     model.load_sample(0xABCDEF, 1)
-    tlm = []
-    for tx in commands:
-        tlm.append(model.transfer(tx))
+    scoreboard = Scoreboard()
+    for tx, observed in zip(commands, rtl, strict=True):
+        scoreboard.check(f"spi baro {tx.hex()}", model.transfer(tx), observed)
         model.now_us += 10_000
-    assert rtl == tlm
     assert rtl[9] == bytes([0, 0xAB, 0xCD, 0xEF])

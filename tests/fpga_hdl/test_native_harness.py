@@ -28,6 +28,7 @@ from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.cosim.harness import CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason
 from fpga_hdl.top import UART_CLK_HZ
+from fpga_hdl.verification.scoreboard import Scoreboard
 from tests.fpga_hdl.transcript import run_script, tlm_transcript
 
 pytestmark = [
@@ -68,7 +69,7 @@ class _HostChips:
 
 def test_compiled_harness_equals_tlm_byte_for_byte(harness):
     native = _run(run_script(harness.spi, harness.i2c, _HostChips(harness)))
-    assert native == asyncio.run(tlm_transcript())
+    Scoreboard("compiled harness vs TLM").check_transcript(asyncio.run(tlm_transcript()), native)
     assert any(rx.startswith("nack") for _, _, rx in native)  # the absent address
     sys_cycles, _, _ = harness.cycles()
     assert sys_cycles > 10_000  # the transfers really ran on the system clock
@@ -91,12 +92,13 @@ def test_px4s_gps_handshake_is_answered_and_timed_as_the_twin_predicts(harness):
     twin's bytes, and the line time the peer measures is ``line_cycles`` to the cycle, on
     the UART clock alone: the system clock does not run for an exchange."""
     model = UbloxM8Model()
-    twin = TlmUbloxUart(model, clk_hz=UART_CLK_HZ)
+    twin, scoreboard = TlmUbloxUart(model, clk_hz=UART_CLK_HZ), Scoreboard()
     for step in px4_configuration():
         before = harness.cycles()
         rtl = _run(harness.uart.exchange(step.frame, baud=step.baud))
         after = harness.cycles()
-        assert rtl == asyncio.run(twin.exchange(step.frame, baud=step.baud))
+        expected = asyncio.run(twin.exchange(step.frame, baud=step.baud))
+        scoreboard.check(f"{step.frame.hex()} at {step.baud} Bd", expected, rtl)
         divider = divider_for(UART_CLK_HZ, step.baud)
         assert harness.uart.line_cycles == line_cycles(len(rtl.data), divider)
         assert after[:2] == before[:2]
@@ -129,7 +131,7 @@ def test_nav_pvt_follows_cfg_rate_on_the_rtl_as_on_the_twin():
     try:
         harness.reset()
         model = UbloxM8Model()
-        twin = TlmUbloxUart(model, clk_hz=UART_CLK_HZ)
+        twin, scoreboard = TlmUbloxUart(model, clk_hz=UART_CLK_HZ), Scoreboard()
         rtl_driver, tlm_driver = UbloxDriver(harness.uart), UbloxDriver(twin)
         _run(rtl_driver.configure())
         asyncio.run(tlm_driver.configure())
@@ -143,7 +145,8 @@ def test_nav_pvt_follows_cfg_rate_on_the_rtl_as_on_the_twin():
                 ubx.CLASS_CFG, ubx.ID_CFG_RATE, struct.pack("<HHH", meas_rate_ms, 1, 0)
             )
             rtl = _run(harness.uart.exchange(frame, baud=115200))
-            assert rtl == asyncio.run(twin.exchange(frame, baud=115200))
+            expected = asyncio.run(twin.exchange(frame, baud=115200))
+            scoreboard.check(f"CFG-RATE {meas_rate_ms} ms", expected, rtl)
             (reply,) = UbxDecoder().feed(rtl.data)
             assert (reply.cls, reply.msg_id, reply.payload) == (ubx.CLASS_ACK, answer, frame[2:4])
             itows = []
@@ -153,7 +156,8 @@ def test_nav_pvt_follows_cfg_rate_on_the_rtl_as_on_the_twin():
                 harness.host.load({"gps": pvt.fields()}, now_us=epoch_us)
                 model.load_fix(pvt)
                 rtl = _run(harness.uart.exchange(b"", baud=115200))
-                assert rtl == asyncio.run(twin.exchange(b"", baud=115200))
+                expected = asyncio.run(twin.exchange(b"", baud=115200))
+                scoreboard.check(f"epoch {k} at {meas_rate_ms} ms", expected, rtl)
                 itows += [
                     ubx.NavPvt.from_payload(f.payload).iTOW for f in UbxDecoder().feed(rtl.data)
                 ]

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from fpga_hdl.buses.amaranth_spi import AmaranthSpiController, run_spi_testbench
 from fpga_hdl.buses.spi_target import check_sys_clk_for_spi
 from fpga_hdl.chips.mpu6000 import regs
 from fpga_hdl.chips.mpu6000.core import Mpu6000
+from fpga_hdl.verification.amaranth_spi import AmaranthSpiController, run_spi_testbench
 
 SYS_CLK_HZ = 50e6
 

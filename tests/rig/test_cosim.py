@@ -19,6 +19,7 @@ from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
 from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix
 from fpga_hdl.chips.ublox.link import BAD_CHECKSUM_FLIP, GpsFault, receiver_solution
+from fpga_hdl.verification.scoreboard import Scoreboard
 from rig.chips.channel import (
     decode_frame,
     decode_readout,
@@ -159,6 +160,7 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
     corrupted, widths, timed_out, pwm, boundary, fixes = set(), set(), [], [], 0, []
     loaded, collected = {}, {}
+    cocotb_rtl, compiled_rtl = Scoreboard("RTL vs TLM"), Scoreboard("compiled RTL vs TLM")
     for frame in _frames(np.random.default_rng(11), 400, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
         fixes += [(frame.now_us, received) for received in reference.gps]
@@ -167,9 +169,8 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
             loaded[k] = frame.range
             nacked = [chip for chip, _ in reference.bus_errors if chip == "lidarlite"]
             collected[k] = "nack" if nacked else reference.range
-        assert rtl == reference, f"frame at {frame.now_us} µs: RTL {rtl} != TLM {reference}"
-        native = native_layer.frame(frame)
-        assert native == reference, f"frame at {frame.now_us} µs: compiled RTL {native} != TLM"
+        cocotb_rtl.check(f"frame at {frame.now_us} µs", reference, rtl)
+        compiled_rtl.check(f"frame at {frame.now_us} µs", reference, native_layer.frame(frame))
         pwm.append(rtl.pwm_widths_us)
         if pwm[-1] == BOUNDARY_WIDTHS_US != pwm[-2]:
             # The falls came 3, 2, 1, 0 µs before the previous frame: there, only motor 0
@@ -230,10 +231,12 @@ def test_a_coarser_pwm_tick_is_the_same_on_every_layer():
     rtl = _started(RtlSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
     native = _started(NativeSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3, frame_us=4000))
     tlm = _started(TlmSensorLayer(pwm_tick_hz=250e3))
+    cocotb_rtl, compiled_rtl = Scoreboard("RTL vs TLM"), Scoreboard("compiled RTL vs TLM")
     try:
         for frame in _frames(np.random.default_rng(12), 120, frame_us=4000):
-            readout = rtl.frame(frame)
-            assert readout == tlm.frame(frame) == native.frame(frame), f"frame at {frame.now_us} µs"
+            readout, reference = rtl.frame(frame), tlm.frame(frame)
+            cocotb_rtl.check(f"frame at {frame.now_us} µs", reference, readout)
+            compiled_rtl.check(f"frame at {frame.now_us} µs", reference, native.frame(frame))
             assert all(width % 4 == 0 for width in readout.pwm_widths_us)
     finally:
         rtl.close()

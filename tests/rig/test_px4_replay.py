@@ -551,7 +551,10 @@ def test_the_8s_quad_is_armed_in_stabilized_at_its_logs_start(tmp_path):
     options = ReplayOptions(autopilot="px4", px4_dir=build, vehicle="quad4001_8s")
     quad = plan_replay(QUAD4001, options)
     assert quad.start_s == QUAD_START_S
-    assert [(e.kind, e.nav_state) for e in quad.pilot.events[:2]] == [("mode", STABILIZED), ("arm", None)]
+    assert [(e.kind, e.nav_state) for e in quad.pilot.events[:2]] == [
+        ("mode", STABILIZED),
+        ("arm", None),
+    ]
     timed = [(type(c).__name__, c.at_s) for c in quad.commands if not isinstance(c, Track)]
     assert timed[:2] == [("SetMode", PX4_BOOT_S - ARM_MODE_LEAD_S), ("Arm", PX4_BOOT_S)]
     assert quad.learned["MPC_THR_HOVER"] == pytest.approx(0.657, abs=0.002)

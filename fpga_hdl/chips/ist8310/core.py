@@ -60,9 +60,7 @@ class Ist8310Core(wiring.Component):
     fault: In(BUS_FAULT)
 
     def __init__(self, *, sys_clk_hz: float, address: int = regs.DEFAULT_ADDRESS) -> None:
-        if address not in regs.ADDRESSES:
-            choices = ", ".join(f"0x{a:02X}" for a in regs.ADDRESSES)
-            raise ValueError(f"IST8310 address must be one of {choices}, not {address!r}")
+        regs.check_address(address)
         self.address = address
         self.sampling = TargetSampling.for_clock(sys_clk_hz)
         super().__init__()

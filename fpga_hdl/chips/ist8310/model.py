@@ -20,9 +20,7 @@ class Ist8310Model:
     """
 
     def __init__(self, address: int = regs.DEFAULT_ADDRESS) -> None:
-        if address not in regs.ADDRESSES:
-            choices = ", ".join(f"0x{a:02X}" for a in regs.ADDRESSES)
-            raise ValueError(f"IST8310 address must be one of {choices}, not {address!r}")
+        regs.check_address(address)
         self.address = address
         self.now_us = 0
         #: Fault injection, as the core's ``fault_mute`` / ``fault_flip`` ports.

@@ -21,6 +21,14 @@ from amaranth.lib import data
 ADDRESSES = (0x0C, 0x0D, 0x0E, 0x0F)
 DEFAULT_ADDRESS = 0x0E
 
+
+def check_address(address: int) -> None:
+    """Reject an address the chip's two address pins cannot select (core and model alike)."""
+    if address not in ADDRESSES:
+        choices = ", ".join(f"0x{a:02X}" for a in ADDRESSES)
+        raise ValueError(f"IST8310 address must be one of {choices}, not {address!r}")
+
+
 #: WAI (Who Am I) value.
 DEVICE_ID = 0x10
 

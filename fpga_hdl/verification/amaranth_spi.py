@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 from amaranth.sim import Simulator
 
-from fpga_hdl.buses.transactions import UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import check_clock_hz, check_spi_mode, check_spi_request
 
 
 class AmaranthSpiController:
@@ -34,8 +34,7 @@ class AmaranthSpiController:
         cs_hold_s: float = 500e-9,
         idle_level: int = 1,
     ) -> None:
-        if mode not in (0, 3):
-            raise ValueError(f"SPI mode must be 0 or 3 (the chips' modes), not {mode!r}")
+        check_spi_mode(mode)
         self.ctx = ctx
         self.devices = dict(devices)
         self.mode = mode
@@ -54,9 +53,8 @@ class AmaranthSpiController:
 
     async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
         check_clock_hz("sclk_hz", sclk_hz)
-        chip = self.devices.get(device)
-        if chip is None:
-            raise UnknownDevice(f"no SPI device {device!r}; wired: {', '.join(self.devices)}")
+        check_spi_request(device, tx, self.devices)
+        chip = self.devices[device]
         half_s = 0.5 / sclk_hz
         ctx = self.ctx
         ctx.set(chip.cs_n, 0)

@@ -21,11 +21,11 @@ from cocotb.clock import Clock
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
-from fpga_hdl.buses.i2c_controller import timing_for  # one place for the stretched timing
+from fpga_hdl.buses.i2c_controller import timing_for
 from fpga_hdl.buses.i2c_target import FAST_MODE, I2cTiming
 from fpga_hdl.buses.transactions import combined_transfer
 
-__all__ = ["CocotbI2cMaster", "I2cTimingViolation", "timing_for"]
+__all__ = ["CocotbI2cMaster", "I2cTimingViolation"]
 
 
 class I2cTimingViolation(AssertionError):

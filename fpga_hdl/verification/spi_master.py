@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from cocotb.triggers import Timer
 
-from fpga_hdl.buses.transactions import UnknownDevice, check_clock_hz
+from fpga_hdl.buses.transactions import check_clock_hz, check_spi_mode, check_spi_request
 
 
 @dataclass(frozen=True)
@@ -28,8 +28,7 @@ class SpiMasterTiming:
     idle_level: int = 1  # an undriven MISO reads as the pull-up
 
     def __post_init__(self) -> None:
-        if self.mode not in (0, 3):
-            raise ValueError(f"SPI mode must be 0 or 3 (the chips' modes), not {self.mode!r}")
+        check_spi_mode(self.mode)
         for name in ("cs_setup_s", "cs_hold_s", "cs_idle_s"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, not {getattr(self, name)!r}")
@@ -77,11 +76,8 @@ class CocotbSpiMaster:
 
     async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
         check_clock_hz("sclk_hz", sclk_hz)
-        cs_n = self.chip_selects.get(device)
-        if cs_n is None:
-            raise UnknownDevice(
-                f"no SPI device {device!r} on this bus; wired: {', '.join(self.chip_selects)}"
-            )
+        check_spi_request(device, tx, self.chip_selects)
+        cs_n = self.chip_selects[device]
         timing, half = self.timing, Timer(_ps(0.5 / sclk_hz), unit="ps")
         mode3 = timing.mode == 3
         cs_n.value = 0
