@@ -265,9 +265,9 @@ def assess(
         try:
             results.append(_run(test, logs, plan, caveats))
         except CredibilityError as exc:
-            reason = Caveat(test.name, _reason(exc), f"{exc}; not scored")
-            not_scored.append(NotScored(test, reason, str(exc)))
-            caveats.append(reason)
+            caveat = Caveat(test.name, _reason(exc), f"{exc}; not scored")
+            not_scored.append(NotScored(test, caveat, str(exc)))
+            caveats.append(caveat)
     if strict and not_scored:
         first = not_scored[0]
         more = f" (and {len(not_scored) - 1} more tests not scored)" if len(not_scored) > 1 else ""
@@ -350,7 +350,9 @@ def _note(notes: list[Caveat], caveat: Caveat | None) -> None:
         notes.append(caveat)
 
 
-def _windowed(log: LogFile, spec: SignalSpec, segment_s, plan: Plan) -> signals.Signal:
+def _windowed(
+    log: LogFile, spec: SignalSpec, segment_s: tuple[float, float], plan: Plan
+) -> signals.Signal:
     return signals.window(log.signal(spec), segment_s, plan.max_gap_s, spec.drop_nan)
 
 
@@ -383,7 +385,11 @@ def _check_arming(log: LogFile, segment_s: tuple[float, float], armed: bool) -> 
 
 
 def _performance_signal(
-    test: PerformanceTest, log: LogFile, spec: SignalSpec, segment_s, plan: Plan
+    test: PerformanceTest,
+    log: LogFile,
+    spec: SignalSpec,
+    segment_s: tuple[float, float],
+    plan: Plan,
 ) -> signals.Signal:
     """The test's window of one log, averaged to the test's ``average_hz`` when it has one
     (after the check that it holds the test's arming state, if the test names one)."""
@@ -410,6 +416,7 @@ def _parameter(test: PerformanceTest, sig: signals.Signal, values: np.ndarray) -
         return float(values.mean())
     if test.parameter == "std":
         return float(values.std(ddof=1))
+    assert test.steady_window_s is not None  # __post_init__ sets it with the segment
     metrics = signals.step_metrics(sig.time_s, values, test.settling_band, test.steady_window_s)
     return {
         "overshoot": metrics.overshoot_pct,
@@ -431,6 +438,7 @@ def _performance_row(
             "η_p is undefined; give the test a 'threshold'",
         )
     else:
+        assert test.k_p is not None  # load_plan gives every test the plan's k_p
         threshold = indices.performance_threshold(p_e, p_s, test.k_p)
         rule = "K_p·|p_e|" if p_e != 0.0 else "K_p·|p_s| (p_e = 0)"
     error = indices.performance_error(p_e, p_s)
@@ -447,17 +455,22 @@ def _performance(
             test, lambda role: _performance_row(test, plan, role, p_e, test.values[role]), notes
         )
         return PerformanceResult(test, rows)
+    # __post_init__ requires the real signal and segment but for "value", and fills the sim's
+    signal, segment_s = test.signal, test.segment_s
+    signal_sim, segment_sim_s = test.signal_sim, test.segment_sim_s
+    assert signal is not None
+    assert segment_s is not None
+    assert signal_sim is not None
+    assert segment_sim_s is not None
     real_role = test.roles.real
-    real = _performance_signal(test, logs[real_role], test.signal, test.segment_s, plan)
+    real = _performance_signal(test, logs[real_role], signal, segment_s, plan)
     real_values = _statistic_values(test, real)
     p_e = _parameter(test, real, real_values)
     consequence = RATE_CONSEQUENCES.get(test.parameter)
     sims: dict[str, signals.Signal] = {}
 
     def row(role: str) -> PerformanceRow:
-        sim = sims[role] = _performance_signal(
-            test, logs[role], test.signal_sim, test.segment_sim_s, plan
-        )
+        sim = sims[role] = _performance_signal(test, logs[role], signal_sim, segment_sim_s, plan)
         if consequence:
             real_logged, sim_logged = Logged.of(real_role, real), Logged.of(role, sim)
             _note(notes, rate_mismatch(test.name, real_logged, sim_logged, consequence))
@@ -482,12 +495,17 @@ def _alignment_shift(test: TimeTest, real_log: LogFile, sim_log: LogFile) -> flo
     align = test.align
     if align.method == "none":
         return 0.0
+    # TimeTest.__post_init__ fills the alignment's signals and the sim segment
+    assert align.signal is not None
+    assert align.signal_sim is not None
+    assert test.segment_sim_s is not None
     real = real_log.signal(align.signal)
     sim = sim_log.signal(align.signal_sim)
     (t_a, t_b), (s_a, s_b) = test.segment_s, test.segment_sim_s
     lag = align.max_lag_s
     if align.method == "event":
         level, direction = align.threshold, align.direction
+        assert level is not None  # Alignment.__post_init__: an event needs its level
         t_real = signals.first_crossing(real, level, direction, (t_a - lag, t_b + lag))
         t_sim = signals.first_crossing(sim, level, direction, (s_a - lag, s_b + lag))
         return (t_sim - s_a) - (t_real - t_a)
@@ -513,6 +531,7 @@ def _time(test: TimeTest, logs: dict[str, LogFile], plan: Plan, notes: list[Cave
     if test.threshold is not None:
         threshold, rule = test.threshold, "plan"
     else:
+        assert test.k_p is not None  # load_plan gives every test the plan's k_p
         threshold, rule = indices.range_threshold(y_e, test.k_p), "K_p·(max y_e − min y_e)"
     require_epsilon("ε_t", threshold, rule, test.unit)
     noise_floor = signals.noise_sigma(y_e)
@@ -523,10 +542,15 @@ def _time(test: TimeTest, logs: dict[str, LogFile], plan: Plan, notes: list[Cave
     consequence = RATE_CONSEQUENCES["time"]
     _note(notes, interpolated(test.name, Logged.of(real_role, real), on_grid, consequence))
 
+    # __post_init__ fills them from the real ones
+    signal_sim, segment_sim_s = test.signal_sim, test.segment_sim_s
+    assert signal_sim is not None
+    assert segment_sim_s is not None
+
     def row(role: str) -> TimeRow:
         shift = _alignment_shift(test, real_log, logs[role])
-        segment = (test.segment_sim_s[0] + shift, test.segment_sim_s[1] + shift)
-        sim = _windowed(logs[role], test.signal_sim, segment, plan)
+        segment = (segment_sim_s[0] + shift, segment_sim_s[1] + shift)
+        sim = _windowed(logs[role], signal_sim, segment, plan)
         _note(notes, interpolated(test.name, Logged.of(role, sim), on_grid, consequence))
         y_s = curve(sim, segment[0])
         error = indices.rms_error(y_e, y_s)
@@ -566,9 +590,12 @@ def _frequency(
         or _windowed(logs[real_role], test.output, test.segment_s, plan).rate_hz()
     )
     freqs = spectral.log_grid(test.band_hz, test.n_points)
-    shortest_s = min(
-        test.segment_s[1] - test.segment_s[0], test.segment_sim_s[1] - test.segment_sim_s[0]
-    )
+    # __post_init__ fills them from the real ones
+    input_sim, output_sim, segment_sim_s = test.input_sim, test.output_sim, test.segment_sim_s
+    assert input_sim is not None
+    assert output_sim is not None
+    assert segment_sim_s is not None
+    shortest_s = min(test.segment_s[1] - test.segment_s[0], segment_sim_s[1] - segment_sim_s[0])
     windows = test.windows_s or spectral.default_windows(shortest_s, test.band_hz)
 
     def estimate(
@@ -593,7 +620,7 @@ def _frequency(
     real = estimate(real_role, test.input, test.output, test.segment_s)
 
     def row(role: str) -> FrequencyRow:
-        sim = estimate(role, test.input_sim, test.output_sim, test.segment_sim_s)
+        sim = estimate(role, input_sim, output_sim, segment_sim_s)
         return _compare_responses(test, real, sim, role, plan.pass_mark)
 
     rows = _rows(test, row, notes)
@@ -639,6 +666,7 @@ def _compare_responses(
     w = weight[included]
     e_mag = indices.weighted_rms_error(m_e, m_s, w)
     e_pha = indices.weighted_rms_error(p_e, p_s, w)
+    assert test.k_p is not None  # load_plan gives every test the plan's k_p
     eps_mag = test.threshold_mag_db or indices.range_threshold(m_e, test.k_p)
     eps_pha = test.threshold_phase_deg or indices.range_threshold(p_e, test.k_p)
     rules = {

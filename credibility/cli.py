@@ -9,6 +9,7 @@ import contextlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 from rich.console import Console
 from rich.markup import escape
@@ -39,7 +40,7 @@ thresholds below the real log's noise."""
 class _Parser(argparse.ArgumentParser):
     """argparse that exits with the package's bad-input code and a one-line message."""
 
-    def error(self, message: str) -> None:
+    def error(self, message: str) -> NoReturn:
         self.exit(ExitCode.BAD_INPUT, f"credibility: error: {message}\n")
 
 
@@ -201,7 +202,7 @@ def _paper(console: Console) -> int:
     table = Table(title="Dai et al., section 4: printed vs recomputed (K_e = 0.75)")
     for column in ("section", "figure", "inputs", "printed %", "recomputed %", "status"):
         table.add_column(column)
-    notes = []
+    notes: list[str] = []
     for fig in paper_comparison():
         style = {"match": "green", "within rounding": "yellow", "mismatch": "red"}[fig.status]
         status = f"[{style}]{fig.status}[/]"

@@ -7,6 +7,7 @@ report shows comes from one place.
 """
 
 from collections.abc import Mapping
+from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -30,7 +31,8 @@ CIFER_PHASE_WEIGHT = 0.01745
 #: 1 / (1 − e^{-1}) ≈ 1.58: the coherence weight reaches 1 at γ² = 1.
 _COHERENCE_WEIGHT_SCALE = 1.0 / (1.0 - np.exp(-1.0))
 
-KINDS = ("performance", "time", "frequency")
+Kind = Literal["performance", "time", "frequency"]
+KINDS: tuple[str, ...] = get_args(Kind)
 
 
 def pass_mark_gain(pass_mark: float = DEFAULT_PASS_MARK) -> float:

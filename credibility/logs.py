@@ -33,7 +33,10 @@ _HEADING_FRAME = ("v_forward", "v_right")
 _PATH = re.compile(r"^(?P<topic>[A-Za-z_][\w]*)(?:\.(?P<instance>\d+))?\.(?P<field>[\w.\[\]]+)$")
 
 #: Named unit conversions a plan may apply (factor multiplies the logged value).
-CONVERSIONS = {
+Conversion = Literal[
+    "rad->deg", "deg->rad", "rad/s->deg/s", "deg/s->rad/s", "m/s2->g", "g->m/s2", "us->s"
+]
+CONVERSIONS: dict[Conversion, float] = {
     "rad->deg": 180.0 / np.pi,
     "deg->rad": np.pi / 180.0,
     "rad/s->deg/s": 180.0 / np.pi,
@@ -51,7 +54,7 @@ class SignalSpec:
     #: ``topic[.instance].field``
     path: Annotated[str, Field(strict=True, pattern=_PATH.pattern)]
     scale: Number = 1.0
-    convert: Literal[tuple(CONVERSIONS)] | None = None
+    convert: Conversion | None = None
     #: Drop the samples that are NaN (a topic logged with gaps) instead of failing.
     drop_nan: Annotated[bool, Field(strict=True)] = False
 
@@ -131,7 +134,9 @@ def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Pa
     )
 
 
-def _euler(w, x, y, z) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _euler(
+    w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZYX (yaw-pitch-roll) angles of a Hamilton quaternion, as PX4's matrix::Euler; yaw
     unwrapped. scipy's Rotation, so credibility needs no other package's conventions."""
     rotation = Rotation.from_quat(np.column_stack((x, y, z, w)))  # scipy: scalar last

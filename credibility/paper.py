@@ -71,7 +71,10 @@ def _half_unit(printed: str) -> float:
     A printed 0 is exact: it is the error of the real curve against itself (Table 2).
     """
     number = Decimal(printed)
-    return 0.0 if number.is_zero() else 0.5 * 10.0 ** number.as_tuple().exponent
+    exponent = number.as_tuple().exponent
+    if not isinstance(exponent, int):  # 'n', 'N', 'F': NaN, sNaN, infinity
+        raise ValueError(f"printed value {printed!r} is not a finite number")
+    return 0.0 if number.is_zero() else 0.5 * 10.0**exponent
 
 
 def _bounds(printed: str) -> tuple[float, float, float]:

@@ -11,7 +11,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import AfterValidator, BeforeValidator, Field
 
@@ -29,7 +29,10 @@ from hil_config import (
     table,
 )
 
-PARAMETERS = ("mean", "std", "overshoot", "rise_time", "settling_time", "steady_state", "value")
+Parameter = Literal[
+    "mean", "std", "overshoot", "rise_time", "settling_time", "steady_state", "value"
+]
+PARAMETERS: tuple[str, ...] = get_args(Parameter)
 PARAMETER_UNITS = {"overshoot": "%", "rise_time": "s", "settling_time": "s"}
 
 
@@ -123,7 +126,7 @@ class PerformanceTest(_Test):
     the numbers from ``values`` (role → value) instead of a signal."""
 
     kind: Literal["performance"] = "performance"
-    parameter: Literal[PARAMETERS]
+    parameter: Parameter
     signal: Signal | None = None
     signal_sim: Signal | None = None
     segment_s: Span | None = None
@@ -155,6 +158,7 @@ class PerformanceTest(_Test):
         for key in ("signal", "segment_s"):
             if getattr(self, key) is None:
                 raise FieldError(key, None, f"is required by parameter = {self.parameter!r}")
+        assert self.segment_s is not None  # checked just above
         self._default("signal_sim", self.signal)
         self._default("segment_sim_s", self.segment_s)
         self._default("steady_window_s", 0.1 * (self.segment_s[1] - self.segment_s[0]))
@@ -179,6 +183,7 @@ class TimeTest(_Test):
         self._default("signal_sim", self.signal)
         self._default("segment_sim_s", self.segment_s)
         real, sim = self.segment_s, self.segment_sim_s
+        assert sim is not None  # filled just above
         if abs((sim[1] - sim[0]) - (real[1] - real[0])) > 1e-9:
             raise FieldError("segment_sim_s", sim, f"must last as long as segment_s {list(real)}")
         if self.align.method != "none":
@@ -229,7 +234,7 @@ class NotScorable:
     (a log without GNSS has no position test) and not only what failed to score."""
 
     name: Text
-    kind: Literal[indices.KINDS]
+    kind: indices.Kind
     reason: Text
 
 
@@ -370,7 +375,9 @@ def with_weights(plan: Plan, weights: Mapping[str, float], source: str) -> Plan:
         for kind in indices.KINDS
         if kind in kinds and merged[kind] == 0.0
     ]
-    normalized = {kind: alpha / total for kind, alpha in merged.items() if kind in kinds}
+    normalized: dict[str, float] = {
+        kind: alpha / total for kind, alpha in merged.items() if kind in kinds
+    }
     return replace(plan, weights=normalized, weights_source="; ".join(notes))
 
 

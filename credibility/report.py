@@ -16,6 +16,7 @@ from typing import Any
 
 import jinja2
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -100,13 +101,14 @@ def _not_scored_dict(item: NotScored) -> dict[str, Any]:
 
 
 def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
-    test = result.test
+    test: Test = result.test  # each branch below narrows it with the result
     common = _identity(test) | {
         "scored": True,
         "eta": result.eta,
         "passes_pass_mark": result.eta >= pass_mark,
     }
     if isinstance(result, PerformanceResult):
+        test = result.test
         return common | {
             "parameter": test.parameter,
             "unit": test.unit,
@@ -121,6 +123,7 @@ def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
             "rows": [vars(row) for row in result.rows],
         }
     if isinstance(result, TimeResult):
+        test = result.test
         align = test.align
         return common | {
             "unit": test.unit,
@@ -156,7 +159,7 @@ def _test_dict(result: Result, pass_mark: float) -> dict[str, Any]:
                 for row in result.rows
             ],
         }
-    real = result.real
+    test, real = result.test, result.real
     return common | {
         "input": _spec(test.input),
         "output": _spec(test.output),
@@ -333,7 +336,7 @@ def _time_plot(result: TimeResult) -> str:
     return _png(figure)
 
 
-def _shade_excluded(ax, freqs_hz: np.ndarray, included: np.ndarray) -> None:
+def _shade_excluded(ax: Axes, freqs_hz: np.ndarray, included: np.ndarray) -> None:
     """Shade each excluded grid point out to the log-midpoints with its neighbours."""
     edges = np.sqrt(freqs_hz[:-1] * freqs_hz[1:])
     lower = np.concatenate(([freqs_hz[0]], edges))
@@ -433,6 +436,9 @@ def _performance_section(result: PerformanceResult, pass_mark: float) -> dict[st
     test = result.test
     where = "values given in the plan"
     if test.signal:
+        # required with a signal
+        assert test.segment_s is not None
+        assert test.segment_sim_s is not None
         where = (
             f"{test.signal.path}, segment {list(test.segment_s)} s "
             f"(sim {list(test.segment_sim_s)} s)"
@@ -469,6 +475,7 @@ def _time_section(result: TimeResult, pass_mark: float) -> dict[str, Any]:
     rows.append(["zero output", f"{result.zero_output_error:.4g}",
                  _pct(result.zero_output_eta), "1.000", "—", "—"])  # fmt: skip
     max_lag = f" (max lag {align.max_lag_s:g} s)" if align.method != "none" else ""
+    assert test.segment_sim_s is not None  # __post_init__ fills it
     text = (
         f"Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s before alignment); "
         f"n_t = {result.n_t}; ε_t = {result.threshold:.4g} ({result.threshold_rule}, "
@@ -488,6 +495,7 @@ def _frequency_section(result: FrequencyResult, pass_mark: float) -> dict[str, A
          f"{r.cifer_j:.2f}", Verdict(r.eta >= pass_mark)]
         for r in result.rows
     ]  # fmt: skip
+    assert test.segment_sim_s is not None  # __post_init__ fills it
     text = (
         f"Segment {list(test.segment_s)} s (sim {list(test.segment_sim_s)} s), resampled at "
         f"{result.sample_rate_hz:g} Hz; {test.n_points} log-spaced points over "

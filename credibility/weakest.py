@@ -60,7 +60,7 @@ class TimeDiagnosis:
     @property
     def dominant(self) -> str | None:
         """``bias``, ``variance``, ``covariance`` or None when no share dominates."""
-        if self.u_m is None:
+        if self.u_m is None or self.u_s is None or self.u_c is None:
             return None
         shares = {"bias": self.u_m, "variance": self.u_s, "covariance": self.u_c}
         kind = max(shares, key=lambda k: shares[k])
@@ -291,6 +291,7 @@ def worst_band(
 
 
 def diagnose_performance(result: PerformanceResult, row: PerformanceRow) -> PerformanceDiagnosis:
+    assert result.test.unit is not None  # __post_init__ fills it from the parameter
     return PerformanceDiagnosis(
         parameter=result.test.parameter,
         unit=result.test.unit,

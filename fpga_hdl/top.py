@@ -44,6 +44,7 @@ GPS receiver is not in it: it takes its fix on its own clock (the sample synchro
 so a simulation runs the ``uart`` clock whenever it exchanges bytes with the receiver.
 """
 
+from amaranth.build import Platform
 from amaranth.hdl import Cat, ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
@@ -218,7 +219,7 @@ class SensorTop(wiring.Component):
         self.host = HostPort(SAMPLE_CHANNELS, FAULT_CHIPS, results)
         super().__init__()
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         host, imu, baro, mag, gps = self.host, self.imu, self.baro, self.mag, self.gps
         rangefinder = self.range

@@ -106,7 +106,8 @@ def parse(schema: type[T], document: Any, source: str, error: type[Exception]) -
     ``source`` starts the error's line: the file's path, or what the document stands for.
     """
     try:
-        return _adapter(schema).validate_python(document)
+        # mypy takes type[T] for unhashable (python/mypy#11470, #20409); a class is hashable
+        return _adapter(schema).validate_python(document)  # type: ignore[arg-type]
     except ValidationError as failure:
         raise error(f"{source}: {_describe(failure, document)}") from None
 

@@ -226,8 +226,23 @@ def battery_terminal(p: np.ndarray, v: int, charge_used_c: float, load_w: float)
     return voltage, load_w / voltage
 
 
+#: What :func:`_add_rotor` sums over the rotors: force FRD, moment FRD, angular momentum z.
+_ForceMoment = tuple[float, float, float, float, float, float, float]
+
+
 @_inlined
-def _add_rotor(w, v, i, ct, cq, voltage_ratio, vb0, vb1, vb2, fm):
+def _add_rotor(
+    w: np.ndarray,
+    v: int,
+    i: int,
+    ct: float,
+    cq: float,
+    voltage_ratio: float,
+    vb0: float,
+    vb1: float,
+    vb2: float,
+    fm: _ForceMoment,
+) -> _ForceMoment:
     """Rotor ``i`` of lane ``v`` in :func:`derivative`: its spin-up into the slopes, thrust
     and torque into the outputs, and its force, moment and angular momentum added to ``fm``
     = (f FRD, M FRD, h_z)."""
@@ -421,7 +436,7 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
 
 
 @_kernel
-def _dryden(w, v, n0, n1, n2, dt):
+def _dryden(w: np.ndarray, v: int, n0: float, n1: float, n2: float, dt: float) -> None:
     """Advance lane ``v``'s Dryden shaping filters one step (Euler-Maruyama), add the gust.
 
     Low-altitude MIL-F-8785C: σ_w = 0.1·W20, σ_u = σ_v = σ_w/(0.177 + 0.000823h)^0.4,
@@ -479,7 +494,7 @@ def _dryden(w, v, n0, n1, n2, dt):
 
 
 @_kernel
-def _air(w, noise, first, step, dt, lanes):
+def _air(w: np.ndarray, noise: np.ndarray, first: int, step: int, dt: float, lanes: int) -> None:
     """The air each lane flies through for the next substep: wind and density.
 
     Like the throttles, both are held over the substep's four derivative evaluations
@@ -516,7 +531,7 @@ _N_DYN = X_DYN * LANES
 
 
 @_kernel
-def _rk4_step(w, mount, dt, lanes):
+def _rk4_step(w: np.ndarray, mount: int, dt: float, lanes: int) -> None:
     """One classic RK4 substep of every lane, then the quaternion renormalized, rotor speeds
     kept >= 0 and rotor angles wrapped.
 
@@ -564,7 +579,7 @@ def _rk4_step(w, mount, dt, lanes):
 
 
 @_kernel
-def _ground_contact(w, dt, lanes):
+def _ground_contact(w: np.ndarray, dt: float, lanes: int) -> None:
     """The ground plane z = 0 (home): no sinking, no bounce, no sliding while resting.
 
     A vehicle that reaches the ground stays on it (inelastic contact), with the attitude
@@ -597,7 +612,7 @@ def _ground_contact(w, dt, lanes):
 
 
 @_kernel
-def _outputs(w, duration, lanes):
+def _outputs(w: np.ndarray, duration: float, lanes: int) -> None:
     """Outputs at the final state that the derivative does not give: on the ground the
     acceleration the contact allowed (the velocity's change over the advance: 0 at rest, the
     legs' deceleration in a touchdown), the wind, and the specific force f = Rᵀ·(a - g)
@@ -630,7 +645,15 @@ def _outputs(w, duration, lanes):
 
 
 @_kernel
-def _substeps(w, noise, first, mount, n_steps, dt, lanes):
+def _substeps(
+    w: np.ndarray,
+    noise: np.ndarray,
+    first: int,
+    mount: int,
+    n_steps: int,
+    dt: float,
+    lanes: int,
+) -> None:
     """``n_steps`` substeps of a chunk's scratch, then the outputs at the final state."""
     for axis in range(3):
         for v in range(lanes):
@@ -648,7 +671,18 @@ def _substeps(w, noise, first, mount, n_steps, dt, lanes):
 
 
 @_kernel
-def _advance_chunk(states, outputs, params, throttles, noise, work, chunk, mount, n_steps, dt):
+def _advance_chunk(
+    states: np.ndarray,
+    outputs: np.ndarray,
+    params: np.ndarray,
+    throttles: np.ndarray,
+    noise: np.ndarray,
+    work: np.ndarray,
+    chunk: int,
+    mount: int,
+    n_steps: int,
+    dt: float,
+) -> None:
     """Run vehicles ``chunk·LANES ...`` through ``n_steps`` substeps on the chunk's scratch.
 
     The scratch is one flat array, slot-major ([slot·LANES + lane]), and the kernels index
@@ -684,7 +718,7 @@ def _advance_chunk(states, outputs, params, throttles, noise, work, chunk, mount
 
 
 @_kernel
-def _finite(a):
+def _finite(a: np.ndarray) -> bool:
     """Whether every value is finite (a throttle the kernel can hold)."""
     finite = True
     for value in a.flat:

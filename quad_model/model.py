@@ -12,6 +12,7 @@ then be missed (it was, at 575 s). Frames and sensor slots are whole microsecond
 import enum
 import math
 from collections.abc import Sequence
+from typing import TypedDict, Unpack
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -300,12 +301,12 @@ class QuadBatch:
         quat = np.array(np.broadcast_to(attitude_quat, (n, 4)), dtype=float)
         norms = np.linalg.norm(quat, axis=1)
         if np.any(np.abs(norms - 1.0) > 1e-6):
-            raise ModelInputError(f"attitude_quat={attitude_quat} is not a unit quaternion")
+            raise ModelInputError(f"attitude_quat={attitude_quat!s} is not a unit quaternion")
         s[:, dyn.X_QUAT : dyn.X_QUAT + 4] = quat / norms[:, None]
         s[:, dyn.X_RATE : dyn.X_RATE + 3] = np.broadcast_to(angular_rate_frd_radps, (n, 3))
         speeds = np.broadcast_to(rotor_speed_radps, (n, ROTOR_COUNT))
         if np.any(speeds < 0):
-            raise ModelInputError(f"rotor_speed_radps={rotor_speed_radps} must be >= 0")
+            raise ModelInputError(f"rotor_speed_radps={rotor_speed_radps!s} must be >= 0")
         s[:, dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + ROTOR_COUNT] = speeds
         self._start_us, self._steps = int(time_us), 0
         s[:, dyn.X_TIME_US] = self._start_us
@@ -410,6 +411,18 @@ class QuadBatch:
         return (curve_speed - p[dyn.P_SPEED_OFFSET]) / p[dyn.P_SPEED_SLOPE]
 
 
+class _ResetState(TypedDict, total=False):
+    """:meth:`QuadBatch.reset`'s keywords, as :meth:`QuadModel.reset` passes them on."""
+
+    position_ned_m: ArrayLike
+    velocity_ned_mps: ArrayLike
+    attitude_quat: ArrayLike
+    angular_rate_frd_radps: ArrayLike
+    rotor_speed_radps: ArrayLike
+    time_us: int
+    battery_voltage_v: ArrayLike | None
+
+
 class QuadModel:
     """One vehicle at 5 kHz: what the rig's lockstep loop drives.
 
@@ -443,7 +456,7 @@ class QuadModel:
     def physics_dt_s(self) -> float:
         return self._batch.physics_dt_s
 
-    def reset(self, **state: ArrayLike) -> None:
+    def reset(self, **state: Unpack[_ResetState]) -> None:
         """Set the state; keywords as :meth:`QuadBatch.reset`."""
         self._batch.reset(**state)
 

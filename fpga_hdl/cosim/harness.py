@@ -42,6 +42,7 @@ ticks longer than ``PWM_RESULT_COPY_CYCLES + 0.5`` system periods, which SensorT
 
 from __future__ import annotations
 
+from amaranth.build import Platform
 from amaranth.hdl import (
     Cat,
     ClockDomain,
@@ -146,7 +147,7 @@ class HostWriter(wiring.Component):
             }
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         index = Signal(range(self.max_words + 1))
         settle = Signal(range(3))
@@ -217,7 +218,7 @@ class HostReader(wiring.Component):
             }
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         settle = Signal(range(PWM_RESULT_COPY_CYCLES))
         address = Signal(range(self.count))
@@ -301,7 +302,7 @@ class UartPeer(wiring.Component):
             }
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         m.submodules.uart_tx = uart_tx = UartTx()
         m.submodules.uart_rx = uart_rx = UartRx()
@@ -427,7 +428,7 @@ class CosimHarness(wiring.Component):
         members |= {"sync_cycles": Out(32), "pwm_cycles": Out(32), "uart_cycles": Out(32)}
         super().__init__(members)
 
-    def _forwarded(self):
+    def _forwarded(self) -> tuple[tuple[str, wiring.Component, tuple[str, ...]], ...]:
         return (
             ("spi", self.spi, _SPI_PORTS),
             ("i2c", self.i2c, _I2C_PORTS),
@@ -437,7 +438,7 @@ class CosimHarness(wiring.Component):
             ("uart", self.uart, _UART_PORTS),
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         top, spi, i2c = self.top, self.spi, self.i2c
         writer, reader = self.host_writer, self.host_reader

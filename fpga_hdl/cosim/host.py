@@ -8,6 +8,7 @@ bus costs no simulation time (the clocks run only while a bus is active).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any  # a cocotb DUT: its ports, the generated Verilog's, are known at run time
 
 from cocotb.triggers import Timer
 
@@ -24,7 +25,7 @@ class HostPortTimeout(RuntimeError):
 class CocotbHost:
     """Writes staged words, commits, and clocks SensorTop's ``sync`` domain on demand."""
 
-    def __init__(self, dut, host_map: HostPortMap, *, sys_clk_hz: float) -> None:
+    def __init__(self, dut: Any, host_map: HostPortMap, *, sys_clk_hz: float) -> None:
         self.dut = dut
         self.map = host_map
         self._half = Timer(round(0.5e12 / sys_clk_hz), unit="ps")

@@ -18,6 +18,7 @@ for the interface-timing tests that probe the specification limits.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any  # a cocotb DUT: its ports, the generated Verilog's, are known at run time
 
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
@@ -58,7 +59,7 @@ PWM_PHASE_PS = round(0.25e12 / HARNESS_SYS_CLK_HZ)
 class _Requester:
     """One peripheral's request toggle and acknowledge, and the inputs a request carries."""
 
-    def __init__(self, dut, prefix: str, inputs: Sequence[str] = ()) -> None:
+    def __init__(self, dut: Any, prefix: str, inputs: Sequence[str] = ()) -> None:
         self._request = getattr(dut, f"{prefix}_request")
         self._acknowledge = getattr(dut, f"{prefix}_acknowledge")
         self._inputs = [getattr(dut, f"{prefix}_{name}") for name in inputs]
@@ -88,7 +89,7 @@ class HarnessSpiBus:
     """A :class:`~fpga_hdl.buses.transactions.SpiBus` over the harness's SPI controller
     (mode 0 or 3)."""
 
-    def __init__(self, dut, *, mode: int = 0, sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:
+    def __init__(self, dut: Any, *, mode: int = 0, sys_clk_hz: float = HARNESS_SYS_CLK_HZ) -> None:
         check_spi_mode(mode)
         self.dut = dut
         self.sys_clk_hz = sys_clk_hz
@@ -121,7 +122,7 @@ class HarnessI2cBus:
     A requested rate is rounded down to the controller's rates (:data:`RATES_HZ`).
     """
 
-    def __init__(self, dut) -> None:
+    def __init__(self, dut: Any) -> None:
         self.dut = dut
         self.write_depth = len(dut.i2c_tx) // 8
         self.read_depth = len(dut.i2c_rx) // 8
@@ -156,7 +157,7 @@ class HarnessI2cBus:
 class HarnessUart:
     """:class:`~fpga_hdl.buses.transactions.UartPort` over the harness's GPS UART peer."""
 
-    def __init__(self, dut, *, clk_hz: float = UART_CLK_HZ) -> None:
+    def __init__(self, dut: Any, *, clk_hz: float = UART_CLK_HZ) -> None:
         self.dut = dut
         self.clk_hz = clk_hz
         self.tx_depth = len(dut.uart_tx) // 8
@@ -188,7 +189,7 @@ class HarnessUart:
 class HarnessHost:
     """The rig's side of SensorTop's host port: one burst write per load, one burst read."""
 
-    def __init__(self, dut, host_map: HostPortMap = HOST_MAP) -> None:
+    def __init__(self, dut: Any, host_map: HostPortMap = HOST_MAP) -> None:
         self.dut = dut
         self.map = host_map
         self._write = _Requester(dut, "host", ("words", "count"))
@@ -233,7 +234,7 @@ class HarnessHost:
 class HarnessPwm:
     """The autopilot's PWM outputs: period and widths in ticks, written once per frame."""
 
-    def __init__(self, dut, *, tick_hz: float = PWM_TICK_HZ) -> None:
+    def __init__(self, dut: Any, *, tick_hz: float = PWM_TICK_HZ) -> None:
         self.dut = dut
         self.tick_hz = tick_hz
         self.counter_bits = len(dut.pwm_period_ticks)
@@ -266,7 +267,7 @@ class Harness:
     widths (:func:`fpga_hdl.top.sensor_top_host_map`) and how long the reset holds.
     """
 
-    def __init__(self, dut, *, spi_mode: int = 0, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
+    def __init__(self, dut: Any, *, spi_mode: int = 0, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
         self.dut = dut
         self.pwm_tick_hz = pwm_tick_hz
         self.host = HarnessHost(dut, sensor_top_host_map(pwm_tick_hz))

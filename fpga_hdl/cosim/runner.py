@@ -107,7 +107,7 @@ def simulator_params() -> list[object]:
     the simulator cannot run here."""
     import pytest  # the test framework, only for tests (see the module docstring)
 
-    params = []
+    params: list[object] = []
     for simulator in SIMULATORS:
         reason = missing_simulator_reason(simulator)
         marks = [pytest.mark.cosim]

@@ -6,6 +6,8 @@ cocotb bench on the generated ``sensor_top`` starts from the same idle bus level
 
 from __future__ import annotations
 
+from typing import Any  # a cocotb DUT: its ports, the generated Verilog's, are known at run time
+
 from fpga_hdl.buses.i2c_target import I2cTiming
 from fpga_hdl.cosim.host import CocotbHost
 from fpga_hdl.top import HOST_MAP, SYS_CLK_HZ
@@ -24,7 +26,7 @@ class SensorTopPins:
 
     def __init__(
         self,
-        dut,
+        dut: Any,
         *,
         spi_timing: SpiMasterTiming = DEFAULT_TIMING,
         i2c_timing: I2cTiming | None = None,

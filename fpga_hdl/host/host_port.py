@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from amaranth.build import Platform
 from amaranth.hdl import Module, Shape, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
@@ -60,7 +61,7 @@ class CoherentLatch(wiring.Component):
             }
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         with m.If(self.pending & ~self.busy):
             m.d.sync += [self.visible.eq(self.offered), self.pending.eq(0)]
@@ -170,7 +171,7 @@ def host_port_map(
             writes.append(HostWord(len(writes), channel, name, shape.width, shape.signed))
     for chip in faults:
         writes.append(HostWord(len(writes), chip, "fault", FAULT_MUTE_BIT + 1, False))
-    reads = []
+    reads: list[HostWord] = []
     for channel, fields in results.items():
         for name, shape in fields.items():
             shape = Shape.cast(shape)
@@ -240,7 +241,7 @@ class HostPort(wiring.Component):
             members[f"{word.channel}_{word.field}"] = In(word.width)
         super().__init__(members)
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         staged = {
             w.address: Signal(w.width, name=f"staged_{w.channel}_{w.field}")

@@ -33,7 +33,8 @@ runs again.
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Signal, Value
+from amaranth.build import Platform
+from amaranth.hdl import Module, ShapeLike, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
@@ -48,7 +49,7 @@ COUNT_BITS = 16
 PUBLISH_TICKS = 1
 
 
-def _gray(value):
+def _gray(value: Value) -> Value:
     return value ^ (value >> 1)
 
 
@@ -77,12 +78,20 @@ class SnapshotSynchronizer(wiring.Component):
         Destination edges after a publication until ``data_o`` holds it: ``stages + 1``.
     """
 
-    def __init__(self, shape, *, i_domain: str, o_domain: str, stages: int = 2, init=None) -> None:
+    def __init__(
+        self,
+        shape: ShapeLike,
+        *,
+        i_domain: str,
+        o_domain: str,
+        stages: int = 2,
+        init: object = None,  # as the shape takes it (a layout's: a dict of its fields)
+    ) -> None:
         self._i_domain, self._o_domain, self._stages = i_domain, o_domain, stages
         self.copy_cycles = stages + 1
         super().__init__({"data_i": In(shape, init=init), "data_o": Out(shape, init=init)})
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         held = Signal.like(self.data_i, name="held")
         publish = Value.cast(held) != Value.cast(self.data_i)
@@ -123,14 +132,14 @@ class SampleSynchronizer(wiring.Component):
         value: ``stages + 1``.
     """
 
-    def __init__(self, shape, *, i_domain: str, o_domain: str, stages: int = 2) -> None:
+    def __init__(self, shape: ShapeLike, *, i_domain: str, o_domain: str, stages: int = 2) -> None:
         self._i_domain, self._o_domain, self._stages = i_domain, o_domain, stages
         self.copy_cycles = stages + 1
         super().__init__(
             {"data_i": In(shape), "stb_i": In(1), "data_o": Out(shape), "stb_o": Out(1)}
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         moved = _counted_crossing(m, self.stb_i, self._i_domain, self._o_domain, self._stages)
         m.d[self._o_domain] += self.stb_o.eq(moved)
@@ -139,7 +148,9 @@ class SampleSynchronizer(wiring.Component):
         return m
 
 
-def _counted_crossing(m: Module, publish: Value, i_domain: str, o_domain: str, stages: int):
+def _counted_crossing(
+    m: Module, publish: Value, i_domain: str, o_domain: str, stages: int
+) -> Signal:
     """The change count of both synchronisers: steps (Gray coded) in an ``i_domain`` cycle
     with ``publish``, crosses through an ``FFSynchronizer``; the ``o_domain`` signal
     returned is 1 in the destination cycle that sees it move (and takes the copy)."""

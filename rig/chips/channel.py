@@ -128,7 +128,7 @@ def decode_frame(body: bytes) -> ChipFrame:
     fault_end = 14 + 2 * len(CHIPS)
     fault_bytes, gps, count = values[14:fault_end], values[fault_end:-4], values[-1]
     ranged = values[-4:-1]
-    faults = {}
+    faults: dict[str, ChipFault] = {}
     for index, chip in enumerate(CHIPS):
         mute, flip = fault_bytes[2 * index], fault_bytes[2 * index + 1]
         if mute or flip:

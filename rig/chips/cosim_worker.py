@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import os
 import socket
+from typing import Any
 
 import cocotb
 from cocotb.utils import get_sim_time
@@ -177,7 +178,7 @@ class RtlChips:
 
 
 @cocotb.test()
-async def serve(dut) -> None:
+async def serve(dut: Any) -> None:  # the DUT: its ports are known at run time
     """Answer the rig's requests until it sends STOP (or closes the channel)."""
     channel = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     channel.connect(os.environ["RIG_COSIM_SOCKET"])

@@ -36,7 +36,7 @@ hands the fix to the loop only once its last byte has arrived (about 8.7 ms late
 from __future__ import annotations
 
 import math
-from collections.abc import Coroutine, Mapping
+from collections.abc import Coroutine, Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, TypeVar
@@ -440,6 +440,12 @@ class TlmSensorLayer(SensorLayer):
         """Nothing to release: the models live in this process."""
 
 
+def _xyz(vector: Iterable[float]) -> tuple[float, float, float]:
+    """A 3-vector sample as the readout's floats."""
+    x, y, z = vector
+    return float(x), float(y), float(z)
+
+
 class BypassSensorLayer(SensorLayer):
     """No chips: the SI samples go straight into HIL_SENSOR and HIL_GPS (no receiver, no
     UART time) and the commanded pulse widths straight to the motors, as a bare simulator
@@ -469,10 +475,10 @@ class BypassSensorLayer(SensorLayer):
         ranged = readings.range
         now_us = frame.now_us
         return ChipReadout(
-            accel_mps2=tuple(map(float, imu.accel_mps2)),
-            gyro_radps=tuple(map(float, imu.gyro_radps)),
+            accel_mps2=_xyz(imu.accel_mps2),
+            gyro_radps=_xyz(imu.gyro_radps),
             imu_temperature_degc=imu.temperature_degc,
-            mag_gauss=None if mag is None else tuple(map(float, mag.field_gauss)),
+            mag_gauss=None if mag is None else _xyz(mag.field_gauss),
             baro_pa_degc=None if baro is None else (baro.pressure_pa, baro.temperature_degc),
             pwm_widths_us=tuple(self._widths_us),
             pwm_timed_out=(False,) * MOTOR_CHANNELS,

@@ -314,6 +314,7 @@ class _Loop:
             self.log.event(self.time_us, text, level)
 
         model_rng, sensor_rng, fault_rng = np.random.default_rng(scenario.seed).spawn(3)
+        assert self.rates.model_hz is not None, "Rates fills it from imu_hz"
         self.model = QuadModel(
             vehicle, model_rng, environment, _MOUNTS[scenario.constraint], self.rates.model_hz
         )
@@ -426,7 +427,7 @@ class _Loop:
                 self._spent_s["logging"] += clock() - commanded
             self.frames = frame
             if self.progress is not None and frame % max(1, self.rates.imu_hz // 10) == 0:
-                self._report(this_truth)
+                self._report(self.progress, this_truth)
             pacer.wait(self.run_us / 1e6)
         self._wall_end = time.monotonic()
         self.log.event(self.time_us, f"run completed: {self.frames} frames")
@@ -448,6 +449,7 @@ class _Loop:
         PWM capture waits for :meth:`_finish`."""
         started = time.perf_counter()
         imu, mag, baro = readings.imu, readings.mag, readings.baro
+        assert imu is not None, "the IMU is due every frame"
         chip_frame = ChipFrame(
             now_us=frame * self.frame_us,
             imu=Mpu6000Sample.from_si(imu.accel_mps2, imu.gyro_radps, imu.temperature_degc),
@@ -539,7 +541,7 @@ class _Loop:
         """Run due actions; returns those still waiting (without the barrier, PX4: one
         conversation at a time)."""
         ground = self.ground
-        waiting = []
+        waiting: list[Action] = []
         for action in actions:
             if action.conversation is None:
                 ground.send_unacknowledged(action.unacknowledged)
@@ -564,10 +566,10 @@ class _Loop:
         self.log.event(self.time_us, text, level)
         self.last_event = text
 
-    def _report(self, truth: VehicleTruth) -> None:
+    def _report(self, progress: Callable[[Progress], None], truth: VehicleTruth) -> None:
         wall = time.monotonic() - self._wall_start
         time_s = self.run_us / 1e6
-        self.progress(
+        progress(
             Progress(
                 time_s=time_s,
                 duration_s=self.duration_s,
@@ -611,8 +613,8 @@ class _Loop:
         parts_s = (spent["model"], spent["sensor physics"], spent["chips"],
                    spent["messages"] + link.encode_s + link.decode_s, link.send_s, link.wait_s,
                    spent["logging"])  # fmt: skip
-        return FrameBudget(*(part_s / frames * 1e6 for part_s in parts_s),
-                           other_us=(wall_s - sum(parts_s)) / frames * 1e6)  # fmt: skip
+        other_s = wall_s - sum(parts_s)
+        return FrameBudget(*(part_s / frames * 1e6 for part_s in (*parts_s, other_s)))
 
 
 def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:

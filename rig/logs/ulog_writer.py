@@ -21,6 +21,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 
@@ -127,8 +128,8 @@ class ULogWriter:
             self._topics[name] = _Topic(
                 name, msg_id, tuple((f, n) for _, f, n in parsed), struct.Struct(code)
             )
-        for key, value in (info or {}).items():
-            encoded = str(value).encode()
+        for key, text in (info or {}).items():
+            encoded = str(text).encode()
             definitions += _key_value(b"I", f"char[{len(encoded)}] {key}", encoded)
         for name, value in (parameters or {}).items():
             definitions += _parameter(name, value)
@@ -143,8 +144,9 @@ class ULogWriter:
         self._pending += definitions
         self.flush()
 
-    def write(self, topic: str, timestamp_us: int, multi_id: int = 0, **values: object) -> None:
-        """Append one sample of ``topic``; every declared field must be given.
+    def write(self, topic: str, timestamp_us: int, multi_id: int = 0, **values: Any) -> None:
+        """Append one sample of ``topic``; every declared field must be given: a number, a
+        string (char[n]), or an array or sequence of numbers.
 
         Runs for every logged sample, so it avoids numpy conversions: scalars go to
         ``struct`` as they are, arrays as their flattened list.

@@ -34,7 +34,7 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Callable, Generator, Iterable, Sequence
 from dataclasses import dataclass, field
 
 from quad_model.environment import GeoPoint
@@ -402,7 +402,7 @@ class GroundLink:
                                         time_s)  # fmt: skip
 
     def quaternion_setpoint(
-        self, q: Sequence[float], thrust: float, time_s: float
+        self, q: Iterable[float], thrust: float, time_s: float
     ) -> mavlink.MAVLink_message:
         """Attitude (body to NED, w x y z) and collective thrust 0..1."""
         return self.mav.set_attitude_target_encode(

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from rig.errors import AutopilotProtocolError
@@ -85,13 +85,15 @@ def hil_sensor(
             f"HIL_SENSOR time_usec must be > 0 (PX4 sleeps in real time), got {time_us}"
         )
     fields = _IMU_FIELDS
+    accel: tuple[float, ...]
+    gyro: tuple[float, ...]
     if imu_id == 0:
         accel = _int16_limited(accel_mps2, _ACCEL_LIMITS)
         gyro = _int16_limited(gyro_radps, _GYRO_LIMITS)
     else:
         accel = tuple(map(float, accel_mps2))
         gyro = tuple(map(float, gyro_radps))
-    mag = (0.0, 0.0, 0.0)
+    mag: tuple[float, ...] = (0.0, 0.0, 0.0)
     if mag_gauss is not None:
         fields |= _MAG_FIELDS
         mag = tuple(map(float, mag_gauss))
@@ -151,13 +153,13 @@ def hil_state_quaternion(
     mav: mavlink.MAVLink,
     time_us: int,
     *,
-    q_body_to_ned: Sequence[float],
-    rates_frd_radps: Sequence[float],
+    q_body_to_ned: Iterable[float],
+    rates_frd_radps: Iterable[float],
     lat_deg: float,
     lon_deg: float,
     alt_amsl_m: float,
-    vel_ned_mps: Sequence[float],
-    specific_force_frd_mps2: Sequence[float],
+    vel_ned_mps: Iterable[float],
+    specific_force_frd_mps2: Iterable[float],
 ) -> mavlink.MAVLink_hil_state_quaternion_message:
     """HIL_STATE_QUATERNION (ground truth): q (w, x, y, z), rad/s, degE7, mm, cm/s, mG."""
     vn, ve, vd = (float(v) for v in vel_ned_mps)

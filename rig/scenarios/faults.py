@@ -184,7 +184,7 @@ def describe(fault: FaultSpec) -> str:
     return f"{fault.kind} ({params})" if params else fault.kind
 
 
-def _like(value: object, sample: object, field: str) -> object:
+def _like(value: float | np.ndarray, sample: object, field: str) -> float | np.ndarray:
     """Keep the sample field's type: a float stays a float, an array an array."""
     original = getattr(sample, field)
     return float(value) if isinstance(original, float) else np.asarray(value, dtype=float)

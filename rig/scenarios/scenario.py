@@ -114,10 +114,10 @@ class Rates:
     def __post_init__(self) -> None:
         if 1_000_000 % self.imu_hz:
             raise FieldError("imu_hz", self.imu_hz, "must give a whole number of µs per frame")
-        if self.model_hz is None:
-            object.__setattr__(self, "model_hz", model_rate_for(self.imu_hz))
-        if self.model_hz % self.imu_hz:
-            raise FieldError("imu_hz", self.imu_hz, f"must divide model_hz ({self.model_hz})")
+        model_hz = model_rate_for(self.imu_hz) if self.model_hz is None else self.model_hz
+        object.__setattr__(self, "model_hz", model_hz)
+        if model_hz % self.imu_hz:
+            raise FieldError("imu_hz", self.imu_hz, f"must divide model_hz ({model_hz})")
         for name in ("mag_hz", "baro_hz"):
             if getattr(self, name) > self.imu_hz:
                 raise FieldError(name, getattr(self, name), f"exceeds imu_hz ({self.imu_hz})")

@@ -26,15 +26,27 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import assert_never
 
 from rig.mavlink.ground_link import OFFBOARD_KEEPALIVE_S, Conversation, GroundLink, sweep_pitch_rad
 from rig.mavlink.px4_api import mavlink
 from rig.scenarios.scenario import (
+    Arm,
+    Disarm,
     Goto,
+    Hold,
+    Land,
+    Mission,
+    MotorTest,
     PitchSweep,
     ScriptCommand,
+    SetHome,
+    SetMode,
+    SetParam,
     SetpointTrack,
+    Takeoff,
     Track,
+    UploadMission,
 )
 
 #: A pilot's sticks are sent this often (µs of simulated time): well inside PX4's 0.5 s.
@@ -147,7 +159,7 @@ class CommandScript:
             yield self._sticks_action(sticks, time_us)
 
     def _start(self, command: ScriptCommand, time_us: int) -> Iterator[Action]:
-        g, c, name = self.ground, command, f"{command.action} at t={command.at_s:g} s"
+        g, name = self.ground, f"{command.action} at t={command.at_s:g} s"
         if isinstance(command, Track) and command.track.kind == "manual":
             self._sticks = _Sticks(command.track, time_us, time_us)
             return
@@ -157,24 +169,36 @@ class CommandScript:
             period = _us(1.0 / command.rate_hz) if isinstance(command, PitchSweep) else None
             self._stream = _Stream(command, time_us, time_us, period or _KEEPALIVE_US)
             return
-        conversations = {
+        match command:
             # PX4 (not the barrier) is asked again until its pre-flight checks pass
-            "arm": lambda: g.arm(True) if self.barrier else g.arm_when_ready(),
+            case Arm():
+                conversation = g.arm(True) if self.barrier else g.arm_when_ready()
             # a replay's disarm follows the real flight's and may find this one still flying
-            "disarm": lambda: g.attempt(g.arm(False)) if c.may_refuse else g.arm(False),
-            "takeoff": lambda: g.takeoff(c.altitude_m),
-            "land": lambda: g.land(),
-            "hold": lambda: g.hold(),
-            "mode": lambda: g.attempt(g.set_mode(c.nav_state)),
-            "mission": lambda: g.mission(c.waypoints_ned_m),
-            "upload_mission": lambda: g.upload_mission(c.items),
+            case Disarm():
+                conversation = g.attempt(g.arm(False)) if command.may_refuse else g.arm(False)
+            case Takeoff():
+                conversation = g.takeoff(command.altitude_m)
+            case Land():
+                conversation = g.land()
+            case Hold():
+                conversation = g.hold()
+            case SetMode():
+                conversation = g.attempt(g.set_mode(command.nav_state))
+            case Mission():
+                conversation = g.mission(command.waypoints_ned_m)
+            case UploadMission():
+                conversation = g.upload_mission(command.items)
             # a replay's home, where the real PX4 moved it: a refusal (COM_HOME_EN 0 in the
             # log's parameters) leaves PX4's own, and the flight goes on as the pilot's did
-            "set_home": lambda: g.attempt(g.set_home(c.home)),
-            "motor_test": lambda: g.motor_test(c.motor, c.throttle, c.duration_s),
-            "set_param": lambda: g.set_param(c.name, c.value),
-        }
-        yield Action(name, conversations[command.action]())
+            case SetHome():
+                conversation = g.attempt(g.set_home(command.home))
+            case MotorTest():
+                conversation = g.motor_test(command.motor, command.throttle, command.duration_s)
+            case SetParam():
+                conversation = g.set_param(command.name, command.value)
+            case _:
+                assert_never(command)
+        yield Action(name, conversation)
 
     def _stream_action(self, stream: _Stream, time_us: int) -> Action | None:
         command = stream.command

@@ -1,5 +1,6 @@
 """IST8310 magnetometer emulated on I2C (iSentek IST8310 datasheet; register map in regs.py)."""
 
+from amaranth.build import Platform
 from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
@@ -65,7 +66,7 @@ class Ist8310Core(wiring.Component):
         self.sampling = TargetSampling.for_clock(sys_clk_hz)
         super().__init__()
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         m.submodules.target = target = I2cTarget(
             address=self.address, sys_clk_hz=self.sampling.sys_clk_hz

@@ -14,7 +14,7 @@ frame is forward-right-down. :func:`decode_field_gauss` returns that frame and
 (``ROTATION_NONE`` by default) is not emulated.
 """
 
-from collections.abc import Sequence
+from collections.abc import Collection
 from dataclasses import dataclass
 
 from fpga_hdl.buses.transactions import I2cBus
@@ -73,7 +73,7 @@ def decode_field_gauss(measurement: bytes) -> tuple[float, float, float] | None:
     return x * scale, y * scale, z * scale
 
 
-def sample_from_field_gauss(field_frd_gauss: Sequence[float]) -> Ist8310Sample:
+def sample_from_field_gauss(field_frd_gauss: Collection[float]) -> Ist8310Sample:
     """Chip counts (16-bit mode) for a field in PX4's sensor frame; saturates at int16."""
     if len(field_frd_gauss) != 3:
         raise ValueError(f"field must have 3 components (x, y, z), not {len(field_frd_gauss)}")

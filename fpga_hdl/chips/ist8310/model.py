@@ -72,7 +72,7 @@ class Ist8310Model:
             return regs.STAT1_DRDY if finished else 0
         if address == Register.CNTL1:
             return regs.CNTL1_MODE_SINGLE if self._measuring and not finished else 0
-        return self._stored.get(address, 0)
+        return self._stored[Register(address)] if address in self._stored else 0
 
     def _write_register(self, address: int, byte: int) -> None:
         self._data = None  # CNTL3 (resolution) or a soft reset may have changed
@@ -83,4 +83,5 @@ class Ist8310Model:
             self._measuring = False
             self._stored = dict.fromkeys(regs.STORED_REGISTERS, 0)
         elif address in regs.STORED_REGISTERS:
-            self._stored[Register(address)] = byte & regs.STORED_REGISTERS[address]
+            register = Register(address)
+            self._stored[register] = byte & regs.STORED_REGISTERS[register]

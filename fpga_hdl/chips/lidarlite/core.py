@@ -1,5 +1,6 @@
 """LIDAR-Lite v3 rangefinder emulated on I2C (Garmin's manual; register map in regs.py)."""
 
+from amaranth.build import Platform
 from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
@@ -64,7 +65,7 @@ class LidarLiteCore(wiring.Component):
         self.sampling = TargetSampling.for_clock(sys_clk_hz)
         super().__init__()
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         m.submodules.target = target = I2cTarget(
             address=self.address, sys_clk_hz=self.sampling.sys_clk_hz

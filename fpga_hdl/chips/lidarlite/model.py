@@ -85,7 +85,9 @@ class LidarLiteModel:
             return result
         if register in self._stored:
             return self._stored[Register(register)]
-        return regs.ID_REGISTERS.get(register, 0)
+        if register in regs.ID_REGISTERS:
+            return regs.ID_REGISTERS[Register(register)]
+        return 0
 
     def _write_register(self, register: int, byte: int) -> None:
         if register == Register.ACQ_COMMAND:

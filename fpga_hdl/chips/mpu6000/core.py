@@ -14,7 +14,8 @@ digital low-pass filter and sample-rate divider (the rig's model supplies filter
 samples at its own rate), interrupts and INT_STATUS, self-test, the I2C auxiliary bus.
 """
 
-from amaranth.hdl import Const, Module, Mux, Signal
+from amaranth.build import Platform
+from amaranth.hdl import Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
@@ -25,7 +26,7 @@ from fpga_hdl.chips.mpu6000 import regs
 from fpga_hdl.host.host_port import chip_sample_latch
 
 
-def _saturate_int16(value):
+def _saturate_int16(value: Value) -> Value:
     return Mux(value > 32767, 32767, Mux(value < -32768, -32768, value))
 
 
@@ -67,7 +68,7 @@ class Mpu6000(wiring.Component):
         self.sys_clk_hz = sys_clk_hz
         super().__init__()
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         engine = add_spi_engine(m, self)
 
@@ -111,7 +112,7 @@ class Mpu6000(wiring.Component):
         return m
 
     @staticmethod
-    def _write(m: Module, config: dict, address: Signal, value) -> None:
+    def _write(m: Module, config: dict[int, Signal], address: Signal, value: Value) -> None:
         with m.Switch(address):
             for r in regs.CONFIG_REGISTERS:
                 with m.Case(r.address):
@@ -123,7 +124,7 @@ class Mpu6000(wiring.Component):
                             ]
 
     @staticmethod
-    def _data_register(raw, name: str, config: dict):
+    def _data_register(raw: Value, name: str, config: dict[int, Signal]) -> Value:
         if name == "temp":
             return raw
         selector = config[regs.Reg.ACCEL_CONFIG if "accel" in name else regs.Reg.GYRO_CONFIG]

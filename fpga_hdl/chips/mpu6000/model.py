@@ -76,7 +76,7 @@ class Mpu6000Model:
         command, count = tx[0], len(tx) - 1
         address = command & 0x7F
         if command & regs.READ_FLAG:
-            rx = self._read_burst(address, count)
+            rx: bytes | bytearray = self._read_burst(address, count)
         else:  # each byte answers the register's value before the byte is written
             rx = bytearray()
             for byte in tx[1:]:

@@ -162,10 +162,10 @@ class Mpu6000Sample:
             raise ValueError(f"accel and gyro must have 3 axes, not ({len(accel)},)/({len(gyro)},)")
         if not all(map(math.isfinite, accel + gyro)):
             raise ValueError(f"accel and gyro must be finite, not {accel}/{gyro}")
-        a = [_quantized(v / STANDARD_GRAVITY_MPS2 * ACCEL_LSB_PER_G_FINEST) for v in accel]
-        g = [_quantized(math.degrees(v) * GYRO_LSB_PER_DPS_FINEST) for v in gyro]
+        ax, ay, az = (_quantized(v / STANDARD_GRAVITY_MPS2 * ACCEL_LSB_PER_G_FINEST) for v in accel)
+        gx, gy, gz = (_quantized(math.degrees(v) * GYRO_LSB_PER_DPS_FINEST) for v in gyro)
         t = min(max(round((temperature_c - TEMP_OFFSET_C) * TEMP_LSB_PER_C), -32768), 32767)
-        return cls(*a, t, *g)
+        return cls(ax, ay, az, t, gx, gy, gz)
 
     def fields(self) -> dict[str, int]:
         return {name: getattr(self, name) for name in DATA_FIELDS}

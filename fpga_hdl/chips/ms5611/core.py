@@ -12,6 +12,7 @@ Not emulated: the 2.8 ms PROM reload after RESET (the PROM reads back at once), 
 I2C interface, supply-current and self-heating effects.
 """
 
+from amaranth.build import Platform
 from amaranth.hdl import Array, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
@@ -67,7 +68,7 @@ class Ms5611(wiring.Component):
         self.prom = tuple(prom)
         super().__init__()
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         engine = add_spi_engine(m, self)
         latch = chip_sample_latch(m, self, regs.SAMPLE_LAYOUT, busy=engine.busy)

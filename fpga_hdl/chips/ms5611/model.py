@@ -47,11 +47,12 @@ class Ms5611Model:
             value = self.d2 if high == 0x5 else self.d1
             self._conversion = (value, self.now_us, regs.CONVERSION_TIME_US[regs.Osr(low)])
         elif command == regs.CMD_ADC_READ:
-            done = self._conversion is not None and (
-                (self.now_us - self._conversion[1]) % (1 << 32) >= self._conversion[2]
-            )
-            self._adc_result = self._conversion[0] if done else 0
-            self._conversion = None
+            conversion, self._conversion = self._conversion, None
+            self._adc_result = 0  # read before the conversion is done (or without one): 0
+            if conversion is not None:
+                value, start_us, duration_us = conversion
+                if (self.now_us - start_us) % (1 << 32) >= duration_us:
+                    self._adc_result = value
         if command == regs.CMD_ADC_READ:
             return self._adc_result.to_bytes(3, "big")
         if high == regs.CMD_PROM_READ >> 4 and not low & 1:

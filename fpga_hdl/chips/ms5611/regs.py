@@ -39,7 +39,7 @@ class Osr(IntEnum):
 
 
 #: Maximum ADC conversion time per OSR in microseconds (datasheet "Operating conditions").
-CONVERSION_TIME_US = {
+CONVERSION_TIME_US: dict[int, int] = {  # by command offset: an Osr is its int
     Osr.OSR_256: 600,
     Osr.OSR_512: 1170,
     Osr.OSR_1024: 2280,

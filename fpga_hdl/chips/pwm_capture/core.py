@@ -2,6 +2,7 @@
 
 import math
 
+from amaranth.build import Platform
 from amaranth.hdl import Module, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.cdc import FFSynchronizer
@@ -80,7 +81,7 @@ class PwmCapture(wiring.Component):
             }
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         level = Signal(CHANNELS)
         m.submodules.sync_pwm = FFSynchronizer(self.pwm.pulses, level, stages=SYNC_STAGES)

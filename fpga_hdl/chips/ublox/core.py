@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from amaranth.build import Platform
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
@@ -128,7 +129,7 @@ class UbloxM8Core(wiring.Component):
             }
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         m.submodules.uart_tx = uart_tx = UartTx()
         m.submodules.uart_rx = uart_rx = UartRx()
@@ -301,8 +302,18 @@ class UbloxM8Core(wiring.Component):
         return epoch
 
     def _act(
-        self, m, rx_class, rx_id, rx_len, captured, *, ack, mon_ver_pending, pvt_enabled, switch
-    ):
+        self,
+        m: Module,
+        rx_class: Signal,
+        rx_id: Signal,
+        rx_len: Signal,
+        captured: tuple[Signal, Signal, Signal, Signal],
+        *,
+        ack: tuple[Signal, Signal, Signal, Signal],
+        mon_ver_pending: Signal,
+        pvt_enabled: Signal,
+        switch: tuple[Signal, Signal, Signal],
+    ) -> None:
         """A valid frame arrived: queue its ACK/NAK, MON-VER, a rate switch, enable NAV-PVT."""
         p0, p1, p2, p_baud = captured
         ack_pending, ack_is_ack, ack_class, ack_id = ack

@@ -8,6 +8,8 @@ what the core sends next, in the core's order, at the rate :attr:`baud` names.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.core import (
     BAUD_RATES,
@@ -80,7 +82,7 @@ class UbloxM8Model:
                 break
         return bytes(out)
 
-    def _send(self, sources, values) -> bytes:
+    def _send(self, sources: Sequence[ubx.Source], values: Mapping[str, int]) -> bytes:
         if self.fault_mute:
             return b""
         frame = ubx.render(sources, values)

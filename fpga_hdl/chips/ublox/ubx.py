@@ -17,6 +17,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
+from typing import Final, Literal
 
 from amaranth.hdl import Shape, signed, unsigned
 from amaranth.lib import data
@@ -57,12 +58,12 @@ CFG_RATE_LEN = 6
 
 #: Source of one frame byte: a constant, (value name, byte index little-endian), or a
 #: checksum byte.
-CK_A = "ck_a"
-CK_B = "ck_b"
-Source = int | tuple[str, int] | str
+CK_A: Final = "ck_a"
+CK_B: Final = "ck_b"
+Source = int | tuple[str, int] | Literal["ck_a", "ck_b"]
 
 
-def checksum(body: bytes) -> tuple[int, int]:
+def checksum(body: bytes | bytearray) -> tuple[int, int]:
     """UBX 8-bit Fletcher checksum (CK_A, CK_B) over class, id, length and payload."""
     ck_a = ck_b = 0
     for byte in body:

@@ -72,7 +72,7 @@ class LowPass2p:
 
 
 @njit(cache=True)
-def _lowpass_step(b, a, state, x):
+def _lowpass_step(b: np.ndarray, a: np.ndarray, state: np.ndarray, x: np.ndarray) -> np.ndarray:
     y = b[0] * x + state[0]
     state[0] = b[1] * x - a[1] * y + state[1]
     state[1] = b[2] * x - a[2] * y
@@ -214,7 +214,17 @@ class RateController:
 
 
 @njit(cache=True)
-def _rate_step(gains, integral, rates, rates_sp, angular_accel, dt, landed, sat_pos, sat_neg):
+def _rate_step(
+    gains: np.ndarray,
+    integral: np.ndarray,
+    rates: np.ndarray,
+    rates_sp: np.ndarray,
+    angular_accel: np.ndarray,
+    dt: float,
+    landed: bool,
+    sat_pos: np.ndarray,
+    sat_neg: np.ndarray,
+) -> np.ndarray:
     """Torque of :class:`RateController`; the integral is updated in place."""
     torque = np.empty(3)
     for i in range(3):
@@ -266,7 +276,14 @@ class AttitudeController:
 
 
 @njit(cache=True)
-def _attitude_rates(q, q_sp, yawspeed_sp, yaw_weight, gain, rate_limit):
+def _attitude_rates(
+    q: np.ndarray,
+    q_sp: np.ndarray,
+    yawspeed_sp: float,
+    yaw_weight: float,
+    gain: np.ndarray,
+    rate_limit: np.ndarray,
+) -> np.ndarray:
     """Body-rate set-point of :class:`AttitudeController`."""
     e_z = _quat_to_dcm(q)[:, 2].copy()
     e_z_sp = _quat_to_dcm(q_sp)[:, 2].copy()
@@ -491,7 +508,7 @@ class ControlAllocator:
         self.unallocated = np.zeros(4)
 
     def configure(self, params: Parameters) -> None:
-        count = params["CA_ROTOR_COUNT"]
+        count = int(params["CA_ROTOR_COUNT"])
         effectiveness = np.zeros((4, count))  # rows: roll, pitch, yaw torque; collective thrust
         axis = np.array([0.0, 0.0, -1.0])
         for i in range(count):
@@ -530,7 +547,9 @@ class ControlAllocator:
 
 
 @njit(cache=True)
-def _allocate(mix_columns, effectiveness, torque, collective_thrust):
+def _allocate(
+    mix_columns: np.ndarray, effectiveness: np.ndarray, torque: np.ndarray, collective_thrust: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Outputs and unallocated set-point of :meth:`ControlAllocator.allocate`."""
     roll, pitch, yaw, thrust = mix_columns[0], mix_columns[1], mix_columns[2], mix_columns[3]
     outputs = roll * torque[0] + pitch * torque[1] + thrust * collective_thrust
@@ -547,7 +566,9 @@ def _allocate(mix_columns, effectiveness, torque, collective_thrust):
 
 
 @njit(cache=True)
-def _desaturation_gain(outputs, direction, lower, upper):
+def _desaturation_gain(
+    outputs: np.ndarray, direction: np.ndarray, lower: float, upper: float
+) -> float:
     """PX4 ``computeDesaturationGain``: how far along ``direction`` to move to fit the range."""
     k_min = k_max = 0.0
     for i in range(outputs.shape[0]):
@@ -565,7 +586,9 @@ def _desaturation_gain(outputs, direction, lower, upper):
 
 
 @njit(cache=True)
-def _desaturate(outputs, direction, reduce_only, upper):
+def _desaturate(
+    outputs: np.ndarray, direction: np.ndarray, reduce_only: bool, upper: float
+) -> np.ndarray:
     """Move ``outputs`` along ``direction`` into ``0..upper`` (twice: full, then half a step,
     as PX4 does to centre a range that cannot fit); ``reduce_only`` never increases it."""
     if outputs.min() >= 0.0 and outputs.max() <= upper:

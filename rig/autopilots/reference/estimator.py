@@ -53,7 +53,18 @@ def _wrap_pi(angle_rad: float) -> float:
 
 
 @njit(cache=True)
-def _attitude_step(q, bias, rates, gyro, accel, mag, accel_ned, dt, gains, declination_rad):
+def _attitude_step(
+    q: np.ndarray,
+    bias: np.ndarray,
+    rates: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    mag: np.ndarray,
+    accel_ned: np.ndarray,
+    dt: float,
+    gains: np.ndarray,
+    declination_rad: float,
+) -> None:
     """One complementary-filter step on ``q``, ``bias`` and ``rates`` in place.
 
     Compiled: it runs every IMU frame, and in numpy its two dozen small-array operations
@@ -91,7 +102,15 @@ def _attitude_step(q, bias, rates, gyro, accel, mag, accel_ned, dt, gains, decli
 
 
 @njit(cache=True)
-def _predict_step(x, p, transition, transition_t, process_noise, specific_force_ned, dt):
+def _predict_step(
+    x: np.ndarray,
+    p: np.ndarray,
+    transition: np.ndarray,
+    transition_t: np.ndarray,
+    process_noise: np.ndarray,
+    specific_force_ned: np.ndarray,
+    dt: float,
+) -> np.ndarray:
     """Kalman prediction of the three per-axis (position, velocity, error) filters in place.
 
     Compiled for the same reason as :func:`_attitude_step` (~15 µs in numpy, ~1 µs here).
@@ -140,7 +159,9 @@ class AttitudeEstimator:
             self.q = quat_multiply(yaw_quat(declination_rad - self.declination_rad), self.q)
         self.declination_rad = declination_rad
 
-    def initialize(self, accel_mps2: NDArray[np.float64], mag_gauss: NDArray[np.float64] | None):
+    def initialize(
+        self, accel_mps2: NDArray[np.float64], mag_gauss: NDArray[np.float64] | None
+    ) -> None:
         """Level from gravity and heading from the field (north = 0 without a magnetometer)."""
         down = -accel_mps2 / np.linalg.norm(accel_mps2)
         reference = mag_gauss if mag_gauss is not None else np.array([1.0, 0.0, 0.0])
@@ -199,7 +220,9 @@ class GyroRestCalibration:
         self._count = 0
         self._moving = False
 
-    def update(self, gyro_radps, accel_mps2, dt_s: float) -> NDArray[np.float64] | None:
+    def update(
+        self, gyro_radps: NDArray[np.float64], accel_mps2: NDArray[np.float64], dt_s: float
+    ) -> NDArray[np.float64] | None:
         """Add one sample; returns the window's mean gyro when a still window completes."""
         if (
             abs(float(np.linalg.norm(accel_mps2)) - STANDARD_GRAVITY_MPS2)
@@ -350,8 +373,8 @@ class PositionEstimator:
         """GPS position (horizontal, plus height with ``use_height``: GPS is the height
         reference, or the barometer is out) and velocity, measured ``gps_delay_s`` ago."""
         # The change of the estimate since the fix was measured, added to the fix.
-        _, position_then, velocity_then = self._recent[0] if self._recent else (0, None, None)
-        if position_then is not None:
+        if self._recent:
+            _, position_then, velocity_then = self._recent[0]
             position_ned_m = position_ned_m + (self.x[:, 0] - position_then)
             velocity_ned_mps = velocity_ned_mps + (self.x[:, 1] - velocity_then)
         self._fuse(slice(0, 2), 0, position_ned_m[:2], self.gps_pos_noise_m**2)
@@ -401,7 +424,9 @@ class PositionEstimator:
         self.p[:2, 0, :] = self.p[:2, :, 0] = 0.0
         self.p[:2, 0, 0] = self.gps_pos_noise_m**2
 
-    def _fuse(self, axes: slice, state: int, measured: NDArray[np.float64], variance: float):
+    def _fuse(
+        self, axes: slice, state: int, measured: NDArray[np.float64], variance: float
+    ) -> None:
         """Scalar Kalman update of one state on several axes at once, with a 5σ gate."""
         p, x = self.p[axes], self.x[axes]
         innovation_var = p[:, state, state] + variance

@@ -177,9 +177,10 @@ class FlightController:
         if self._params_version != self.params.version:
             self._configure()
         self._sample_monitors(sensors, time_us)
-        if sensors.accel_mps2 is not None and sensors.gyro_radps is not None:
-            self._log_imu_average(sensors, time_us)
-            self._estimate(sensors, dt_s, time_us)
+        gyro, accel = sensors.gyro_radps, sensors.accel_mps2
+        if accel is not None and gyro is not None:
+            self._log_imu_average(gyro, accel, time_us)
+            self._estimate(sensors, gyro, accel, dt_s, time_us)
         self._commander(time_us)
         if self.armed and self._imu_frames:
             self._control(dt_s, time_us)
@@ -195,7 +196,7 @@ class FlightController:
                 # rig that this output is live.
                 motors = [0.0] * 4
                 motors[motor] = throttle
-                return Controls(tuple(motors), True)
+                return Controls((motors[0], motors[1], motors[2], motors[3]), True)
             self._motor_test = None
         if not self.armed:
             return _IDLE
@@ -406,7 +407,15 @@ class FlightController:
         if sensors.gps is not None:
             m["gps"].sample(sensors.gps, time_us)
 
-    def _estimate(self, sensors: SensorFrame, dt_s: float, time_us: int) -> None:
+    def _estimate(
+        self,
+        sensors: SensorFrame,
+        gyro: NDArray[np.float64],
+        accel: NDArray[np.float64],
+        dt_s: float,
+        time_us: int,
+    ) -> None:
+        """The estimators' frame: ``gyro`` and ``accel`` are ``sensors``' IMU sample."""
         if sensors.mag_gauss is not None:
             self._last_mag_gauss = sensors.mag_gauss
         # the latest field is used every frame, as PX4's filter keeps it between samples
@@ -422,14 +431,14 @@ class FlightController:
         if self.params["ATT_ACC_COMP"] and self.monitors["gps"].healthy(time_us):
             compensation = self._gps_accel_ned
         if not self.armed:
-            offsets = self.gyro_calibration.update(sensors.gyro_radps, sensors.accel_mps2, dt_s)
+            offsets = self.gyro_calibration.update(gyro, accel, dt_s)
             if offsets is not None:
                 self.attitude.gyro_bias_radps = offsets
-        self.attitude.update(sensors.gyro_radps, sensors.accel_mps2, mag, dt_s, compensation)
+        self.attitude.update(gyro, accel, mag, dt_s, compensation)
         self._rates_filter.update(self.attitude.rates_radps, time_us)
         if sensors.range is not None:
             self._fuse_range(sensors.range, time_us)
-        self.position.predict(quat_to_dcm(self.attitude.q) @ sensors.accel_mps2, dt_s)
+        self.position.predict(quat_to_dcm(self.attitude.q) @ accel, dt_s)
         baro_ok = self.monitors["baro"].healthy(time_us)
         if sensors.baro_pressure_pa is not None and baro_ok:
             learn_bias = self.position.gps_height_reference and self._gps_good
@@ -679,6 +688,7 @@ class FlightController:
         when none was given (PX4 takeoff)."""
         altitude = self._takeoff_altitude_amsl_m
         if not math.isfinite(altitude):
+            assert self.home is not None, "set when the vehicle arms"
             altitude = self.home[2] + self.params["MIS_TAKEOFF_ALT"]
         self.navigator.set_takeoff_target(self.position.position_ned_m, altitude)
 
@@ -704,7 +714,8 @@ class FlightController:
         if self.log is not None:
             self.log.log(_SEVERITY_LEVEL.get(severity, "info"), self.time_us, text)
 
-    def _to_local(self, lat_deg: float, lon_deg: float, alt_amsl_m: float):
+    def _to_local(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> NDArray[np.float64]:
+        assert self.position.origin is not None, "set at the first good GPS fix"
         lat0, lon0, alt0 = self.position.origin
         return geodetic_to_ned(lat_deg, lon_deg, alt_amsl_m, lat0, lon0, alt0)
 
@@ -716,9 +727,12 @@ class FlightController:
         self.mission_events.append(("current", seq))
 
     # ------------------------------------------------------------------ log
-    def _log_imu_average(self, sensors: SensorFrame, time_us: int) -> None:
+    def _log_imu_average(
+        self, gyro: NDArray[np.float64], accel: NDArray[np.float64], time_us: int
+    ) -> None:
         """``sensor_combined`` as PX4 logs it: the raw IMU averaged per IMU_INTEG_RATE."""
-        interval = self._imu_average.add(time_us, sensors.gyro_radps, sensors.accel_mps2)
+        assert self._imu_average is not None, "_configure sets it"
+        interval = self._imu_average.add(time_us, gyro, accel)
         if interval is None or self.log is None:
             return
         self.log.write(
@@ -795,10 +809,9 @@ class FlightController:
                   maybe_landed=detector.maybe_landed,
                   ground_contact=detector.ground_contact)  # fmt: skip
         if self.truth is not None and est.origin is not None:
-            self._write_truth_errors(log, time_us)
+            self._write_truth_errors(log, self.truth, time_us)
 
-    def _write_truth_errors(self, log: ULogWriter, time_us: int) -> None:
-        truth = self.truth
+    def _write_truth_errors(self, log: ULogWriter, truth: GroundTruth, time_us: int) -> None:
         q_err = quat_multiply(quat_conjugate(truth.q), self.attitude.q)
         attitude_error = 2.0 * math.acos(min(abs(q_err[0]), 1.0))
         z_est, z_true = quat_to_dcm(self.attitude.q)[:, 2], quat_to_dcm(truth.q)[:, 2]

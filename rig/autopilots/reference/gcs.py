@@ -204,7 +204,7 @@ class MavlinkLink:
         others = [a for a, t in self._heard.items() if a != self.peer and now - t <= PEER_TIMEOUT_S]
         return [self.peer, *others]
 
-    def send(self, message, to: Address | None = None) -> None:
+    def send(self, message: mavlink.MAVLink_message, to: Address | None = None) -> None:
         """To ``to`` (an answer), else as telemetry to :meth:`stations`."""
         data = message.pack(self.mav)
         for address in [to] if to is not None else self.stations():
@@ -222,7 +222,7 @@ def _parser() -> mavlink.MAVLink:
     return parser
 
 
-def _addressed_to(message, system_id: int) -> bool:
+def _addressed_to(message: mavlink.MAVLink_message, system_id: int) -> bool:
     """Valid, and for this system (or for every system, or with no target at all)."""
     if message.get_type() == "BAD_DATA":
         return False
@@ -260,7 +260,12 @@ class GroundStation:
         }
 
     # ------------------------------------------------------------------ receive
-    def handle(self, link: MavlinkLink | None, message, sender: Address | None = None) -> None:
+    def handle(
+        self,
+        link: MavlinkLink,
+        message: mavlink.MAVLink_message,
+        sender: Address | None = None,
+    ) -> None:
         """Dispatch one message; anything malformed or unknown is counted, never raised.
         Answers go to ``sender`` (None: the link's last sender)."""
         kind = message.get_type()
@@ -268,7 +273,7 @@ class GroundStation:
             self._malformed(link, sender)
             return
         handler = self._handlers.get(kind)
-        if handler is None or not _addressed_to(message, self.fc.params["MAV_SYS_ID"]):
+        if handler is None or not _addressed_to(message, int(self.fc.params["MAV_SYS_ID"])):
             self.unexpected += 1
             return
         self._reply_to = sender
@@ -280,7 +285,7 @@ class GroundStation:
             self._reply_to = None
         self.flush_events()
 
-    def _reply(self, link: MavlinkLink, message) -> None:
+    def _reply(self, link: MavlinkLink, message: mavlink.MAVLink_message) -> None:
         link.send(message, self._reply_to)
 
     def _malformed(self, link: MavlinkLink | None, sender: Address | None) -> None:
@@ -300,17 +305,19 @@ class GroundStation:
               file=sys.stderr, flush=True)  # fmt: skip
 
     # ------------------------------------------------------------------ commands
-    def _command_long(self, link: MavlinkLink, msg) -> None:
+    def _command_long(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                   msg.param7)  # fmt: skip
         self._command(link, msg, msg.command, params)
 
-    def _command_int(self, link: MavlinkLink, msg) -> None:
+    def _command_int(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.x * 1e-7, msg.y * 1e-7,
                   msg.z)  # fmt: skip
         self._command(link, msg, msg.command, params)
 
-    def _command(self, link: MavlinkLink, msg, command: int, p: tuple[float, ...]) -> None:
+    def _command(
+        self, link: MavlinkLink, msg: mavlink.MAVLink_message, command: int, p: tuple[float, ...]
+    ) -> None:
         try:
             result = self._run_command(link, command, p)
         except (ValueError, OverflowError):  # NaN or ∞ where a mode or index was needed
@@ -320,7 +327,7 @@ class GroundStation:
         self._reply(link, mavlink.MAVLink_command_ack_message(
             command, result.result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))  # fmt: skip
 
-    def _run_command(self, link: MavlinkLink, command: int, p: tuple[float, ...]):
+    def _run_command(self, link: MavlinkLink, command: int, p: tuple[float, ...]) -> CommandResult:
         fc = self.fc
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] not in (0.0, 1.0):  # PX4's commander: "Unsupported ARM_DISARM param"
@@ -358,7 +365,9 @@ class GroundStation:
             return self.fc.refuse(f"Mode {int(p[1])}/{int(p[2])} not available (no RC pilot)")
         return self.fc.set_mode(nav_state)
 
-    def _set_interval(self, link: MavlinkLink, message_id: int, interval_us: float):
+    def _set_interval(
+        self, link: MavlinkLink, message_id: int, interval_us: float
+    ) -> CommandResult:
         name = _NAMES_BY_ID.get(message_id)
         if name is None:
             return CommandResult(mavlink.MAV_RESULT_UNSUPPORTED)
@@ -388,7 +397,7 @@ class GroundStation:
         return CommandResult(mavlink.MAV_RESULT_ACCEPTED)
 
     # ------------------------------------------------------------------ parameters
-    def _param_value(self, name: str):
+    def _param_value(self, name: str) -> mavlink.MAVLink_param_value_message:
         params = self.fc.params
         value = params[name]
         if params.spec(name).is_int:  # PX4 sends int32 bit patterns in the float field
@@ -400,7 +409,7 @@ class GroundStation:
             name.encode(), encoded, kind, len(params), params.index(name)
         )
 
-    def _param_request_list(self, link: MavlinkLink, msg) -> None:
+    def _param_request_list(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         """The hash first (QGroundControl loads its cache when it matches), then each one."""
         params = self.fc.params
         hash_bits = struct.unpack("<f", struct.pack("<I", self.parameter_hash()))[0]
@@ -421,7 +430,7 @@ class GroundStation:
             crc = zlib.crc32(data, crc ^ 0xFFFFFFFF) ^ 0xFFFFFFFF
         return crc
 
-    def _param_request_read(self, link: MavlinkLink, msg) -> None:
+    def _param_request_read(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         try:
             name = (self.fc.params.name_at(msg.param_index) if msg.param_index >= 0
                     else _param_id(msg.param_id))  # fmt: skip
@@ -429,7 +438,7 @@ class GroundStation:
         except ParameterError as error:
             self.fc.notify(mavlink.MAV_SEVERITY_WARNING, str(error))
 
-    def _param_set(self, link: MavlinkLink, msg) -> None:
+    def _param_set(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         name = _param_id(msg.param_id)
         if name == HASH_PARAM:
             return  # QGroundControl's "cache matched, stop": the list is already sent
@@ -445,7 +454,7 @@ class GroundStation:
         self._reply(link, self._param_value(name))  # the value it holds now, as PX4 answers
 
     # ------------------------------------------------------------------ missions
-    def _mission_count(self, link: MavlinkLink, msg) -> None:
+    def _mission_count(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         """An upload. Geofence and rally lists stay empty: clearing them is accepted, items
         are refused with a reason (there is no geofence or rally point to fly)."""
         kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
@@ -464,24 +473,24 @@ class GroundStation:
             self.fc.set_mission([])
             self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
             return
-        link.upload = _Upload(msg.count, (msg.get_srcSystem(), msg.get_srcComponent()),
-                              self._reply_to)  # fmt: skip
-        self._request_item(link)
+        link.upload = upload = _Upload(msg.count, (msg.get_srcSystem(), msg.get_srcComponent()),
+                                       self._reply_to)  # fmt: skip
+        self._request_item(link, upload)
 
-    def _request_item(self, link: MavlinkLink) -> None:
-        upload = link.upload
+    def _request_item(self, link: MavlinkLink, upload: _Upload) -> None:
+        """Ask ``link``'s peer for the next item of ``upload`` (the link's upload)."""
         upload.last_request_s = time.monotonic()
         request = mavlink.MAVLink_mission_request_int_message(
             *upload.peer, len(upload.items), mavlink.MAV_MISSION_TYPE_MISSION)  # fmt: skip
         link.send(request, upload.address)
 
-    def _mission_item_int(self, link: MavlinkLink, msg) -> None:
+    def _mission_item_int(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         upload = link.upload
         if upload is None or msg.mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
             self.unexpected += 1
             return
         if msg.seq != len(upload.items):  # a duplicate or out of order: ask again
-            self._request_item(link)
+            self._request_item(link, upload)
             return
         item = MissionItem(msg.seq, msg.frame, msg.command, msg.param1, msg.param2, msg.param3,
                            msg.param4, msg.x, msg.y, msg.z, msg.autocontinue)  # fmt: skip
@@ -498,19 +507,19 @@ class GroundStation:
         upload.items.append(item)
         upload.retries = 0
         if len(upload.items) < upload.count:
-            self._request_item(link)
+            self._request_item(link, upload)
             return
         link.upload = None
         self.fc.set_mission(upload.items)
         self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
         link.send(self._telemetry("MISSION_CURRENT"))
 
-    def _mission_ack(self, link: MavlinkLink, msg, result: int,
+    def _mission_ack(self, link: MavlinkLink, msg: mavlink.MAVLink_message, result: int,
                      kind: int = mavlink.MAV_MISSION_TYPE_MISSION) -> None:  # fmt: skip
         self._reply(link, mavlink.MAVLink_mission_ack_message(
             msg.get_srcSystem(), msg.get_srcComponent(), result, kind))  # fmt: skip
 
-    def _mission_request_list(self, link: MavlinkLink, msg) -> None:
+    def _mission_request_list(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         """The mission's length; the geofence and rally lists are empty (PX4 with none)."""
         kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
         if kind not in _MISSION_TYPES:
@@ -520,7 +529,7 @@ class GroundStation:
         self._reply(link, mavlink.MAVLink_mission_count_message(
             msg.get_srcSystem(), msg.get_srcComponent(), count, kind))  # fmt: skip
 
-    def _mission_request(self, link: MavlinkLink, msg) -> None:
+    def _mission_request(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
         mission = self.fc.navigator.mission if kind == mavlink.MAV_MISSION_TYPE_MISSION else []
         if not 0 <= msg.seq < len(mission):
@@ -532,7 +541,7 @@ class GroundStation:
             int(i.seq == self.fc.navigator.mission_seq), i.autocontinue, i.param1, i.param2,
             i.param3, i.param4, i.x, i.y, i.z, mavlink.MAV_MISSION_TYPE_MISSION))  # fmt: skip
 
-    def _mission_clear_all(self, link: MavlinkLink, msg) -> None:
+    def _mission_clear_all(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         """Clears the mission (type MISSION or ALL); the other lists are empty already."""
         kind = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
         if kind in (mavlink.MAV_MISSION_TYPE_MISSION, _MISSION_TYPE_ALL):
@@ -542,7 +551,7 @@ class GroundStation:
             return
         self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, kind)
 
-    def _mission_set_current(self, link: MavlinkLink, msg) -> None:
+    def _mission_set_current(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         if not self.fc.set_mission_current(msg.seq):
             self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE)
 
@@ -558,10 +567,10 @@ class GroundStation:
                 self.fc.notify(mavlink.MAV_SEVERITY_WARNING, "Mission upload timed out")
                 continue
             upload.retries += 1
-            self._request_item(link)
+            self._request_item(link, upload)
 
     # ------------------------------------------------------------------ file transfer
-    def _file_transfer(self, link: MavlinkLink, msg) -> None:
+    def _file_transfer(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         """MAVLink FTP answered as by a PX4 without the file: a NAK at once, never silence, so
         MAVProxy and QGroundControl fall back to the parameter protocol without a time-out.
         There is no file system: every path is missing (PX4's answer to MAVProxy's
@@ -585,7 +594,7 @@ class GroundStation:
             0, msg.get_srcSystem(), msg.get_srcComponent(), list(payload)))  # fmt: skip
 
     # ------------------------------------------------------------------ offboard
-    def _set_position_target(self, link: MavlinkLink, msg) -> None:
+    def _set_position_target(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         if msg.coordinate_frame != mavlink.MAV_FRAME_LOCAL_NED:
             self.unexpected += 1
             return
@@ -610,7 +619,7 @@ class GroundStation:
             return
         self.fc.set_offboard_setpoint(position, velocity, yaw, yaw_rate)
 
-    def _set_attitude_target(self, link: MavlinkLink, msg) -> None:
+    def _set_attitude_target(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         """PX4's type_mask semantics (mavlink_receiver.cpp): the attitude when it is not
         ignored, else the three body rates (all needed here); thrust is 0..1 either way."""
         mask = msg.type_mask
@@ -670,7 +679,7 @@ class GroundStation:
         for link in self.links:
             link.send(self._telemetry("HEARTBEAT"))
 
-    def _telemetry(self, name: str):
+    def _telemetry(self, name: str) -> mavlink.MAVLink_message | None:
         fc = self.fc
         boot_ms = fc.time_us // 1000
         if name == "HEARTBEAT":
@@ -730,7 +739,7 @@ class GroundStation:
         return None
 
 
-def _param_id(raw) -> str:
+def _param_id(raw: str | bytes) -> str:
     """A MAVLink param_id (16 chars, NUL padded) as text."""
     text = raw.decode("ascii") if isinstance(raw, bytes) else str(raw)
     return text.split("\x00", 1)[0]

@@ -14,6 +14,7 @@ import enum
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,7 +74,7 @@ _CUSTOM_MODES = {
     NavState.AUTO_LAND: (Px4MainMode.AUTO, Px4AutoMode.LAND),
 }
 #: Modes a ground station may select (DESCEND and TERMINATION are failsafe-only).
-_SELECTABLE = {
+_SELECTABLE: dict[tuple[int, int], NavState] = {  # (main mode, sub mode): a mode is its int
     _CUSTOM_MODES[s]: s
     for s in (NavState.POSCTL, NavState.AUTO_MISSION, NavState.AUTO_LOITER,
               NavState.OFFBOARD, NavState.AUTO_TAKEOFF, NavState.AUTO_LAND)
@@ -198,7 +199,9 @@ class Navigator:
         self._land_down_m: float | None = None
 
     # --- mode entry -------------------------------------------------------------------
-    def enter(self, position, velocity, yaw_rad: float) -> None:
+    def enter(
+        self, position: NDArray[np.float64], velocity: NDArray[np.float64], yaw_rad: float
+    ) -> None:
         """Start a mode from the current state: the trajectory begins where the vehicle is."""
         self.trajectory.reset(position, velocity)
         self.hold_ned = np.array(position, dtype=float)
@@ -206,7 +209,7 @@ class Navigator:
         self._hold_until_us = None
         self._land_down_m = None
 
-    def set_takeoff_target(self, position_ned: NDArray[np.float64], altitude_amsl_m: float):
+    def set_takeoff_target(self, position_ned: NDArray[np.float64], altitude_amsl_m: float) -> None:
         target = np.array(position_ned, dtype=float)
         target[2] = self.home_ned[2] - (altitude_amsl_m - self.home_alt_amsl_m)
         self.takeoff_target_ned = target
@@ -241,7 +244,9 @@ class Navigator:
             max_error_xy=p["MPC_XY_ERR_MAX"],
         )  # fmt: skip
 
-    def _track(self, target, dt_s, limits: Limits | None = None) -> Setpoint:
+    def _track(
+        self, target: NDArray[np.float64], dt_s: float, limits: Limits | None = None
+    ) -> Setpoint:
         self.trajectory.update(np.asarray(target, dtype=float), self.vehicle_ned, dt_s,
                                limits or self._auto_limits())  # fmt: skip
         speeds = (self.params["MPC_XY_VEL_MAX"], self.params["MPC_Z_VEL_MAX_UP"],
@@ -251,7 +256,9 @@ class Navigator:
             acceleration_ned_mps2=self.trajectory.acceleration,
         )  # fmt: skip
 
-    def _turn_towards(self, position, target, dt_s: float) -> None:
+    def _turn_towards(
+        self, position: NDArray[np.float64], target: NDArray[np.float64], dt_s: float
+    ) -> None:
         """Heading towards the target (PX4 MPC_YAW_MODE 0), at most MPC_YAWRAUTO_MAX."""
         offset = np.asarray(target) - np.asarray(position)
         if math.hypot(offset[0], offset[1]) < 2.0:
@@ -268,7 +275,9 @@ class Navigator:
         limits = self._auto_limits(climb_mps=self.params["MPC_TKO_SPEED"])
         return self._track(self.takeoff_target_ned, dt_s, limits)
 
-    def land(self, position, dt_s: float, dist_bottom_m: float | None = None) -> Setpoint:
+    def land(
+        self, position: NDArray[np.float64], dt_s: float, dist_bottom_m: float | None = None
+    ) -> Setpoint:
         """Hold the horizontal position and descend, slowing between MPC_LAND_ALT1/2 and,
         with a rangefinder's height above the ground, to MPC_LAND_CRWL below MPC_LAND_ALT3
         (PX4 ``FlightTaskAuto``: the heights are the rangefinder's when it has one, else
@@ -315,7 +324,9 @@ class Navigator:
             yawspeed if math.isfinite(yawspeed) else 0.0, limits,
         )  # fmt: skip
 
-    def mission_step(self, position, landed: bool, time_us: int, dt_s: float) -> Setpoint | str:
+    def mission_step(
+        self, position: NDArray[np.float64], landed: bool, time_us: int, dt_s: float
+    ) -> Setpoint | Literal["land"]:
         """Fly the current mission item; returns a set-point, or ``"land"`` when the item is a
         landing that has reached its descent, so the commander runs the land logic."""
         while self.mission_seq < len(self.mission):
@@ -355,7 +366,7 @@ class Navigator:
         """The landing of the current mission item touched down."""
         self._advance()
 
-    def _item_target(self, item: MissionItem, position) -> NDArray[np.float64]:
+    def _item_target(self, item: MissionItem, position: NDArray[np.float64]) -> NDArray[np.float64]:
         relative = _GLOBAL_FRAMES[item.frame]
         alt = item.z + self.home_alt_amsl_m if relative else item.z
         if item.x == 0 and item.y == 0:  # no position: here, at the item's altitude
@@ -369,7 +380,13 @@ class Navigator:
             return item.param2
         return self.params["NAV_ACC_RAD"]
 
-    def _reached(self, item: MissionItem, position, target, time_us: int) -> bool:
+    def _reached(
+        self,
+        item: MissionItem,
+        position: NDArray[np.float64],
+        target: NDArray[np.float64],
+        time_us: int,
+    ) -> bool:
         if self._hold_until_us is None:
             horizontal = math.hypot(*(position[:2] - target[:2]))
             if item.command == mavlink.MAV_CMD_NAV_TAKEOFF:

@@ -33,7 +33,9 @@ class ParamSpec:
         return isinstance(self.default, int)
 
 
-def _p(name: str, default: float | int, minimum: float, maximum: float, unit: str, text: str):
+def _p(
+    name: str, default: float | int, minimum: float, maximum: float, unit: str, text: str
+) -> ParamSpec:
     return ParamSpec(name, default, minimum, maximum, unit, text)
 
 

@@ -47,7 +47,9 @@ IDLE_HEARTBEAT_S = 1.0
 SIM_SILENCE_NOTE_S = 5.0
 
 
-def sensor_frame(message, gps: GpsFix | None, ranged: RangeReading | None = None) -> SensorFrame:
+def sensor_frame(
+    message: mavlink.MAVLink_message, gps: GpsFix | None, ranged: RangeReading | None = None
+) -> SensorFrame:
     """HIL_SENSOR (SI units after PX4's conversions: hPa → Pa) → :class:`SensorFrame`."""
     fields = message.fields_updated
 
@@ -69,7 +71,7 @@ def sensor_frame(message, gps: GpsFix | None, ranged: RangeReading | None = None
     )  # fmt: skip
 
 
-def range_reading(message) -> RangeReading:
+def range_reading(message: mavlink.MAVLink_message) -> RangeReading:
     """DISTANCE_SENSOR (cm; quality 0 unknown, else 1..100) as PX4's
     ``publish_distance_topic`` turns it into ``distance_sensor``."""
     quality = -1 if message.signal_quality == 0 else 100 * (message.signal_quality - 1) // 99
@@ -81,7 +83,7 @@ def range_reading(message) -> RangeReading:
     )
 
 
-def gps_fix(message) -> GpsFix:
+def gps_fix(message: mavlink.MAVLink_message) -> GpsFix:
     """HIL_GPS (degE7, mm, cm/s, eph/epv in cm as PX4 reads them) → :class:`GpsFix`."""
     return GpsFix(
         lat_deg=message.lat * 1e-7,
@@ -95,7 +97,7 @@ def gps_fix(message) -> GpsFix:
     )
 
 
-def ground_truth(message) -> GroundTruth:
+def ground_truth(message: mavlink.MAVLink_message) -> GroundTruth:
     """HIL_STATE_QUATERNION → :class:`GroundTruth` (for the estimator-error log only)."""
     return GroundTruth(
         q=np.array(message.attitude_quaternion, dtype=float),
@@ -155,8 +157,9 @@ class Autopilot:
         self._last_frame_wall_s = time.monotonic()
         self._silence_noted = False
 
-    def connect(self) -> None:
-        """Connect to the rig, retrying until it accepts; heartbeats meanwhile."""
+    def connect(self) -> socket.socket:
+        """Connect to the rig, retrying until it accepts; heartbeats meanwhile. Returns the
+        connection (also ``sim``)."""
         last_heartbeat = 0.0
         while True:
             sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -178,26 +181,27 @@ class Autopilot:
             0, 0, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
             mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, GROUND_TRUTH_INTERVAL_US, 0, 0, 0, 0, 0,
         ))  # fmt: skip
+        return sock
 
     def run(self) -> str:
         """Serve until the simulator closes the link; returns why it stopped."""
         warm_up()
-        self.connect()
+        sim = self.connect()
         self._last_frame_wall_s = time.monotonic()
         while True:
-            readable, _, _ = select.select([self.sim, *(link.sock for link in self.links)],
+            readable, _, _ = select.select([sim, *(link.sock for link in self.links)],
                                            [], [], IDLE_HEARTBEAT_S)  # fmt: skip
             if not readable:
                 self.ground.heartbeat()
-            if self.sim not in readable:
+            if sim not in readable:
                 self._note_silence()
             for link in self.links:
                 if link.sock in readable:
                     for message, sender in link.receive():
                         self.ground.handle(link, message, sender)
             self.ground.retry_uploads()
-            if self.sim in readable:
-                data = self.sim.recv(65536)
+            if sim in readable:
+                data = sim.recv(65536)
                 if not data:
                     return f"the simulator closed the link at t={self.fc.time_us / 1e6:.3f} s"
                 for message in self.sim_mav.parse_buffer(data) or []:
@@ -220,7 +224,7 @@ class Autopilot:
                   f"t={self.fc.time_us / 1e6:.3f} s (lockstep), waiting",
                   file=sys.stderr, flush=True)  # fmt: skip
 
-    def _handle_sim(self, message) -> None:
+    def _handle_sim(self, message: mavlink.MAVLink_message) -> None:
         kind = message.get_type()
         if kind == "HIL_SENSOR":
             if message.id != 0:
@@ -246,5 +250,6 @@ class Autopilot:
         elif kind == "BAD_DATA":
             self.sim_malformed += 1
 
-    def _send_sim(self, message) -> None:
+    def _send_sim(self, message: mavlink.MAVLink_message) -> None:
+        assert self.sim is not None, "run() connects before any message arrives"
         self.sim.sendall(message.pack(self.sim_mav))
