@@ -140,7 +140,7 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
     lags = [
         a.motor_time_constant_s
         for a in result.axes
-        if a.motor_lag_identified and a.motor_time_constant_s is not None  # identified: fitted
+        if a.motor_lag_identified and a.motor_time_constant_s is not None  # identified: estimated
     ]
     if lags:
         tau = float(np.mean([e.value for e in lags]))

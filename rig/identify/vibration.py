@@ -405,6 +405,7 @@ def fit_vibration(
                 levels[triad, :, axis, index] = np.sqrt(squared)
 
     def table(triad: int, kind: int) -> LevelTable:
+        """One of ``levels``' tables: triad 0 accel, 1 gyro; kind 0 tone, 1 broadband."""
         return tuple(_triple(levels[triad, kind, :, p]) for p in range(len(points)))
 
     vib = replace(
