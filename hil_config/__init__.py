@@ -23,9 +23,12 @@ import tomllib
 from collections.abc import Mapping
 from enum import Enum
 from pathlib import Path
-from typing import Annotated, Any, TypeVar, dataclass_transform
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar, dataclass_transform
 
 from pydantic import ConfigDict, Field, Strict, TypeAdapter, ValidationError
+
+if TYPE_CHECKING:
+    from typing_extensions import TypeForm
 
 T = TypeVar("T")
 
@@ -100,13 +103,15 @@ def load(
     return parse(schema, document, str(path), error)
 
 
-def parse(schema: type[T], document: Any, source: str, error: type[Exception]) -> T:
-    """Check a parsed document (or one built in code) against ``schema``.
+def parse(schema: TypeForm[T], document: Any, source: str, error: type[Exception]) -> T:
+    """Check a parsed document (or one built in code) against ``schema``: a table, or any
+    type pydantic reads (a discriminated union such as a scenario fault).
 
     ``source`` starts the error's line: the file's path, or what the document stands for.
     """
     try:
-        # mypy takes type[T] for unhashable (python/mypy#11470, #20409); a class is hashable
+        # mypy takes a type form for unhashable (python/mypy#11470, #20409); a class, a union
+        # and an Annotated form are all hashable
         return _adapter(schema).validate_python(document)  # type: ignore[arg-type]
     except ValidationError as failure:
         raise error(f"{source}: {_describe(failure, document)}") from None
@@ -118,7 +123,7 @@ def json_schema(schema: type) -> dict[str, Any]:
 
 
 @functools.cache
-def _adapter(schema: type) -> TypeAdapter[Any]:
+def _adapter(schema: TypeForm[Any]) -> TypeAdapter[Any]:
     return TypeAdapter(schema)
 
 

@@ -56,18 +56,18 @@ class FlightLog:
         self.parameters = dict(parameters)
         self.firmware = firmware
         self.warnings = warnings  # pyulog's, become a run's notes
-        topics = {name: dict(data) for name, data in topics.items()}
-        if not topics:
+        own = {name: dict(data) for name, data in topics.items()}  # derive_missing adds to it
+        if not own:
             raise LogError(f"{self.path}: the ULog holds no logged data")
-        first_us = min(float(data["timestamp"][0]) for data in topics.values())
+        first_us = min(float(data["timestamp"][0]) for data in own.values())
         self.first_s = first_us / 1e6 if first_s is None else first_s
-        last_us = max(float(data["timestamp"][-1]) for data in topics.values())
+        last_us = max(float(data["timestamp"][-1]) for data in own.values())
         self.last_s = last_us / 1e6 if last_s is None else last_s
         #: Notes of the topics derived from an older PX4's layout.
-        self.derived = derive_missing(topics, self.parameters)
+        self.derived = derive_missing(own, self.parameters)
         self.topics: dict[str, dict[str, NDArray[Any]]] = {}
         self._time_s: dict[str, NDArray[np.float64]] = {}
-        for name, data in topics.items():
+        for name, data in own.items():
             # the body rates at their measurement time, so a fitted delay is physical
             measured = name == "vehicle_angular_velocity" and "timestamp_sample" in data
             stamp = np.asarray(data["timestamp_sample" if measured else "timestamp"])

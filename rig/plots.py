@@ -17,6 +17,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 import pyulog
+from numpy.typing import NDArray
 from scipy import signal
 
 matplotlib.use("Agg")  # files only, no display
@@ -31,6 +32,8 @@ from rig.lockstep.loop import AUTOPILOT_LOGS
 PLOTS = ("position", "attitude", "motors", "imu_psd")
 _AXES = ("x (north)", "y (east)", "z (down)")
 _ANGLES = ("roll", "pitch", "yaw")
+#: The run's logged messages: time (s), level, text.
+Events = list[tuple[float, str, str]]
 
 
 class PlotError(RigError):
@@ -48,7 +51,7 @@ def plot_run(run_dir: Path) -> list[Path]:
         (_read(run_dir / name) for name in AUTOPILOT_LOGS if (run_dir / name).is_file()), None
     )
     events = [(m.timestamp / 1e6, m.log_level_str(), m.message) for m in rig.logged_messages]
-    makers: dict[str, Callable[..., None]] = {
+    makers: dict[str, Callable[[plt.Figure, pyulog.ULog, pyulog.ULog | None, Events], None]] = {
         "position": _position, "attitude": _attitude, "motors": _motors, "imu_psd": _imu_psd,
     }  # fmt: skip
     paths = []
@@ -85,7 +88,7 @@ def _topic(log: pyulog.ULog | None, name: str) -> tuple[np.ndarray, dict] | None
     return None
 
 
-def _mark(ax: plt.Axes, events: list[tuple[float, str, str]]) -> None:
+def _mark(ax: plt.Axes, events: Events) -> None:
     """Faults and errors as red lines, commands as grey dotted ones."""
     for time_s, level, text in events:
         if level in ("WARNING", "ERROR", "CRITICAL", "ALERT", "EMERGENCY"):
@@ -100,13 +103,15 @@ def _legend(ax: plt.Axes) -> None:
         ax.legend(fontsize=8, loc="upper right")
 
 
-def _faults_legend(figure: plt.Figure, events: list[tuple[float, str, str]]) -> None:
+def _faults_legend(figure: plt.Figure, events: Events) -> None:
     faults = [f"{t:.2f} s: {text}" for t, level, text in events if level != "INFO"]
     if faults:
         figure.text(0.01, 0.005, "\n".join(faults[:6]), fontsize=7, color="tab:red", va="bottom")
 
 
-def _position(figure, rig, autopilot, events) -> None:
+def _position(
+    figure: plt.Figure, rig: pyulog.ULog, autopilot: pyulog.ULog | None, events: Events
+) -> None:
     axes = figure.subplots(3, 1, sharex=True)
     truth = _topic(rig, "vehicle_local_position_groundtruth")
     estimate = _topic(autopilot, "vehicle_local_position")
@@ -127,7 +132,9 @@ def _euler_deg(fields: dict, prefix: str) -> np.ndarray:
     return np.degrees(np.array([euler_from_quat(q) for q in quats]).T)
 
 
-def _attitude(figure, rig, autopilot, events) -> None:
+def _attitude(
+    figure: plt.Figure, rig: pyulog.ULog, autopilot: pyulog.ULog | None, events: Events
+) -> None:
     axes = figure.subplots(3, 1, sharex=True)
     curves = (
         ("truth (rig)", _topic(rig, "vehicle_attitude_groundtruth"), "q", "k"),
@@ -144,7 +151,13 @@ def _attitude(figure, rig, autopilot, events) -> None:
     _finish(figure, axes, [f"{angle} [deg]" for angle in _ANGLES], "attitude", events)
 
 
-def _finish(figure, axes, ylabels: list[str], title: str, events) -> None:
+def _finish(
+    figure: plt.Figure,
+    axes: NDArray[np.object_],  # of Axes, as Figure.subplots returns them
+    ylabels: list[str],
+    title: str,
+    events: Events,
+) -> None:
     """Labels, grid and event marks of a stack of time plots sharing one time axis."""
     for ax, ylabel in zip(axes, ylabels, strict=True):
         ax.set_ylabel(ylabel)
@@ -156,7 +169,9 @@ def _finish(figure, axes, ylabels: list[str], title: str, events) -> None:
     _faults_legend(figure, events)
 
 
-def _motors(figure, rig, autopilot, events) -> None:
+def _motors(
+    figure: plt.Figure, rig: pyulog.ULog, autopilot: pyulog.ULog | None, events: Events
+) -> None:
     commanded, captured = figure.subplots(2, 1, sharex=True)
     motors = _topic(rig, "actuator_motors")
     if motors is not None:
@@ -177,7 +192,9 @@ def _motors(figure, rig, autopilot, events) -> None:
     _faults_legend(figure, events)
 
 
-def _imu_psd(figure, rig, autopilot, events) -> None:
+def _imu_psd(
+    figure: plt.Figure, rig: pyulog.ULog, autopilot: pyulog.ULog | None, events: Events
+) -> None:
     """Welch PSDs of the IMU as delivered to the autopilot (rig.ulg sensor_combined)."""
     del autopilot, events  # a spectrum has no time axis to mark
     accel_ax, gyro_ax = figure.subplots(2, 1)

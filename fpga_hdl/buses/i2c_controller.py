@@ -23,7 +23,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.build import Platform
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, ValueLike
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -176,11 +177,11 @@ class I2cController(wiring.Component):
         restart = c.low + c.su_sta + c.hd_sta if write_part and read_len else 0
         return 1 + c.hd_sta + 9 * frames * c.bit + restart + c.low + c.su_sto + c.buf
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         fast = Signal()
 
-        def cycles(field: str):
+        def cycles(field: str) -> Value:
             return Mux(fast, getattr(self.fast_mode, field), getattr(self.standard, field))
 
         longest = max(max(vars(self.standard).values()), max(vars(self.fast_mode).values()))
@@ -197,7 +198,7 @@ class I2cController(wiring.Component):
         reading = Signal()  # the read part's address has been sent or is being sent
         acked = Signal()
 
-        def after(state: str, duration, *actions) -> None:
+        def after(state: str, duration: ValueLike, *actions: object) -> None:
             """Leave for ``state`` (which lasts ``duration`` cycles) once ``wait`` is 0."""
             with m.If(wait == 0):
                 m.d.sync += [*actions, wait.eq(duration - 1)]
@@ -205,7 +206,7 @@ class I2cController(wiring.Component):
             with m.Else():
                 m.d.sync += wait.eq(wait - 1)
 
-        def load(value, *, send: bool, is_address: bool = False) -> None:
+        def load(value: ValueLike, *, send: bool, is_address: bool = False) -> None:
             m.d.sync += [
                 byte.eq(value),
                 bit.eq(0),

@@ -10,7 +10,8 @@ bytes the controller wrote (``write_stb``) and a request for the next byte to se
 import math
 from dataclasses import dataclass
 
-from amaranth.hdl import Assert, Cat, Const, Module, Signal
+from amaranth.build import Platform
+from amaranth.hdl import Assert, Cat, Const, Module, Signal, ValueLike
 from amaranth.lib import enum, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
@@ -162,7 +163,9 @@ def _pipeline(filter_samples: int) -> int:
     return SYNC_STAGES + filter_samples + 1
 
 
-class _State(enum.Enum, shape=3):
+# amaranth is untyped here, so mypy checks shape= against object.__init_subclass__; amaranth's
+# enum metaclass takes it
+class _State(enum.Enum, shape=3):  # type: ignore[call-arg]
     IDLE = 0  # not addressed: wait for START
     ADDRESS = 1  # shifting in the address byte
     ADDRESS_ACK = 2  # driving the ACK of our address
@@ -246,7 +249,7 @@ class I2cTarget(wiring.Component):
         self.assertions = assertions
         super().__init__()
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
 
         scl, sda = self._filtered(m, self.i2c.scl, "scl"), self._filtered(m, self.i2c.sda_i, "sda")
@@ -282,7 +285,7 @@ class I2cTarget(wiring.Component):
             with m.Else():
                 m.d.sync += hold.eq(hold - 1)
 
-        def drive_after_fall(pull_low) -> None:
+        def drive_after_fall(pull_low: ValueLike) -> None:
             m.d.sync += [
                 drive_next.eq(pull_low),
                 hold.eq(self.sampling.hold_cycles),
@@ -410,7 +413,7 @@ class I2cTargetChecker(wiring.Component):
     drive_phase: In(1)
     hold_pending: In(1)
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         drive_before = Signal()  # sda_drive one cycle back
         released = Signal()  # a START or STOP released SDA at the last edge

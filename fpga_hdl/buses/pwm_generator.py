@@ -12,6 +12,7 @@ second for all eight channels and nothing per pulse edge.
 
 from __future__ import annotations
 
+from amaranth.build import Platform
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
@@ -51,7 +52,7 @@ class PwmGenerator(wiring.Component):
             }
         )
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         count = Signal(self.counter_bits)
         channels = range(PWM_CHANNELS)

@@ -20,7 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Module, Signal
+from amaranth.build import Platform
+from amaranth.hdl import Cat, Module, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -152,7 +153,7 @@ class SpiController(wiring.Component):
         edges = 2 * divider * 8 * length
         return 2 + self.cs_setup_cycles + edges + self.cs_hold_cycles + self.cs_idle_cycles
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         wait = Signal(range(max(256, self.cs_hold_cycles + 1, self.cs_idle_cycles + 1)))
         shift = Signal(8 * self.depth)  # tx bytes out of the top, rx bits in at the bottom
@@ -249,6 +250,6 @@ class SpiController(wiring.Component):
                     m.d.sync += wait.eq(wait - 1)
         return m
 
-    def _leading_edge(self, m: Module, next_bit, divider, wait) -> None:
+    def _leading_edge(self, m: Module, next_bit: Value, divider: Signal, wait: Signal) -> None:
         """SCLK falls (a no-op in mode 0 before the first bit) and MOSI takes the next bit."""
         m.d.sync += [self.sclk.eq(0), self.mosi.eq(next_bit), wait.eq(divider - 1)]

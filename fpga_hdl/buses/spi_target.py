@@ -31,6 +31,7 @@ The engine has three clock domains, all local to the chip that instantiates it:
 During the first (command) byte SDO sends zeros: neither chip defines SDO there.
 """
 
+from amaranth.build import Platform
 from amaranth.hdl import Assert, Cat, ClockDomain, Module, ResetSignal, Signal
 from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
@@ -122,7 +123,7 @@ class SpiTarget(wiring.Component):
         self.assertions = assertions
         super().__init__()
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         pins = self.spi
         for name, edge in (("spi_rx", "pos"), ("spi_tx", "neg")):
@@ -195,7 +196,7 @@ class SpiTargetChecker(wiring.Component):
     first_byte: In(1)
     loaded: In(8)
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         m.d.sync += Assert(~self.miso_oe | ~self.cs_n, "SPI target drives SDO while CS is high")
         sent = Signal(8)  # the reference: the byte loaded at this data byte's start

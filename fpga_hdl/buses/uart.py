@@ -7,6 +7,7 @@ crystal) is what the far end must tolerate; :func:`baud_error` gives it and
 :data:`MAX_BAUD_ERROR` is the budget a divider must meet (see there).
 """
 
+from amaranth.build import Platform
 from amaranth.hdl import Cat, Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
@@ -93,7 +94,7 @@ class UartTx(wiring.Component):
     ready: Out(1)
     busy: Out(1)
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         shift = Signal(9)  # data bits then the stop bit, LSB first
         bits_left = Signal(range(11))  # bit periods left including the one on the line
@@ -149,7 +150,7 @@ class UartRx(wiring.Component):
     frame_error: Out(1)
     busy: Out(1)
 
-    def elaborate(self, platform) -> Module:
+    def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         meta, line, last = Signal(init=1), Signal(init=1), Signal(init=1)
         m.d.sync += [meta.eq(self.rx), line.eq(meta), last.eq(line)]

@@ -10,14 +10,23 @@ from __future__ import annotations
 
 import math
 from collections.abc import Awaitable, Callable
+from typing import Protocol
 
 from amaranth.hdl import Elaboratable, Module, Signal
-from amaranth.sim import Simulator
+from amaranth.sim import Simulator, SimulatorContext
 
 from fpga_hdl.buses.i2c_target import FAST_MODE, I2cTiming
 from fpga_hdl.buses.transactions import combined_transfer
 
 __all__ = ["AmaranthI2cController", "run_i2c_testbench"]
+
+
+class I2cPins(Protocol):
+    """A target's ``i2c`` interface: SCL and SDA in, its SDA pull-down out."""
+
+    scl: Signal
+    sda_i: Signal
+    sda_oe: Signal
 
 
 class AmaranthI2cController:
@@ -26,7 +35,7 @@ class AmaranthI2cController:
 
     def __init__(
         self,
-        ctx,
+        ctx: SimulatorContext,
         scl: Signal,
         sda_ctrl: Signal,
         sda_bus: Signal,
@@ -104,8 +113,8 @@ class AmaranthI2cController:
 
 def run_i2c_testbench(
     dut: Elaboratable,
-    pins,
-    bench: Callable[[object, AmaranthI2cController], Awaitable[object]],
+    pins: I2cPins,
+    bench: Callable[[SimulatorContext, AmaranthI2cController], Awaitable[object]],
     *,
     sys_clk_hz: float,
     timing: I2cTiming = FAST_MODE,
@@ -125,9 +134,9 @@ def run_i2c_testbench(
     ]
     sim = Simulator(m)
     sim.add_clock(1 / sys_clk_hz)
-    result = {}
+    result: dict[str, object] = {}
 
-    async def testbench(ctx) -> None:
+    async def testbench(ctx: SimulatorContext) -> None:
         await ctx.tick().repeat(8)
         controller = AmaranthI2cController(
             ctx, scl, sda_ctrl, sda_bus, sys_clk_hz=sys_clk_hz, timing=timing

@@ -8,11 +8,23 @@ never for the closed loop.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Protocol
 
-from amaranth.sim import Simulator
+from amaranth.hdl import Elaboratable, Signal
+from amaranth.sim import Simulator, SimulatorContext
 
 from fpga_hdl.buses.transactions import check_clock_hz, check_spi_mode, check_spi_request
+
+
+class SpiPins(Protocol):
+    """A chip's ``spi`` interface, the pins the controller drives and reads."""
+
+    cs_n: Signal
+    sclk: Signal
+    mosi: Signal
+    miso: Signal
+    miso_oe: Signal
 
 
 class AmaranthSpiController:
@@ -26,8 +38,8 @@ class AmaranthSpiController:
 
     def __init__(
         self,
-        ctx,
-        devices: Mapping[str, object],
+        ctx: SimulatorContext,
+        devices: Mapping[str, SpiPins],
         *,
         mode: int = 0,
         cs_setup_s: float = 50e-9,
@@ -48,7 +60,7 @@ class AmaranthSpiController:
             self.ctx.set(chip.cs_n, 1)
             self.ctx.set(chip.sclk, 1 if self.mode == 3 else 0)
 
-    def _sample_miso(self, chip) -> int:
+    def _sample_miso(self, chip: SpiPins) -> int:
         return self.ctx.get(chip.miso) if self.ctx.get(chip.miso_oe) else self.idle_level
 
     async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
@@ -79,7 +91,12 @@ class AmaranthSpiController:
         return bytes(rx)
 
 
-def run_spi_testbench(dut, *benches, sys_clk_hz: float, deadline_s: float | None = None) -> None:
+def run_spi_testbench(
+    dut: Elaboratable,
+    *benches: Callable[[SimulatorContext], Awaitable[object]],
+    sys_clk_hz: float,
+    deadline_s: float | None = None,
+) -> None:
     """Simulate ``dut`` with a ``sync`` clock and the given async testbenches.
 
     The first bench is the main one; the others run beside it (e.g. a host racing a

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import cocotb
 from cocotb.clock import Clock
+from cocotb.handle import LogicObject
 from cocotb.triggers import Timer
 from cocotb.utils import get_sim_time
 
@@ -55,10 +56,10 @@ class CocotbI2cMaster:
     def __init__(
         self,
         *,
-        scl,
-        sda_i,
-        sda_oe,
-        clk,
+        scl: LogicObject,
+        sda_i: LogicObject,
+        sda_oe: LogicObject,
+        clk: LogicObject,
         sys_clk_hz: float,
         timing: I2cTiming | None = None,
     ) -> None:
@@ -71,7 +72,7 @@ class CocotbI2cMaster:
         self._scl = 1
         self._spike = 0  # 1 while an injected spike pulls SDA low
         self._clock: Clock | None = None
-        self._clock_since_ps = 0
+        self._clock_since_ps = 0.0
         #: System-clock cycles run for transfers so far: the bus's simulation cost.
         self.cycles = 0
         self._t = timing or FAST_MODE

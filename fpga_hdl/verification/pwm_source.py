@@ -7,6 +7,7 @@ the current level of all channels.
 
 from __future__ import annotations
 
+from cocotb.handle import LogicArrayObject
 from cocotb.triggers import Timer
 
 __all__ = ["CocotbPwmSource"]
@@ -19,7 +20,7 @@ def _ps(seconds: float) -> int:
 class CocotbPwmSource:
     """Drives ``pins`` (one bit per channel); all channels start low."""
 
-    def __init__(self, pins, channels: int = 8) -> None:
+    def __init__(self, pins: LogicArrayObject, channels: int = 8) -> None:
         self.pins = pins
         self.channels = channels
         self._levels = 0

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass
 
+from cocotb.handle import LogicObject
 from cocotb.triggers import Timer
 
 from fpga_hdl.buses.transactions import check_clock_hz, check_spi_mode, check_spi_request
@@ -51,11 +52,11 @@ class CocotbSpiMaster:
     def __init__(
         self,
         *,
-        sclk,
-        mosi,
-        miso,
-        miso_oe,
-        chip_selects: Mapping[str, object],
+        sclk: LogicObject,
+        mosi: LogicObject,
+        miso: LogicObject,
+        miso_oe: LogicObject,
+        chip_selects: Mapping[str, LogicObject],
         timing: SpiMasterTiming = DEFAULT_TIMING,
         after_release: Callable[[], Awaitable[None]] | None = None,
     ) -> None:

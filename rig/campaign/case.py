@@ -120,6 +120,10 @@ def credibility_metrics(
     except CredibilityError as error:
         missing = dict.fromkeys(("eta_all", "eta_min"))
         return missing, f"credibility not assessed: {error}"
+    # assess is strict: a test it cannot score raises above, so every test is scored and
+    # the indices exist
+    assert assessment.eta_all is not None
+    assert assessment.eta_min is not None
     return {
         "eta_all": round(float(assessment.eta_all), 6),
         "eta_min": round(float(assessment.eta_min), 6),

@@ -71,12 +71,13 @@ def campaign_from_dict(document: Mapping[str, Any], source: str = "<dict>") -> C
     for name, fault in file.faults.items():
         sweep = {key: fault[key] for key in ("severity", "duration_s") if key in fault}
         severity = parse(FaultSweep, sweep, f"{source}: faults.{name}", CampaignError).severity
-        values = fault.get(severity)
-        if severity is not None and (not isinstance(values, list) or not values):
-            raise CampaignError(
-                f"{source}: key 'faults.{name}.severity' = {severity!r}: expected a parameter "
-                f"of {fault.get('kind')} whose value is a list of severities"
-            )
+        if severity is not None:
+            values = fault.get(severity)
+            if not isinstance(values, list) or not values:
+                raise CampaignError(
+                    f"{source}: key 'faults.{name}.severity' = {severity!r}: expected a "
+                    f"parameter of {fault.get('kind')} whose value is a list of severities"
+                )
         for variant in fault_variants(name, file.faults):
             parse(FaultSpec, fault_table(fault, variant, 0.0), f"{source}: faults.{name}",
                   CampaignError)  # fmt: skip
@@ -145,7 +146,8 @@ def expand(campaign: Campaign, out_dir: Path) -> list[CaseSpec]:
     base, base_path = read_toml(
         settings.scenario, SCENARIOS_DIR, kind="scenario", error=CampaignError
     )
-    vehicle_name = base.get("vehicle")
+    # Still unchecked TOML: a missing or non-text vehicle is the TypeError below.
+    vehicle_name: Any = base.get("vehicle")
     try:
         vehicle, _ = read_toml(vehicle_name, VEHICLES_DIR, kind="vehicle", error=VehicleFileError)
     except (VehicleFileError, TypeError) as error:
@@ -199,7 +201,12 @@ def expand(campaign: Campaign, out_dir: Path) -> list[CaseSpec]:
     return cases
 
 
-def _apply(chosen: Mapping[str, Any], campaign: Campaign, scenario: dict, vehicle: dict):
+def _apply(
+    chosen: Mapping[str, Any],
+    campaign: Campaign,
+    scenario: dict[str, Any],
+    vehicle: dict[str, Any],
+) -> float | None:
     """Write the chosen axis values into the scenario and vehicle documents; returns the
     fault onset (the start of the window the metrics look at) or None."""
     onset_s = chosen.get("fault_onset_s")

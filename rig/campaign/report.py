@@ -11,7 +11,7 @@ import base64
 import io
 import json
 from collections import defaultdict
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -83,7 +83,7 @@ def survived(result: CaseResult) -> bool:
     return result.status in ("ok", "failed") and not result.metrics.get("crashed", True)
 
 
-def _group_row(value: str, group: list[CaseResult], metrics: list[str]) -> dict[str, Any]:
+def _group_row(value: str, group: list[CaseResult], metrics: Sequence[str]) -> dict[str, Any]:
     row: dict[str, Any] = {
         "value": value,
         "cases": len(group),

@@ -117,10 +117,20 @@ class ResultsDb:
         )
         return [
             CaseResult(
-                *row[:2], tuple(json.loads(row[2]).items()), *row[3:5], json.loads(row[5]), *row[6:]
+                case_id=case_id,
+                index=index,
+                labels=tuple(json.loads(axes_json).items()),
+                status=status,
+                reason=reason,
+                metrics=json.loads(metrics_json),
+                wall_s=wall_s,
+                run_dir=run_dir,
+                rig_log=rig_log,
+                autopilot_log=autopilot_log,
             )
-            for row in rows
-        ]
+            for (case_id, index, axes_json, status, reason, metrics_json, wall_s, run_dir,
+                 rig_log, autopilot_log) in rows
+        ]  # fmt: skip
 
 
 def read_results(out_dir: Path) -> list[CaseResult]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar, get_args
 
 from pydantic import Field
 
@@ -31,8 +31,8 @@ CAMPAIGNS_DIR = Path(__file__).parent / "campaigns"
 PLANS_DIR = Path(__file__).parents[2] / "credibility" / "plans"
 
 
-#: What each case reports (rig.campaign.case computes them from the run's logs).
-METRICS = (
+#: A metric each case reports (rig.campaign.case computes them from the run's logs).
+Metric = Literal[
     "max_tilt_deg",
     "altitude_loss_m",
     "time_to_failsafe_s",
@@ -40,7 +40,9 @@ METRICS = (
     "crashed",
     "eta_all",
     "eta_min",
-)
+]
+#: The metrics in report order.
+METRICS: tuple[Metric, ...] = get_args(Metric)
 
 
 #: The metrics only a campaign with a ``[credibility]`` table measures.
@@ -48,7 +50,8 @@ CREDIBILITY_METRICS = ("eta_all", "eta_min")
 
 
 #: Which of a case's logs can fill the credibility plan's role.
-CASE_LOGS = ("rig", "autopilot")
+CaseLog = Literal["rig", "autopilot"]
+CASE_LOGS: tuple[CaseLog, ...] = get_args(CaseLog)
 
 
 #: Vehicle axes: ``axis → (section, keys)``; the value scales those vehicle-file entries.
@@ -167,7 +170,7 @@ class CredibilityTable:
 
     plan: Text
     role: Text = "sim"
-    log: Literal[CASE_LOGS] = "autopilot"
+    log: CaseLog = "autopilot"
 
 
 @table
@@ -188,7 +191,7 @@ class CampaignFile:
     #: ``[faults.NAME]``: a scenario fault without its start; ``severity`` names the
     #: parameter whose list of values is swept, ``duration_s`` the fault's length.
     faults: dict[str, dict[str, Any]] = field(default_factory=dict)
-    criteria: dict[Literal[METRICS], Bounds] = field(default_factory=dict)
+    criteria: dict[Metric, Bounds] = field(default_factory=dict)
     crash: CrashLimits = CrashLimits()
     credibility: CredibilityTable | None = None
 

@@ -35,8 +35,9 @@ def _campaign(args: argparse.Namespace, console: Console) -> int:
         console.print(f"report: {write_report(args.folder)}", highlight=False)
         return 0
     campaign = load_campaign(args.campaign)
-    out = args.out or RUNS_DIR / f"campaign-{campaign.name}"
-    console.print(f"[bold]{campaign.name}[/]: {campaign.description}\nresults in {out}")
+    settings = campaign.file
+    out = args.out or RUNS_DIR / f"campaign-{settings.name}"
+    console.print(f"[bold]{settings.name}[/]: {settings.description}\nresults in {out}")
     with campaign_executor(args.scheduler, args.workers) as executor:
         run_campaign(campaign, out, executor, lambda r: console.print(
             f"case {r.index:4d} {r.status:8s} {r.wall_s:6.1f} s  {r.reason}",

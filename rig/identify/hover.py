@@ -26,11 +26,11 @@ def identify_hover(
             f"and |rates| ≤ {HOVER_MAX_RATE_RADPS} rad/s for ≥ {MIN_HOVER_S:g} s)"
         )
     span = (windows[0][0], windows[-1][1])
-    commands = []
+    per_motor = []
     for motor in range(ROTOR_COUNT):
         t, u = log.series("actuator_motors", f"control[{motor}]", "hover motor commands")
-        commands.append(mean_in(t, u, windows))
-    commands = np.array(commands)  # motors × samples
+        per_motor.append(mean_in(t, u, windows))
+    commands = np.array(per_motor)  # motors × samples
     pwm = pwm_range[0] + (pwm_range[1] - pwm_range[0]) * commands
     throttle_samples = pwm_to_throttle(pwm).mean(axis=0)
     throttle = float(throttle_samples.mean())

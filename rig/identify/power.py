@@ -4,6 +4,8 @@ inside windows."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -11,7 +13,7 @@ from px4_logs import FlightLog
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
 
 
-def mean_in(time_s: NDArray, values: NDArray, windows) -> NDArray:
+def mean_in(time_s: NDArray, values: NDArray, windows: Iterable[tuple[float, float]]) -> NDArray:
     mask = np.zeros(time_s.size, dtype=bool)
     for a, b in windows:
         mask |= (time_s >= a) & (time_s < b)

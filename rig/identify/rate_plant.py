@@ -190,6 +190,8 @@ def _fit_plant(
         [np.inf, TAU_BOUNDS_S[1], DELAY_BOUNDS_S[1]],
     )
     fit = optimize.least_squares(residuals, start, bounds=bounds)
+    # '2-point' differences of a dense residual: a dense Jacobian, never sparse or an operator
+    assert isinstance(fit.jac, np.ndarray)
     dof = max(2 * f.size - 3, 1)
     covariance = np.linalg.pinv(fit.jac.T @ fit.jac) * (2.0 * fit.cost / dof)
     return _PlantFit(

@@ -137,7 +137,11 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
             f"thrust_coefficient_n_per_radps2 = {k_t.value:.4g}   # [identified] {source}, "
             f"hover rotor line {line.frequency.value:.1f} ± {line.frequency.uncertainty:.1f} Hz"
         )
-    lags = [a.motor_time_constant_s for a in result.axes if a.motor_lag_identified]
+    lags = [
+        a.motor_time_constant_s
+        for a in result.axes
+        if a.motor_lag_identified and a.motor_time_constant_s is not None  # identified: estimated
+    ]
     if lags:
         tau = float(np.mean([e.value for e in lags]))
         lines.append(

@@ -18,9 +18,10 @@ density is scaled until the model's stream at rest has the log's σ.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,7 +33,7 @@ from px4_logs import FlightLog, motor_pwm_range
 from quad_model.frames import pwm_to_throttle
 from quad_model.model import Mount, QuadModel
 from quad_model.sensors import ImuModel
-from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, Vehicle, VibrationParams
+from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, ImuParams, Vehicle, VibrationParams
 from rig.identify.results import IdentificationError
 from rig.scenarios.scenario import model_rate_for
 
@@ -60,6 +61,8 @@ MODEL_SECONDS = 20.0
 PX4_SITL_STREAM = (0.25, 0.5, 0.25)
 #: The points whose levels are fitted; the others check the interpolation.
 FITTED_POINTS = ("idle", "hover")
+#: A ``[vibration]`` level table: the (x, y, z) levels at each operating point.
+LevelTable = tuple[tuple[float, float, float], ...]
 _TRIAD_FIELDS = ("accelerometer_m_s2", "gyro_rad")  # kernel order: accel, gyro
 
 
@@ -190,7 +193,9 @@ def _pooled(spectra: Sequence[StreamSpectrum], weights: NDArray[np.float64]) -> 
     return StreamSpectrum(grid, psd, first.bands_hz, np.sqrt(band_power), np.sqrt(variance))
 
 
-def _mean_voltage(topics, path: Path, start: float, end: float) -> float:
+def _mean_voltage(
+    topics: Mapping[str, Mapping[str, NDArray[Any]]], path: Path, start: float, end: float
+) -> float:
     battery = topics.get("battery_status")
     if battery is None:
         raise IdentificationError(f"{path}: no topic 'battery_status' (the motors' speed curve)")
@@ -220,7 +225,7 @@ def _windows(log: FlightLog, imu_span: tuple[float, float]) -> dict[str, list[tu
             vz = np.interp(grid, time_s, uniform_filter1d(position["vz"], max(1, round(1 / step))))
             masks["climb"] = is_armed & ~landed & (vz <= -VERTICAL_SPEED_MPS)
             masks["descent"] = is_armed & ~landed & (vz >= VERTICAL_SPEED_MPS)
-    windows = {}
+    windows: dict[str, list[tuple[float, float] | None]] = {}
     for name, mask in masks.items():
         span = _longest(grid, mask, imu_span)
         if span is not None:
@@ -229,13 +234,12 @@ def _windows(log: FlightLog, imu_span: tuple[float, float]) -> dict[str, list[tu
         windows["hover"] = [_clip(w, imu_span) for w in log.hover_windows()]
     settled = {}
     for name, spans in windows.items():
-        spans = [(start + SETTLE_S, end) for start, end in filter(None, spans)]
-        spans = [(start, end) for start, end in spans if end - start >= MIN_WINDOW_S[name]]
-        if spans:
-            settled[name] = spans
-    windows = settled
+        kept = [(start + SETTLE_S, end) for start, end in filter(None, spans)]
+        kept = [(start, end) for start, end in kept if end - start >= MIN_WINDOW_S[name]]
+        if kept:
+            settled[name] = kept
     order = ("stopped", "idle", "hover", "climb", "descent")
-    return {name: windows[name] for name in order if name in windows}
+    return {name: settled[name] for name in order if name in settled}
 
 
 def _held(time_s: NDArray, values: NDArray, grid: NDArray) -> NDArray:
@@ -249,7 +253,9 @@ def _clip(span: tuple[float, float], limits: tuple[float, float]) -> tuple[float
     return (start, end) if end > start else None
 
 
-def _longest(grid: NDArray, mask: NDArray, limits: tuple[float, float]):
+def _longest(
+    grid: NDArray, mask: NDArray, limits: tuple[float, float]
+) -> tuple[float, float] | None:
     """The longest span of ``mask`` over ``grid``, from its first to its last sample in
     the state: the state is known only at the samples (``actuator_motors`` at 10 Hz), so a
     span run on to the next sample could take in up to 0.1 s of the next state (the X500's
@@ -262,6 +268,7 @@ def _longest(grid: NDArray, mask: NDArray, limits: tuple[float, float]):
             start = t if start is None else start
             last = t
         elif start is not None:
+            assert last is not None  # set with start
             span = _clip((float(start), float(last)), limits)
             if span is not None and (best is None or span[1] - span[0] > best[1] - best[0]):
                 best = span
@@ -308,6 +315,7 @@ def model_spectrum(
         reading = imu.sample(model.truth)
         samples[k, :3], samples[k, 3:] = reading.accel_mps2, reading.gyro_radps
     logged = sum(w * samples[taps - 1 - i : count - i] for i, w in enumerate(PX4_SITL_STREAM))
+    assert isinstance(logged, np.ndarray)  # PX4_SITL_STREAM has taps: not the empty sum's 0
     means = logged.reshape(-1, round(per_mean), 6).mean(axis=1)
     return stream_spectrum(means, stream_rate_hz, point.spectrum.bands_hz)
 
@@ -365,9 +373,15 @@ def fit_vibration(
         accel_noise_density_mps2_per_sqrthz=0.0,
     )
 
-    def variant(tone, broadband, imu) -> Vehicle:
-        tables = dict(zip(LEVEL_TABLES, (tone, broadband, tone, broadband), strict=True))
-        vib = replace(vehicle.vibration, level_rotor_speed_radps=speeds, **tables)
+    def variant(tone: LevelTable, broadband: LevelTable, imu: ImuParams) -> Vehicle:
+        vib = replace(
+            vehicle.vibration,
+            level_rotor_speed_radps=speeds,
+            accel_tone_level=tone,
+            accel_broadband_level=broadband,
+            gyro_tone_level=tone,
+            gyro_broadband_level=broadband,
+        )
         return replace(vehicle, vibration=vib, imu=imu)
 
     runs = {
@@ -389,11 +403,19 @@ def fit_vibration(
                 )
                 squared, _ = optimize.nnls(basis, np.maximum(wanted[triad, axis], 0.0))
                 levels[triad, :, axis, index] = np.sqrt(squared)
-    tables = {
-        name: tuple(tuple(float(v) for v in levels[t, k, :, p]) for p in range(len(points)))
-        for name, (t, k) in zip(LEVEL_TABLES, ((0, 0), (0, 1), (1, 0), (1, 1)), strict=True)
-    }
-    vib = replace(vehicle.vibration, level_rotor_speed_radps=speeds, **tables)
+
+    def table(triad: int, kind: int) -> LevelTable:
+        """One of ``levels``' tables: triad 0 accel, 1 gyro; kind 0 tone, 1 broadband."""
+        return tuple(_triple(levels[triad, kind, :, p]) for p in range(len(points)))
+
+    vib = replace(
+        vehicle.vibration,
+        level_rotor_speed_radps=speeds,
+        accel_tone_level=table(0, 0),
+        accel_broadband_level=table(0, 1),
+        gyro_tone_level=table(1, 0),
+        gyro_broadband_level=table(1, 1),
+    )
     return replace(vehicle, vibration=vib), densities
 
 
@@ -407,7 +429,7 @@ def rest_point(vehicle: Vehicle, measured: LogVibration) -> OperatingPoint | Non
     return measured.point("stopped") if "stopped" in names else None
 
 
-def _mean_speed(vehicle: Vehicle):
+def _mean_speed(vehicle: Vehicle) -> Callable[[OperatingPoint], float]:
     """The model's mean steady rotor speed at a point's throttles and voltage (the sort key
     and table position of a fitted point)."""
 
@@ -429,6 +451,12 @@ def _mean_speed(vehicle: Vehicle):
 def _gains(values: NDArray[np.float64]) -> tuple[float, float, float]:
     """Per-axis gains as the vehicle file keeps them (3 decimals)."""
     x, y, z = (round(float(v), 3) for v in values)
+    return x, y, z
+
+
+def _triple(values: NDArray[np.float64]) -> tuple[float, float, float]:
+    """A vibration level table's row: the x, y, z levels at one point."""
+    x, y, z = (float(v) for v in values)
     return x, y, z
 
 

@@ -17,7 +17,9 @@ apart.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -114,7 +116,7 @@ def _unit(v: NDArray[np.float64]) -> NDArray[np.float64]:
     return v / np.linalg.norm(v)
 
 
-def _density(topics, vehicle: Vehicle) -> float:
+def _density(topics: Mapping[str, Mapping[str, NDArray[Any]]], vehicle: Vehicle) -> float:
     air = topics.get("vehicle_air_data")
     if air is not None and "rho" in air:
         return float(np.mean(air["rho"]))

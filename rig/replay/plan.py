@@ -258,6 +258,7 @@ class Replay:
                 if hold_s is not None and not armed_in_it:  # a hold is in the air
                     commands.append(SetMode(at_s=at_s, nav_state=NAV_STATE_LOITER))
                     at_s += hold_s
+                assert event.nav_state is not None  # only an arm or a disarm has no mode
                 commands.append(SetMode(at_s=at_s, nav_state=event.nav_state))
         commands += [
             SetParam(at_s=time_s - origin, name="MPC_YAWRAUTO_MAX", value=limit)
@@ -545,6 +546,7 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
     else:
         parameters, skipped, unknown = reference_parameters(log.parameters)
     real_arm_s, disarm_s = log.arming(start_s, end_s)
+    arm_s: float | None
     if start_height_m:  # armed in the air: the lead-in arms as soon as the autopilot is ready
         real_arm_s = arm_s = start_s - lead_in_s + ready_s
     elif px4:  # PX4 booted early enough to arm at the log's time
@@ -617,7 +619,7 @@ def _pilot_inputs(
     mission where one was flown, the yaw-rate limits and the home moves."""
     events = log.timeline(start_s, end_s)
     sticks = log.sticks(start_s, end_s)
-    manual = sorted({e.nav_state for e in events if e.commanded} & STICK_MODES)
+    manual = sorted({e.nav_state for e in events if e.commanded and e.nav_state in STICK_MODES})
     if sticks is None and manual:
         raise ReplayError(
             f"{log.path}: topic manual_control_setpoint (the pilot's sticks, which PX4 needs "

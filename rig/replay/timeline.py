@@ -297,10 +297,10 @@ class ReplayLog(FlightLog):
         if not armed.any():
             return None, None
         first = int(np.argmax(armed))
-        arm_s = _arm_time_s(status, first)
+        armed_at_s = _arm_time_s(status, first)
         disarmed_after = np.nonzero(~armed[first:])[0]
         disarm_s = float(times_s[first + disarmed_after[0]]) if len(disarmed_after) else None
-        arm_s = max(arm_s, start_s) if arm_s < end_s else None
+        arm_s = max(armed_at_s, start_s) if armed_at_s < end_s else None
         if disarm_s is not None and not start_s < disarm_s < end_s:
             disarm_s = None
         return arm_s, disarm_s
@@ -487,12 +487,13 @@ class ReplayLog(FlightLog):
         at once (:data:`PASSED_AT_ONCE_S`) is put where the vehicle passed it."""
         times_s = data["timestamp"] / 1e6
         sequence = data["sequence_current"].astype(int)
-        altitudes, notes = [float(data["altitude"][k]) for k in rows], []
+        altitudes = [float(data["altitude"][k]) for k in rows]
+        notes: list[str] = []
         if home is None:
             return altitudes, notes
         relative = [bool(data["altitude_is_relative"][k]) for k in rows]
-        homes_then = {k: self.home_altitude_at(times_s[k]) for k in rows}
-        homes_then = {k: home.alt_amsl_m if h is None else h for k, h in homes_then.items()}
+        held = {k: self.home_altitude_at(times_s[k]) for k in rows}
+        homes_then = {k: home.alt_amsl_m if h is None else h for k, h in held.items()}
         references = homes_then if home_replayed else dict.fromkeys(rows, home.alt_amsl_m)
         moves_m = {
             k: homes_then[k] - references[k]

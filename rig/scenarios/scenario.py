@@ -477,9 +477,15 @@ class Scenario:
     commands: tuple[Command, ...] = ()
     faults: tuple[FaultSpec, ...] = ()
     #: Commands set by code (a replay: recorded setpoint and stick streams, a PX4 replay's
-    #: mode switches and mission); a file cannot give them.
+    #: mode switches, mission and home moves); a file cannot give them.
     tracks: SkipJsonSchema[
-        tuple[InstanceOf[Track] | InstanceOf[SetMode] | InstanceOf[UploadMission], ...]
+        tuple[
+            InstanceOf[Track]
+            | InstanceOf[SetMode]
+            | InstanceOf[UploadMission]
+            | InstanceOf[SetHome],
+            ...,
+        ]
     ] = ()
     #: Where the scenario came from (its file); set by the loader.
     source: SkipJsonSchema[str] = "<code>"

@@ -27,6 +27,7 @@ from importlib import resources
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
+from websockets.typing import Origin
 
 from rig.lockstep.loop import Progress
 from rig.view.frames import Frame, Recording, ViewError, live_frame
@@ -57,8 +58,9 @@ class ViewServer:
         try:
             self._sock = socket.create_server((LOOPBACK, port))
         except OSError as error:
+            reason = str(error) if error.errno is None else os.strerror(error.errno)
             raise ViewError(
-                f"cannot serve the view on {LOOPBACK}:{port} ({os.strerror(error.errno)}); "
+                f"cannot serve the view on {LOOPBACK}:{port} ({reason}); "
                 "is another view running there? (--view-port picks another port)"
             ) from None
         self.port: int = self._sock.getsockname()[1]
@@ -116,7 +118,11 @@ class ViewServer:
             self._ready.set()
 
     async def _serve(self) -> None:
-        origins = [None, f"http://{LOOPBACK}:{self.port}", f"http://localhost:{self.port}"]
+        origins = [
+            None,
+            Origin(f"http://{LOOPBACK}:{self.port}"),
+            Origin(f"http://localhost:{self.port}"),
+        ]
         # A page that stopped reading must not hold the end of a run: 1 s for its close.
         async with serve(self._client, sock=self._sock, process_request=self._http,
                          origins=origins, compression=None, close_timeout=1.0):  # fmt: skip
@@ -173,15 +179,17 @@ class ViewServer:
                 hello["frames"] = list(self._history)
                 hello["duration"] = None if self._sampled is None else self._sampled.duration_s
             sent = self._version
+
+            def moved_on() -> bool:  # a frame newer than the page's, or the end of the run
+                return self._version != sent or self._closing
+
             await connection.send(json.dumps(hello))
             if not self._live:
                 await connection.wait_closed()
                 return
             while not self._closing:
                 async with self._changed:
-                    await self._changed.wait_for(
-                        lambda seen=sent: self._version != seen or self._closing
-                    )
+                    await self._changed.wait_for(moved_on)
                 if self._version != sent:
                     sent = self._version
                     await connection.send(self._message)

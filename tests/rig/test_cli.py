@@ -4,10 +4,12 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 import pyulog
 
+from rig.campaign.results import CaseResult
 from rig.cli import main
 from rig.mavlink.px4_api import free_instance as find_free_instance
 from rig.processes import restore_sigint
@@ -118,6 +120,32 @@ def test_a_folder_holding_a_run_is_refused_without_force(capsys, tmp_path):
     assert last == (f"rig: error: {out}: already holds a run (rig.ulg); choose another --out, "
                     "or pass --force to overwrite it")  # fmt: skip
     assert (out / "rig.ulg").read_bytes() == b"a finished run"  # untouched
+
+
+def test_campaign_announces_its_name_and_runs_to_the_report(capsys, tmp_path, monkeypatch):
+    """``rig campaign FILE`` names the campaign from its file, runs every case and writes
+    the report; the cases are stood in for (no flights), the rest is the real command."""
+    path = tmp_path / "c.toml"
+    path.write_text('name = "two_seeds"\ndescription = "Hover, twice."\n'
+                    'scenario = "takeoff_hover_land"\n[axes]\nseed = [1, 2]\n')  # fmt: skip
+
+    def run_case(spec):
+        return CaseResult(
+            case_id=spec.case_id, index=spec.index, labels=spec.labels, status="ok", reason="",
+            metrics={}, wall_s=0.0, run_dir=spec.run_dir, rig_log=None, autopilot_log=None,
+        )  # fmt: skip
+
+    monkeypatch.setattr("rig.campaign.executor.run_case", run_case)
+    monkeypatch.setattr(
+        "rig.cli.campaign.campaign_executor", lambda *_: ThreadPoolExecutor(max_workers=1)
+    )
+    monkeypatch.setattr("rig.cli.campaign.RUNS_DIR", tmp_path)
+    out = tmp_path / "campaign-two_seeds"  # the default folder, named after the campaign
+    assert main(["campaign", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert err.splitlines()[0] == "two_seeds: Hover, twice.", err
+    assert err.count(" ok ") == 2
+    assert (out / "report.html").is_file()
 
 
 def _limit_file_size(limit_bytes: int):
