@@ -9,13 +9,13 @@ from rich.console import Console
 
 from rig.cli.command import Command
 from rig.cli.flight import add_run_options, announce, fly, run_options
-from rig.replay import DRIVES, ReplayOptions, plan_replay, run_replay
+from rig.replay import Drive, ReplayOptions, plan_replay, run_replay
 from rig.scenarios.scenario import Rates
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", type=Path, help="the real flight's ULog")
-    parser.add_argument("--drive", choices=DRIVES, default="velocity",
+    parser.add_argument("--drive", type=Drive, choices=list(Drive), default=Drive.VELOCITY,
                         help="which of the log's setpoints drive the autopilot")  # fmt: skip
     parser.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), default=None,
                         help="boot seconds where --drive attitude|rates acts")  # fmt: skip

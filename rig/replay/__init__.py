@@ -30,8 +30,8 @@ flown (``navigator_mission_item``) and, in Offboard, its velocity setpoints. PX4
 PX4_BOOT_S before the log's start, so it is ready when the log arms.
 """
 
-from rig.replay.options import DRIVES, ReplayError, ReplayOptions
+from rig.replay.options import Drive, ReplayError, ReplayOptions
 from rig.replay.plan import Replay, plan_replay
 from rig.replay.run import run_replay
 
-__all__ = ["DRIVES", "Replay", "ReplayError", "ReplayOptions", "plan_replay", "run_replay"]
+__all__ = ["Drive", "Replay", "ReplayError", "ReplayOptions", "plan_replay", "run_replay"]

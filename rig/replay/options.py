@@ -3,13 +3,23 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 
 from rig.autopilots import Autopilot
 from rig.errors import RigError
 from rig.scenarios.scenario import SensorLayer
 
-DRIVES = ("velocity", "attitude", "rates")
+
+class Drive(StrEnum):
+    """Which of the log's set-points the reference autopilot flies (``--drive``)."""
+
+    #: Offboard velocity set-points (``vehicle_local_position_setpoint``): the whole flight.
+    VELOCITY = "velocity"
+    #: Attitude and thrust (``vehicle_attitude_setpoint``), inside ``--window``.
+    ATTITUDE = "attitude"
+    #: Body rates and thrust (``vehicle_rates_setpoint``), inside ``--window``.
+    RATES = "rates"
 
 
 class ReplayError(RigError):
@@ -20,7 +30,7 @@ class ReplayError(RigError):
 class ReplayOptions:
     """What to replay and how (times are the log's boot seconds)."""
 
-    drive: str = "velocity"
+    drive: Drive = Drive.VELOCITY
     window_s: tuple[float, float] | None = None
     start_s: float | None = None  # None: the log's first timestamp
     end_s: float | None = None  # None: the log's last timestamp

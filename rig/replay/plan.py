@@ -40,7 +40,7 @@ from rig.chips.pwm import PwmOutput
 from rig.errors import RigError
 from rig.identify.wind import WindEstimate, WindEstimateError, estimate_wind
 from rig.mavlink.ground_link import MissionItem
-from rig.replay.options import DRIVES, ReplayError, ReplayOptions
+from rig.replay.options import Drive, ReplayError, ReplayOptions
 from rig.replay.parameters import (
     LEARNED,
     SkippedParameter,
@@ -56,6 +56,7 @@ from rig.replay.timeline import (
     NAV_STATE_MISSION,
     NAV_STATE_OFFBOARD,
     STICK_MODES,
+    EventKind,
     FlightEvent,
     ReplayLog,
     delayed,
@@ -141,7 +142,7 @@ class Replay:
     """
 
     log_path: Path
-    drive: str
+    drive: Drive
     start_s: float
     end_s: float
     window_s: tuple[float, float] | None
@@ -162,7 +163,7 @@ class Replay:
     real_arm_s: float | None
     arm_s: float | None  # as flown: the real time, at least AUTOPILOT_READY_S after start
     disarm_s: float | None
-    tracks: dict[str, SetpointTrack]
+    tracks: dict[Drive, SetpointTrack]
     options: ReplayOptions
     log_warnings: tuple[str, ...] = ()  # what pyulog reported (a damaged message skipped)
     #: Airborne at --start: the height (m) taken off to first.
@@ -212,12 +213,12 @@ class Replay:
         if self.start_height_m:
             commands.append(Takeoff(at_s=self.ready_s + 0.1, altitude_m=self.start_height_m))
         commands.append(Track(at_s=max(self.arm_s - origin, self.lead_in_s),
-                              track=tracks["velocity"]))  # fmt: skip
-        if self.window_s is not None and self.drive != "velocity":
+                              track=tracks[Drive.VELOCITY]))  # fmt: skip
+        if self.window_s is not None and self.drive is not Drive.VELOCITY:
             a, b = self.window_s
             commands += [
                 Track(at_s=a - origin, track=tracks[self.drive]),
-                Track(at_s=b - origin, track=tracks["velocity"]),
+                Track(at_s=b - origin, track=tracks[Drive.VELOCITY]),
             ]
         if self.disarm_s is not None:
             commands.append(Disarm(at_s=self.disarm_s - origin, may_refuse=True))
@@ -237,19 +238,19 @@ class Replay:
         if self.start_height_m:
             takeoff = Takeoff(at_s=self.ready_s + 0.1, altitude_m=self.start_height_m)
             commands += [Arm(at_s=self.ready_s), takeoff]
-        arms = {event.time_s for event in pilot.events if event.kind == "arm"}
+        arms = {event.time_s for event in pilot.events if event.kind is EventKind.ARM}
         holds = dict(pilot.mission_holds)
         for event in pilot.events:
             if not event.commanded:
                 continue
             at_s = event.time_s - origin
-            if event.kind == "arm":
+            if event.kind is EventKind.ARM:
                 if not self.start_height_m:  # an airborne start's lead-in armed already
                     commands.append(Arm(at_s=at_s))
-            elif event.kind == "disarm":
+            elif event.kind is EventKind.DISARM:
                 commands.append(Disarm(at_s=at_s, may_refuse=True))
             elif event.nav_state == NAV_STATE_OFFBOARD:
-                velocity = delayed(self.tracks["velocity"], self.lead_in_s)
+                velocity = delayed(self.tracks[Drive.VELOCITY], self.lead_in_s)
                 commands.append(Track(at_s=at_s, track=velocity))
             else:  # the mode it armed in is selected before the arm
                 armed_in_it = event.time_s in arms
@@ -564,8 +565,9 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
     )
     events = pilot.events if pilot is not None else ()
     offboard = any(e.commanded and e.nav_state == NAV_STATE_OFFBOARD for e in events)
-    tracks = {"velocity": log.track("velocity", start_s, end_s)} if not px4 or offboard else {}
-    if options.drive != "velocity":
+    velocity = not px4 or offboard
+    tracks = {Drive.VELOCITY: log.track(Drive.VELOCITY, start_s, end_s)} if velocity else {}
+    if options.drive is not Drive.VELOCITY:
         tracks[options.drive] = log.track(options.drive, start_s, end_s)
     heading_resets = log.heading_resets(start_s, end_s)
     replay = Replay(
@@ -668,8 +670,9 @@ def _air(log: ReplayLog, home: GeoPoint | None, start_s: float, end_s: float) ->
 
 def _checked(options: ReplayOptions) -> ReplayOptions:
     """The options with the IMU rate resolved; a bad one fails in one line naming its flag."""
-    if options.drive not in DRIVES:
-        raise ReplayError(f"--drive {options.drive!r}: expected one of {', '.join(DRIVES)}")
+    if options.drive not in list(Drive):
+        raise ReplayError(f"--drive {options.drive!r}: expected one of {', '.join(Drive)}")
+    options = replace(options, drive=Drive(options.drive))  # a name given as text
     if options.sensor_layer not in list(SensorLayer):
         raise ReplayError(
             f"--sensor-layer {options.sensor_layer!r}: expected one of {', '.join(SensorLayer)}"
@@ -681,7 +684,7 @@ def _checked(options: ReplayOptions) -> ReplayOptions:
     options = replace(options, autopilot=Autopilot(options.autopilot))  # a name given as text
     if options.autopilot is Autopilot.REFERENCE:
         return replace(options, imu_hz=options.imu_hz or Rates().imu_hz)
-    if options.drive != "velocity" or options.window_s is not None:
+    if options.drive is not Drive.VELOCITY or options.window_s is not None:
         raise ReplayError(
             "--drive and --window choose the reference autopilot's loop; PX4 flies the log "
             "as its pilot flew it (sticks, modes, mission)"
@@ -697,7 +700,7 @@ def _checked(options: ReplayOptions) -> ReplayOptions:
 def _window(
     path: Path, options: ReplayOptions, start_s: float, end_s: float
 ) -> tuple[float, float] | None:
-    if options.drive == "velocity":
+    if options.drive is Drive.VELOCITY:
         if options.window_s is not None:
             raise ReplayError(
                 "--window applies to --drive attitude|rates only (the velocity "

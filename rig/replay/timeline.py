@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,7 @@ from quad_model.environment import (
 from quad_model.frames import geodetic_to_ned, ned_to_geodetic
 from rig.mavlink.ground_link import PX4_MODES, MissionItem
 from rig.mavlink.px4_api import mavlink
-from rig.replay.options import ReplayError
+from rig.replay.options import Drive, ReplayError
 from rig.scenarios.scenario import (
     SetpointTrack,
 )
@@ -84,11 +85,22 @@ _MISSION_ITEM_FIELDS = (
 
 
 _DRIVE_FIELDS = {
-    "velocity": ("vehicle_local_position_setpoint", ("vx", "vy", "vz", "yaw")),
-    "attitude": ("vehicle_attitude_setpoint",
+    Drive.VELOCITY: ("vehicle_local_position_setpoint", ("vx", "vy", "vz", "yaw")),
+    Drive.ATTITUDE: ("vehicle_attitude_setpoint",
                  ("q_d[0]", "q_d[1]", "q_d[2]", "q_d[3]", "thrust_body[2]")),
-    "rates": ("vehicle_rates_setpoint", ("roll", "pitch", "yaw", "thrust_body[2]")),
+    Drive.RATES: ("vehicle_rates_setpoint", ("roll", "pitch", "yaw", "thrust_body[2]")),
 }  # fmt: skip
+
+
+class EventKind(StrEnum):
+    """What happened in the real flight (:class:`FlightEvent`)."""
+
+    ARM = "arm"
+    DISARM = "disarm"
+    #: The pilot's mode (``nav_state_user_intention``) changed.
+    MODE = "mode"
+    #: PX4 changed mode by itself (a failsafe).
+    AUTOPILOT = "autopilot"
 
 
 @dataclass(frozen=True)
@@ -101,15 +113,15 @@ class FlightEvent:
     its position for 2 s), and the pilot's sticks mean something else in another mode."""
 
     time_s: float
-    kind: str
+    kind: EventKind
     nav_state: int | None
     commanded: bool
     detail: str
 
     def describe(self) -> str:
-        what = {"arm": "armed", "disarm": "disarmed"}.get(self.kind) or (
+        what = {EventKind.ARM: "armed", EventKind.DISARM: "disarmed"}.get(self.kind) or (
             f"mode {mode_name(self.nav_state)}"
-            if self.kind == "mode"
+            if self.kind is EventKind.MODE
             else f"PX4 switched to {mode_name(self.nav_state)} by itself"
         )
         action = "commanded" if self.commanded else "not commanded"
@@ -338,13 +350,13 @@ class ReplayLog(FlightLog):
                     commanded, detail = True, "the pilot's"
                 else:
                     commanded, detail = False, "after the disarm: PX4's own"
-                events.append(FlightEvent(time_s, "mode", mode, commanded, detail))
+                events.append(FlightEvent(time_s, EventKind.MODE, mode, commanded, detail))
             elif nav[k] != nav[k - 1]:
                 cause = "failsafe" if failsafe[k] else "back from a failsafe"
                 flown_mode = int(nav[k]) in PX4_MODES and bool(armed[k])
                 detail = (f"{cause}: commanded, so the sticks act in the mode the vehicle flew"
                           if flown_mode else f"{cause}: PX4 decides again")  # fmt: skip
-                events.append(FlightEvent(float(times_s[k]), "autopilot", int(nav[k]),
+                events.append(FlightEvent(float(times_s[k]), EventKind.AUTOPILOT, int(nav[k]),
                                           flown_mode, detail))  # fmt: skip
         return _clipped(events, start_s, end_s)
 
@@ -352,12 +364,13 @@ class ReplayLog(FlightLog):
         self, status: dict[str, NDArray[Any]], k: int, armed: bool, reasons: NDArray[Any] | None
     ) -> FlightEvent:
         if armed:  # the logger starts on arming: the arm comes before the first sample
-            return FlightEvent(_arm_time_s(status, k), "arm", None, True, "the pilot's")
+            return FlightEvent(_arm_time_s(status, k), EventKind.ARM, None, True, "the pilot's")
         reason = None if reasons is None else int(reasons[k])
         whose = ("the pilot's" if reason is None or reason in PILOT_DISARM_REASONS else
                  f"PX4's own, reason {reason}")  # fmt: skip
         detail = f"{whose}; refused unless PX4 has landed"
-        return FlightEvent(float(status["timestamp"][k]) / 1e6, "disarm", None, True, detail)
+        return FlightEvent(float(status["timestamp"][k]) / 1e6, EventKind.DISARM, None, True,
+                           detail)  # fmt: skip
 
     def sticks(self, start_s: float, end_s: float) -> SetpointTrack | None:
         """The pilot's sticks (``manual_control_setpoint`` roll, pitch, yaw, throttle, PX4's
@@ -526,7 +539,7 @@ class ReplayLog(FlightLog):
             altitudes[index] = passed_at
         return altitudes, notes
 
-    def track(self, drive: str, start_s: float, end_s: float) -> SetpointTrack:
+    def track(self, drive: Drive, start_s: float, end_s: float) -> SetpointTrack:
         """The drive's setpoints in run seconds from ``start_s``, first the one in force then.
 
         NaN components hold the last finite value: PX4 logs NaN for an axis its mode does
@@ -544,23 +557,23 @@ class ReplayLog(FlightLog):
         turn = np.zeros_like(times_s)
         for reset_s, delta in resets:
             turn[times_s < reset_s] += delta
-        if drive == "velocity":
+        if drive is Drive.VELOCITY:
             cos, sin = np.cos(turn), np.sin(turn)
             values[:, 0], values[:, 1] = (
                 cos * values[:, 0] - sin * values[:, 1],
                 sin * values[:, 0] + cos * values[:, 1],
             )
             values[:, 3] = np.remainder(values[:, 3] + turn + np.pi, 2 * np.pi) - np.pi
-        elif drive == "attitude":  # q_d ← (a turn about NED down) ⊗ q_d, for every sample
+        elif drive is Drive.ATTITUDE:  # q_d ← (a turn about NED down) ⊗ q_d, for every sample
             # at once (quad_model.frames.quat_multiply takes one pair)
             w, x, y, z = values[:, :4].T
             c, s = np.cos(turn / 2), np.sin(turn / 2)
             values[:, :4] = np.column_stack(
                 (c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w)
             )
-        if drive != "velocity":
+        if drive is not Drive.VELOCITY:
             values[:, -1] = -values[:, -1]  # thrust = −thrust_body[2] (PX4 FRD, 0..1)
-        held = values.shape[1] - 1 if drive == "velocity" else values.shape[1]
+        held = values.shape[1] - 1 if drive is Drive.VELOCITY else values.shape[1]
         values[:, :held] = _hold_last_finite(values[:, :held])
         inside = (times_s > start_s) & (times_s < end_s)
         before = np.nonzero(times_s <= start_s)[0]
@@ -615,9 +628,9 @@ def _clipped(events: list[FlightEvent], start_s: float, end_s: float) -> tuple[F
     its log's start)."""
     before = [e for e in events if e.time_s < start_s]
     inside = [e for e in events if start_s <= e.time_s < end_s]
-    modes = [e for e in before if e.kind == "mode"]
-    armed = [e for e in before if e.kind in ("arm", "disarm")]
-    if modes and armed and armed[-1].kind == "arm":
+    modes = [e for e in before if e.kind is EventKind.MODE]
+    armed = [e for e in before if e.kind in (EventKind.ARM, EventKind.DISARM)]
+    if modes and armed and armed[-1].kind is EventKind.ARM:
         inside[:0] = [
             replace(modes[-1], time_s=start_s, commanded=True, detail="in force at --start"),
             replace(armed[-1], time_s=start_s, detail=f"{armed[-1].detail}, before --start"),
@@ -637,11 +650,11 @@ def delayed(track: SetpointTrack, delay_s: float) -> SetpointTrack:
     return SetpointTrack(track.kind, tuple(t + delay_s for t in track.times_s), track.values)
 
 
-def _initial(drive: str, first: NDArray[np.float64]) -> NDArray[np.float64]:
+def _initial(drive: Drive, first: NDArray[np.float64]) -> NDArray[np.float64]:
     """The setpoint before the topic's first sample: at rest on the ground."""
-    if drive == "velocity":
+    if drive is Drive.VELOCITY:
         return np.array([0.0, 0.0, 0.0, first[3]])
-    if drive == "attitude":
+    if drive is Drive.ATTITUDE:
         return np.array([*first[:4], 0.0])
     return np.zeros(4)
 
