@@ -26,7 +26,7 @@ from rig.mavlink.simulator_link import LinkTimeouts
 from rig.replay import ReplayError, ReplayOptions, plan_replay, run_replay
 from rig.replay.parameters import YAW_RATE_LIMIT_FLOOR_DEG_S
 from rig.replay.plan import PX4_BOOT_S, PX4_SETUP_S
-from rig.replay.timeline import ARM_MODE_LEAD_S, FlightEvent, ReplayLog
+from rig.replay.timeline import ARM_MODE_LEAD_S, EventKind, FlightEvent, ReplayLog
 from rig.scenarios.scenario import (
     SetHome,
     SetMode,
@@ -310,8 +310,8 @@ def test_only_a_loiter_the_navigator_replaced_by_the_mission_is_flown_as_hold():
     """A loiter (31) started at the switch and replaced by item 0 is a hold; an inserted
     climb (22, which PX4 v1.14 inserts itself), a mission whose item 0 is a loiter, and a
     first item long after the switch are not."""
-    switch = FlightEvent(10.0, "mode", MISSION, True, "test")
-    other = FlightEvent(10.0, "mode", POSCTL, True, "test")
+    switch = FlightEvent(10.0, EventKind.MODE, MISSION, True, "test")
+    other = FlightEvent(10.0, EventKind.MODE, POSCTL, True, "test")
     log = _mission_log([0, 0, 1], [10.01, 10.41, 10.46], [31, 16, 16])
     assert log.mission_start_holds([switch]) == ((10.0, pytest.approx(0.4)),)
     assert log.mission_start_holds([other]) == ()
