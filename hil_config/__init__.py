@@ -9,7 +9,8 @@ the file, the key, the value and what was expected. A check that spans several k
 in the table's ``__post_init__`` and raises :class:`FieldError` to name its key. Every
 default is the dataclass field's default: defined once, shown in the JSON Schema
 (:func:`json_schema`, written by ``rig schema``) that lets an editor complete and check
-the files.
+the files. A field's ``#:`` comment (its documentation, as Sphinx reads it) is its
+description there, so an editor's hover and the configuration reference say what it is.
 
 This package sits under every other one (quad_model and credibility included) and
 imports none of them.
@@ -19,6 +20,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
+import re
 import tomllib
 from collections.abc import Mapping
 from enum import Enum
@@ -52,10 +55,61 @@ def table(cls: type[T] | None = None, *, kw_only: bool = False) -> Any:
     """
 
     def make(cls: type[T]) -> type[T]:
-        cls.__pydantic_config__ = ConfigDict(extra="forbid")  # type: ignore[attr-defined]
-        return dataclasses.dataclass(frozen=True, kw_only=kw_only)(cls)
+        made = dataclasses.dataclass(frozen=True, kw_only=kw_only)(cls)
+        comments = {
+            name: text
+            for klass in reversed(made.__mro__)
+            if dataclasses.is_dataclass(klass)
+            for name, text in _field_comments(klass).items()
+        }
+
+        def describe(schema: dict[str, Any]) -> None:
+            for name, prop in schema.get("properties", {}).items():
+                if name in comments:
+                    prop.setdefault("description", comments[name])
+
+        made.__pydantic_config__ = ConfigDict(  # type: ignore[attr-defined]
+            extra="forbid", json_schema_extra=describe
+        )
+        return made
 
     return make if cls is None else make(cls)
+
+
+#: A field's line in a table's body (``name: type`` or ``name: type = default``).
+_FIELD_LINE = re.compile(r"^(\w+)\s*:")
+
+
+def _field_comments(cls: type) -> dict[str, str]:
+    """Each field's ``#:`` comment lines in ``cls``'s own source, joined (none: no source).
+
+    Why by hand: pydantic reads a field's docstring (``use_attribute_docstrings``) but not
+    the ``#:`` comments above it, which the project's tables use as Sphinx does."""
+    try:
+        lines = inspect.getsource(cls).splitlines()
+    except (OSError, TypeError):  # defined where no source is kept (an interactive session)
+        return {}
+    start = next(k for k, line in enumerate(lines) if line.lstrip().startswith("class "))
+    body = lines[start + 1 :]
+    indent = min((len(line) - len(line.lstrip()) for line in body if line.strip()), default=0)
+    fields = {field.name for field in dataclasses.fields(cls)}
+    comments: dict[str, str] = {}
+    pending: list[str] = []
+    for line in body:
+        text = line.strip()
+        if not text:  # a blank line ends a comment: it documents nothing below it
+            pending = []
+            continue
+        if len(line) - len(line.lstrip()) != indent:
+            continue  # inside a method or a continued line
+        if text.startswith("#:"):
+            pending.append(text[2:].strip())
+            continue
+        match = _FIELD_LINE.match(text)
+        if match and match.group(1) in fields and pending:
+            comments[match.group(1)] = " ".join(pending)
+        pending = []
+    return comments
 
 
 class FieldError(ValueError):

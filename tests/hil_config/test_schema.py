@@ -124,3 +124,40 @@ def test_the_json_schema_carries_types_bounds_enums_defaults_and_refuses_unknown
     }  # fmt: skip
     assert schema["$defs"]["Colour"]["enum"] == ["red", "blue"]
     assert schema["required"] == ["name"]
+
+
+@table
+class Documented:
+    """A table whose fields say what they are."""
+
+    #: The vehicle's mass,
+    #: without the battery.
+    mass_kg: Positive
+    count: PositiveInteger = 1  # a trailing remark is not documentation
+    #: Not about the next line.
+
+    #: Where the centre of mass sits.
+    centre_m: Vector3 = (0.0, 0.0, 0.0)
+
+    def scaled(self, factor: float) -> float:
+        #: inside a method: no field's comment
+        return self.mass_kg * factor
+
+
+@table(kw_only=True)
+class MoreDocumented(Documented):
+    #: When it starts.
+    at_s: Number = 0.0
+
+
+def test_a_fields_doc_comment_is_its_description_in_the_json_schema():
+    """``#:`` lines above a field (joined) describe it, for an editor's hover and the
+    configuration reference; a trailing remark, a comment cut off by a blank line's field
+    or one inside a method describes nothing; a table that extends another keeps them."""
+    properties = json_schema(Documented)["properties"]
+    assert properties["mass_kg"]["description"] == "The vehicle's mass, without the battery."
+    assert "description" not in properties["count"]
+    assert properties["centre_m"]["description"] == "Where the centre of mass sits."
+    extended = json_schema(MoreDocumented)["properties"]
+    assert extended["at_s"]["description"] == "When it starts."
+    assert extended["mass_kg"]["description"] == "The vehicle's mass, without the battery."
