@@ -20,7 +20,7 @@ DISARM_SETTLE_S = 0.5
 def identify_battery(
     log: FlightLog, hover: HoverIdentification, vehicle: Vehicle
 ) -> tuple[BatteryIdentification | None, str]:
-    """Internal resistance, avionics power and propulsion efficiency (module docstring)."""
+    """Internal resistance, avionics power and propulsion efficiency (:mod:`rig.identify`)."""
     data = log.topics.get("battery_status")
     if data is None:
         return None, "no battery_status in the log"

@@ -14,6 +14,7 @@ from quad_model.vehicle import ROTOR_COUNT, Vehicle
 
 
 def mean_in(time_s: NDArray, values: NDArray, windows: Iterable[tuple[float, float]]) -> NDArray:
+    """The samples of ``values`` that fall inside any of ``windows`` (for their mean)."""
     mask = np.zeros(time_s.size, dtype=bool)
     for a, b in windows:
         mask |= (time_s >= a) & (time_s < b)

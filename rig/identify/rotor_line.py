@@ -43,7 +43,7 @@ FOLD_MIN_WINDOWS = 8
 def identify_rotor_line(
     log: FlightLog, windows: tuple[tuple[float, float], ...], vehicle: Vehicle, density: float
 ) -> tuple[RotorLine | None, str]:
-    """The hover rotor speed from the rotors' line in ``sensor_combined`` (module docstring);
+    """The hover rotor speed from the rotors' line in ``sensor_combined`` (:mod:`rig.identify`);
     (None, why) when the log cannot show it."""
     data = log.topics.get("sensor_combined")
     if data is None or "accelerometer_m_s2[0]" not in data:

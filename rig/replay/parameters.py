@@ -21,9 +21,7 @@ from rig.autopilots.reference.params import PARAMETERS, ParameterError, Paramete
 from rig.errors import RigError
 from rig.replay.options import ReplayError, ReplayOptions
 from rig.replay.timeline import NAV_STATE_MISSION, FlightEvent, ReplayLog
-from rig.scenarios.scenario import (
-    Rates,
-)
+from rig.scenarios.scenario import Rates
 
 #: A PX4 replay's IMU (= lockstep) rate unless --imu-hz says otherwise is the log's
 #: IMU_GYRO_RATEMAX, the rate its rate controller ran at (800 Hz on the X500), where PX4 can

@@ -13,16 +13,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from px4_logs import FlightLog
-from quad_model.environment import (
-    GeoPoint,
-)
+from quad_model.environment import GeoPoint
 from quad_model.frames import geodetic_to_ned, ned_to_geodetic
 from rig.mavlink.ground_link import PX4_MODES, MissionItem
 from rig.mavlink.px4_api import mavlink
 from rig.replay.options import Drive, ReplayError
-from rig.scenarios.scenario import (
-    SetpointTrack,
-)
+from rig.scenarios.scenario import SetpointTrack
 
 #: PX4's navigation states (vehicle_status.nav_state) a replay acts on.
 NAV_STATE_MISSION, NAV_STATE_LOITER, NAV_STATE_OFFBOARD = 3, 4, 14
