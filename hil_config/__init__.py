@@ -89,7 +89,7 @@ def _field_comments(cls: type) -> dict[str, str]:
         lines = inspect.getsource(cls).splitlines()
     except (OSError, TypeError):  # defined where no source is kept (an interactive session)
         return {}
-    start = next(k for k, line in enumerate(lines) if line.lstrip().startswith("class "))
+    start = next((k for k, line in enumerate(lines) if line.lstrip().startswith("class ")), 0)
     body = lines[start + 1 :]
     indent = min((len(line) - len(line.lstrip()) for line in body if line.strip()), default=0)
     fields = {field.name for field in dataclasses.fields(cls)}

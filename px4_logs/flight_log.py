@@ -128,11 +128,9 @@ class FlightLog:
     def logged_at(self, name: str, field: str, time_s: float) -> float | None:
         """:meth:`value_at` for what a tool can do without: None when the topic, the field
         or a finite value is missing."""
-        data = self.topics.get(name)
-        if data is None or field not in data or not len(data["timestamp"]):
+        if field not in self.topics.get(name, {}):
             return None
-        index = max(int(np.searchsorted(self._time_s[name], time_s, "right")) - 1, 0)
-        value = float(data[field][index])
+        value = self.value_at(name, field, time_s, "")
         return value if math.isfinite(value) else None
 
     def airborne_span(self) -> tuple[float, float]:
