@@ -4,15 +4,17 @@ steady hover).
 
 Why one reader: identification, the wind estimate, the vibration fit and a replay all ask
 the same log the same questions; each parsing it again cost seconds and gave each its own
-error wording. Topics are the first instance (``multi_id`` 0), each row-sorted by its time;
-a topic a newer PX4 has and an older log lacks is derived from what the log holds
-(:mod:`px4_logs.layouts`) and the note says how.
+error wording. ``topics`` are the first instance (``multi_id`` 0) of each topic and
+:meth:`FlightLog.instances` every instance (the motors may be on the second
+``actuator_outputs``), each row-sorted by its time; a topic a newer PX4 has and an older log
+lacks is derived from what the log holds (:mod:`px4_logs.layouts`) and the note says how, as
+is the airborne span of a log without the land detector.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self
 
@@ -22,6 +24,7 @@ from scipy.ndimage import uniform_filter1d
 
 from px4_logs.errors import LogError
 from px4_logs.layouts import derive_missing
+from px4_logs.outputs import MOTOR_FUNCTIONS
 from px4_logs.ulog import firmware_name, read_ulog
 
 #: Steady hover: airborne, RMS over HOVER_SMOOTH_S of |v| and of each body rate below these,
@@ -32,6 +35,16 @@ HOVER_MAX_RATE_RADPS = 0.25
 MIN_HOVER_S = 3.0
 #: … and the thrust set-point within this fraction of its airborne median.
 HOVER_THRUST_BAND = 0.2
+#: Without a land detector: airborne while armed and more than AIRBORNE_HEIGHT_M above the
+#: height of the first ARMED_GROUND_S armed (on the ground, spinning up: a baro's noise is
+#: ±0.2 m, a climb-out passes 0.5 m within a second), or without a height while the thrust
+#: set-point is above AIRBORNE_THRUST_FRACTION of its hover level (its median while armed
+#: above half its armed maximum: a pilot's spin-up and idle stay below it).
+AIRBORNE_HEIGHT_M = 0.5
+ARMED_GROUND_S = 1.0
+AIRBORNE_THRUST_FRACTION = 0.8
+#: vehicle_status.arming_state of an armed vehicle.
+ARMING_STATE_ARMED = 2
 
 Topic = Mapping[str, NDArray[Any]]
 
@@ -42,7 +55,7 @@ class FlightLog:
     def __init__(
         self,
         path: str | Path,
-        topics: Mapping[str, Mapping[str, NDArray[Any]]],
+        topics: Mapping[str, Topic | Sequence[Topic]],
         parameters: Mapping[str, float],
         *,
         firmware: str = "",
@@ -50,34 +63,38 @@ class FlightLog:
         first_s: float | None = None,
         last_s: float | None = None,
     ) -> None:
-        """A log from its topics (field → array, each with its ``timestamp`` in µs):
+        """A log from its topics (field → array, each with its ``timestamp`` in µs; a
+        sequence of them in ``multi_id`` order for a topic logged in several instances):
         :meth:`read` parses a file; a test or a tool can build one in memory."""
         self.path = Path(path)
         self.parameters = dict(parameters)
         self.firmware = firmware
         self.warnings = warnings  # pyulog's, become a run's notes
-        own = {name: dict(data) for name, data in topics.items()}  # derive_missing adds to it
-        if not own:
+        grouped = {
+            name: (data,) if isinstance(data, Mapping) else tuple(data)
+            for name, data in topics.items()
+        }
+        if not grouped:
             raise LogError(f"{self.path}: the ULog holds no logged data")
-        first_us = min(float(data["timestamp"][0]) for data in own.values())
-        self.first_s = first_us / 1e6 if first_s is None else first_s
-        last_us = max(float(data["timestamp"][-1]) for data in own.values())
-        self.last_s = last_us / 1e6 if last_s is None else last_s
-        #: Notes of the topics derived from an older PX4's layout.
-        self.derived = derive_missing(own, self.parameters)
-        self.topics: dict[str, dict[str, NDArray[Any]]] = {}
-        self._time_s: dict[str, NDArray[np.float64]] = {}
-        for name, data in own.items():
-            # the body rates at their measurement time, so a fitted delay is physical
-            measured = name == "vehicle_angular_velocity" and "timestamp_sample" in data
-            stamp = np.asarray(data["timestamp_sample" if measured else "timestamp"])
-            order = np.argsort(stamp, kind="stable")
-            self.topics[name] = {field: np.asarray(v)[order] for field, v in data.items()}
-            self._time_s[name] = stamp[order] * 1e-6
+        stamps = [np.asarray(d["timestamp"], float) for group in grouped.values() for d in group]
+        self.first_s = min(float(t[0]) for t in stamps) / 1e6 if first_s is None else first_s
+        self.last_s = max(float(t[-1]) for t in stamps) / 1e6 if last_s is None else last_s
+        instances = {
+            name: tuple(_by_time(name, d) for d in group) for name, group in grouped.items()
+        }
+        own = {name: group[0] for name, group in instances.items()}  # derive_missing adds to it
+        #: Notes of what was derived: topics of an older PX4's layout, the airborne span.
+        self.derived = derive_missing(own, self.parameters, instances)
+        self.topics: dict[str, dict[str, NDArray[Any]]] = own
+        self._instances = {name: (own[name], *instances.get(name, ())[1:]) for name in own}
+        self._time_s = {name: _stamp(name, data) * 1e-6 for name, data in own.items()}
+        self._airborne = self._airborne_samples()
+        if isinstance(self._airborne, tuple) and self._airborne[2]:
+            self.derived = (*self.derived, self._airborne[2])
 
     @classmethod
     def read(cls, path: str | Path) -> Self:
-        """Parse a ULog file (the first instance of each topic)."""
+        """Parse a ULog file, every instance of each topic."""
         path = Path(path)
         if not path.is_file():
             raise LogError(f"{path}: flight log not found")
@@ -87,9 +104,12 @@ class FlightLog:
         # header's start time bounds the logged span (0 in some logs, the X500's).
         first_us = min((float(d.data["timestamp"][0]) for d in ulog.data_list), default=0.0)
         last_us = max((float(d.data["timestamp"][-1]) for d in ulog.data_list), default=0.0)
+        topics: dict[str, list[dict[str, NDArray[Any]]]] = {}
+        for data in sorted(ulog.data_list, key=lambda d: d.multi_id):
+            topics.setdefault(data.name, []).append(data.data)
         return cls(
             path,
-            {d.name: d.data for d in ulog.data_list if d.multi_id == 0},
+            topics,
             ulog.initial_parameters,
             firmware=firmware_name(ulog.msg_info_dict),
             warnings=warnings,
@@ -107,6 +127,11 @@ class FlightLog:
         if missing:
             raise LogError(f"{self.path}: topic {name} has no field {missing[0]} ({why})")
         return data
+
+    def instances(self, name: str) -> tuple[dict[str, NDArray[Any]], ...]:
+        """Every instance of topic ``name`` in ``multi_id`` order, each sorted by time (the
+        first is ``topics[name]``); none when the log lacks it."""
+        return self._instances.get(name, ())
 
     def time_s(self, name: str) -> NDArray[np.float64]:
         """Seconds of each row of topic ``name`` (its sample time where PX4 logs one)."""
@@ -134,12 +159,35 @@ class FlightLog:
         return value if math.isfinite(value) else None
 
     def airborne_span(self) -> tuple[float, float]:
-        """First to last sample the land detector called airborne."""
-        time_s, landed = self.series("vehicle_land_detected", "landed", "airborne span")
-        flying = time_s[landed < 0.5]
+        """First to last sample the land detector called airborne (without one, as
+        :meth:`_airborne_samples` derives it)."""
+        time_s, airborne = self._airborne_or_raise()
+        flying = time_s[airborne]
         if flying.size == 0:
             raise LogError(f"{self.path}: the vehicle never left the ground")
         return float(flying[0]), float(flying[-1])
+
+    def rotor_speeds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """The rotor speeds the ESCs measured: (time s, rad/s per sample × motor 1..N) from
+        ``esc_status.esc[i].esc_rpm``; None when no instance reports a speed. Motor m is the
+        ESC whose ``actuator_function`` is Motor m (PX4 1.14 on), else ESC m − 1 (a driver
+        reports its ESCs in its output order); N is ``CA_ROTOR_COUNT``, else the ESCs."""
+        for data in self.instances("esc_status"):
+            rpm_by_motor = {}
+            reporting = (esc for esc in range(len(data)) if f"esc[{esc}].esc_rpm" in data)
+            for esc in reporting:
+                rpm = data[f"esc[{esc}].esc_rpm"]
+                function = data.get(f"esc[{esc}].actuator_function")
+                last = int(np.max(function)) if function is not None else 0
+                motor = last - 100 if last in MOTOR_FUNCTIONS else esc + 1
+                rpm_by_motor[motor] = np.abs(np.asarray(rpm, dtype=float))
+            count = int(self.parameters.get("CA_ROTOR_COUNT", 0)) or len(rpm_by_motor)
+            motors = range(1, count + 1)
+            if count and all(m in rpm_by_motor for m in motors):
+                speeds = np.column_stack([rpm_by_motor[m] for m in motors]) * (2.0 * math.pi / 60.0)
+                if np.any(speeds > 0):  # ESCs without telemetry log zeros
+                    return _stamp("esc_status", data) * 1e-6, speeds
+        return None
 
     def armed_span(self) -> tuple[float, float, bool]:
         """First arm to the disarm after the last armed sample (``actuator_armed``), else the
@@ -169,20 +217,18 @@ class FlightLog:
             # a hover
             horizontal_sq *= self.series("vehicle_local_position", "v_xy_valid", why)[1]
         speed_sq = vz**2 + horizontal_sq
-        t_landed, landed = self.series("vehicle_land_detected", "landed", "airborne span")
-        landed_now = landed[np.clip(np.searchsorted(t_landed, time_s, "right") - 1, 0, None)]
+        airborne = _step_at(*self._airborne_or_raise(), time_s)
         # averaged over HOVER_SMOOTH_S: a pilot's small corrections are hover, a manoeuvre not
         span = max(1, round(HOVER_SMOOTH_S / np.median(np.diff(time_s))))
         # a running mean of squares can dip below zero by rounding: clip before the root
         mean_speed_sq = np.maximum(uniform_filter1d(speed_sq, span), 0.0)
-        steady = (landed_now < 0.5) & (np.sqrt(mean_speed_sq) <= HOVER_MAX_SPEED_MPS)
+        steady = airborne & (np.sqrt(mean_speed_sq) <= HOVER_MAX_SPEED_MPS)
         # the collective thrust near its airborne median: the land detector calls a heavy
         # vehicle's slow spin-up airborne before it lifts (the 8S quad: 110-120 s at thrust
         # 0.2-0.55 against 0.65 in hover), and a climb without velocity (no GNSS) looks level
         if "vehicle_thrust_setpoint" in self.topics:  # else the hover's thrust names it missing
             t_thrust, thrust = self.series("vehicle_thrust_setpoint", "xyz[2]", "hover detection")
             thrust = np.interp(time_s, t_thrust, -thrust)
-            airborne = landed_now < 0.5
             median = float(np.median(thrust[airborne])) if np.any(airborne) else 0.0
             steady &= np.abs(thrust - median) <= HOVER_THRUST_BAND * median
         for axis in range(3):
@@ -201,3 +247,100 @@ class FlightLog:
                     windows.append((float(start), float(t)))
                 start = None
         return tuple(windows)
+
+    def _airborne_or_raise(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        if isinstance(self._airborne, str):
+            raise LogError(f"{self.path}: {self._airborne}")
+        return self._airborne[0], self._airborne[1]
+
+    def _airborne_samples(self) -> tuple[NDArray[np.float64], NDArray[np.bool_], str] | str:
+        """(time s, airborne, how it was derived or "") from the land detector; without one
+        from the arming state and the height (AIRBORNE_HEIGHT_M) or the thrust
+        (AIRBORNE_THRUST_FRACTION); else the one line saying what is missing."""
+        if "landed" in self.topics.get("vehicle_land_detected", {}):
+            time_s, landed = self.series("vehicle_land_detected", "landed", "airborne span")
+            return time_s, landed < 0.5, ""
+        missing = "no vehicle_land_detected"
+        arming = self._armed_samples()
+        if arming is None:
+            return (
+                f"{missing}, and no arming state (actuator_armed, vehicle_status) to derive "
+                "the airborne span from"
+            )
+        t_armed, armed = arming
+        if "z" in self.topics.get("vehicle_local_position", {}):
+            time_s, down = self.series("vehicle_local_position", "z", "")
+            on = _step_at(t_armed, armed, time_s)
+            ground = np.full(time_s.size, np.nan)
+            starts = np.flatnonzero(on & ~np.concatenate(([False], on[:-1])))
+            ends = np.append(np.flatnonzero(~on & np.concatenate(([False], on[:-1]))), on.size)
+            for start in starts:
+                end = ends[ends > start][0]
+                first = (time_s >= time_s[start]) & (time_s < time_s[start] + ARMED_GROUND_S)
+                first[start] = True  # a height logged slower than ARMED_GROUND_S
+                ground[start:end] = np.median(down[first])
+            with np.errstate(invalid="ignore"):  # NaN outside the armed spans: not airborne
+                airborne = on & (ground - down > AIRBORNE_HEIGHT_M)
+            return (
+                time_s,
+                airborne,
+                (
+                    f"airborne span derived ({missing}): armed and more than "
+                    f"{AIRBORNE_HEIGHT_M:g} m above the height of the first {ARMED_GROUND_S:g} s "
+                    "armed (vehicle_local_position.z)"
+                ),
+            )
+        if "xyz[2]" in self.topics.get("vehicle_thrust_setpoint", {}):
+            time_s, thrust = self.series("vehicle_thrust_setpoint", "xyz[2]", "")
+            thrust = -thrust
+            on = _step_at(t_armed, armed, time_s)
+            if not on.any():
+                return time_s, on, ""
+            strong = on & (thrust >= 0.5 * float(np.max(thrust[on])))
+            level = float(np.median(thrust[strong]))
+            return (
+                time_s,
+                on & (thrust >= AIRBORNE_THRUST_FRACTION * level),
+                (
+                    f"airborne span derived ({missing}, no vehicle_local_position height): armed "
+                    f"and the thrust set-point above {AIRBORNE_THRUST_FRACTION:g} of its hover "
+                    f"level {level:.2f}"
+                ),
+            )
+        return (
+            f"{missing}, and neither a height (vehicle_local_position.z) nor a thrust "
+            "set-point to derive the airborne span from"
+        )
+
+    def _armed_samples(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+        """(time s, armed) from actuator_armed, else vehicle_status.arming_state."""
+        if "armed" in self.topics.get("actuator_armed", {}):
+            time_s, armed = self.series("actuator_armed", "armed", "")
+            return time_s, armed > 0.5
+        if "arming_state" in self.topics.get("vehicle_status", {}):
+            time_s, state = self.series("vehicle_status", "arming_state", "")
+            return time_s, state == ARMING_STATE_ARMED
+        return None
+
+
+def _step_at(
+    time_s: NDArray[np.float64], values: NDArray[Any], at_s: NDArray[np.float64]
+) -> NDArray[Any]:
+    """The value in force at each of ``at_s`` (the first before the series starts)."""
+    return values[np.clip(np.searchsorted(time_s, at_s, "right") - 1, 0, None)]
+
+
+def _stamp(name: str, data: Topic) -> NDArray[np.float64]:
+    """A topic's time stamps (µs): the body rates at their measurement time, so a fitted
+    delay is physical."""
+    measured = name == "vehicle_angular_velocity" and "timestamp_sample" in data
+    return np.asarray(data["timestamp_sample" if measured else "timestamp"], dtype=float)
+
+
+def _by_time(name: str, data: Topic) -> dict[str, NDArray[Any]]:
+    """The topic's rows in time order (its arrays as they are when already in order)."""
+    stamp = _stamp(name, data)
+    if np.all(np.diff(stamp) >= 0):
+        return {field: np.asarray(values) for field, values in data.items()}
+    order = np.argsort(stamp, kind="stable")
+    return {field: np.asarray(values)[order] for field, values in data.items()}

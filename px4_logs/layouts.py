@@ -11,23 +11,17 @@ it stands for, so each says how in a note the reader shows.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from px4_logs.outputs import motor_layout
+
 Topics = dict[str, dict[str, NDArray]]
-#: PX4's PWM at motor command 0 and 1 (µs) when a log sets no range.
-DEFAULT_PWM_RANGE_US = (1000.0, 2000.0)
-
-
-def legacy_pwm_range(parameters: Mapping[str, float]) -> tuple[float, float] | None:
-    """``PWM_MAIN_MIN``/``PWM_MAIN_MAX`` of a log before PX4 1.13 (one range for every main
-    output), None when the log has not both."""
-    if "PWM_MAIN_MIN" in parameters and "PWM_MAIN_MAX" in parameters:
-        return float(parameters["PWM_MAIN_MIN"]), float(parameters["PWM_MAIN_MAX"])
-    return None
+#: Every instance of each topic (``multi_id`` order), each sorted by time.
+Instances = Mapping[str, Sequence[Mapping[str, NDArray]]]
 
 
 @dataclass(frozen=True)
@@ -37,22 +31,22 @@ class Derivation:
     topic: str
     sources: tuple[str, ...]
     note: str
-    derive: Callable[[Topics, Mapping[str, float]], dict[str, NDArray]]
+    derive: Callable[[Topics, Mapping[str, float], Instances], dict[str, NDArray]]
 
 
-def _rates_from_gyro(topics: Topics, _: Mapping[str, float]) -> dict[str, NDArray]:
+def _rates_from_gyro(topics: Topics, *_: object) -> dict[str, NDArray]:
     gyro = topics["sensor_combined"]
     rates = {f"xyz[{i}]": gyro[f"gyro_rad[{i}]"] for i in range(3)}
     return {"timestamp": gyro["timestamp"], "timestamp_sample": gyro["timestamp"], **rates}
 
 
-def _torque_from_controls(topics: Topics, _: Mapping[str, float]) -> dict[str, NDArray]:
+def _torque_from_controls(topics: Topics, *_: object) -> dict[str, NDArray]:
     controls = topics["actuator_controls_0"]
     torque = {f"xyz[{i}]": controls[f"control[{i}]"] for i in range(3)}
     return {"timestamp": controls["timestamp"], **torque}
 
 
-def _thrust_from_controls(topics: Topics, _: Mapping[str, float]) -> dict[str, NDArray]:
+def _thrust_from_controls(topics: Topics, *_: object) -> dict[str, NDArray]:
     controls = topics["actuator_controls_0"]
     zero = np.zeros_like(controls["control[3]"])
     # FRD body: thrust points up, along −z
@@ -60,14 +54,20 @@ def _thrust_from_controls(topics: Topics, _: Mapping[str, float]) -> dict[str, N
             "xyz[2]": -controls["control[3]"]}  # fmt: skip
 
 
-def _motors_from_outputs(topics: Topics, parameters: Mapping[str, float]) -> dict[str, NDArray]:
-    outputs = topics["actuator_outputs"]
-    low, high = legacy_pwm_range(parameters) or DEFAULT_PWM_RANGE_US
-    motors = {"timestamp": outputs["timestamp"]}
-    for i in range(8):
-        field = f"output[{i}]"
-        if field in outputs:
-            motors[f"control[{i}]"] = np.clip((outputs[field] - low) / (high - low), 0.0, 1.0)
+def _motors_from_outputs(
+    topics: Topics, parameters: Mapping[str, float], instances: Instances
+) -> dict[str, NDArray]:
+    # the instance whose motor channels move with the thrust: another driver's may log zeros
+    outputs = instances["actuator_outputs"]
+    layout = motor_layout(
+        parameters, outputs, topics.get("vehicle_thrust_setpoint"), topics.get("actuator_armed"), ""
+    )
+    if layout.instance is None:
+        raise KeyError("actuator_outputs")
+    chosen = outputs[layout.instance]
+    commands = layout.commands(chosen)
+    motors = {"timestamp": np.asarray(chosen["timestamp"])}
+    motors |= {f"control[{i}]": commands[:, i] for i in range(commands.shape[1])}
     return motors
 
 
@@ -82,12 +82,14 @@ DERIVATIONS = (
                "vehicle_thrust_setpoint derived from actuator_controls_0 (the log predates PX4 "
                "1.13)", _thrust_from_controls),
     Derivation("actuator_motors", ("actuator_outputs",),
-               "actuator_motors derived from actuator_outputs with PWM_MAIN_MIN/MAX (the log "
-               "predates PX4 1.13)", _motors_from_outputs),
+               "actuator_motors derived from the motor channels of actuator_outputs through "
+               "their output range (the log predates PX4 1.13)", _motors_from_outputs),
 )  # fmt: skip
 
 
-def derive_missing(topics: Topics, parameters: Mapping[str, float]) -> tuple[str, ...]:
+def derive_missing(
+    topics: Topics, parameters: Mapping[str, float], instances: Instances
+) -> tuple[str, ...]:
     """Add each topic the log lacks and can derive (``topics`` is changed in place);
     returns the notes of what was derived."""
     notes = []
@@ -95,8 +97,8 @@ def derive_missing(topics: Topics, parameters: Mapping[str, float]) -> tuple[str
         sources_present = all(source in topics for source in derivation.sources)
         if derivation.topic not in topics and sources_present:
             try:
-                topics[derivation.topic] = derivation.derive(topics, parameters)
-            except KeyError:  # a source without the fields it needs (a damaged log) gives none
+                topics[derivation.topic] = derivation.derive(topics, parameters, instances)
+            except KeyError:  # a source without what it needs (a damaged log) gives none
                 continue
             notes.append(derivation.note)
     return tuple(notes)

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from px4_logs import FlightLog
 from quad_model.vehicle import Vehicle
+from rig.identify.bounds import bounded, refusal
 from rig.identify.power import mean_in, shaft_power_w
 from rig.identify.results import BatteryIdentification, Estimate, HoverIdentification
 
@@ -39,28 +40,34 @@ def identify_battery(
     residual = volts[use] - design @ solution
     covariance = np.var(residual, ddof=3) * np.linalg.pinv(design.T @ design)
     span = (float(time_s[use][0]), float(time_s[use][-1]))
-    resistance = Estimate(
-        float(solution[2]),
-        float(np.sqrt(covariance[2, 2])),
-        f"V = E₀ − s·Q − R·I, least squares over {int(use.sum())} armed samples "
-        f"(RMS residual {np.sqrt(np.mean(residual**2)) * 1e3:.0f} mV)",
-        span,
+    resistance = bounded(
+        "internal resistance",
+        Estimate(
+            float(solution[2]),
+            float(np.sqrt(covariance[2, 2])),
+            f"V = E₀ − s·Q − R·I, least squares over {int(use.sum())} armed samples "
+            f"(RMS residual {np.sqrt(np.mean(residual**2)) * 1e3:.0f} mV)",
+            span,
+        ),
     )
     # after a logged disarm only: the end of the airborne span may still idle the rotors
     after = (time_s >= armed_to + DISARM_SETTLE_S) & np.isfinite(volts) & (amps >= 0)
     avionics = None
     if disarm_logged and after.any():
         power = volts[after] * amps[after]
-        avionics = Estimate(
-            float(power.mean()),
-            float(power.std()),
-            f"V·I after the disarm (rotors stopped from {DISARM_SETTLE_S:g} s), {int(after.sum())} "
-            "samples ± σ",
-            (float(time_s[after][0]), float(time_s[after][-1])),
+        avionics = bounded(
+            "avionics power",
+            Estimate(
+                float(power.mean()),
+                float(power.std()),
+                f"V·I after the disarm (rotors stopped from {DISARM_SETTLE_S:g} s), "
+                f"{int(after.sum())} samples ± σ",
+                (float(time_s[after][0]), float(time_s[after][-1])),
+            ),
         )
     efficiency, efficiency_reason = _propulsion_efficiency(
         mean_in(time_s, volts * amps, hover.windows_s),
-        avionics.value if avionics else vehicle.battery.avionics_power_w,
+        avionics.value if avionics and not avionics.refused else vehicle.battery.avionics_power_w,
         hover,
         vehicle,
     )
@@ -77,17 +84,24 @@ def _propulsion_efficiency(
     into_motors = float(electric_w.mean()) - avionics_w
     shaft = shaft_power_w(vehicle, hover.air_density_kgpm3, hover.rotor_speed_radps)
     efficiency = shaft / into_motors if into_motors > 0 else math.inf
-    if not 0.0 < efficiency <= 1.0:
-        return None, (
-            f"the rotors' shaft power in hover ({shaft:.0f} W at {hover.rotor_speed_radps:.0f} "
-            f"rad/s) against {into_motors:.0f} W into the motors gives an efficiency of "
-            f"{efficiency:.2f}: the torque coefficient or the rotor speed is off"
-        )
-    line = hover.rotor_line
+    # shaft power ∝ ω_h³: three times ω_h's relative uncertainty (measured or the line's)
+    measured = hover.measured_rotor_speed
+    if measured is not None and not measured.refused:
+        speed_relative = measured.relative_uncertainty
+    else:
+        line = hover.rotor_line
+        speed_relative = line.frequency.relative_uncertainty if line else 0.0
     relative = math.hypot(
-        3.0 * line.frequency.relative_uncertainty if line else 0.0,
+        3.0 * speed_relative,
         float(electric_w.std() / electric_w.mean()) / math.sqrt(electric_w.size),
     )
+    reason = refusal("propulsion efficiency", efficiency, efficiency * relative)
+    if reason:
+        return None, (
+            f"the rotors' shaft power in hover ({shaft:.0f} W at {hover.rotor_speed_radps:.0f} "
+            f"rad/s) against {into_motors:.0f} W into the motors: {reason}; the torque "
+            "coefficient or the rotor speed is off"
+        )
     return Estimate(
         efficiency,
         efficiency * relative,

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from px4_logs import FlightLog
+from quad_model.frames import STANDARD_GRAVITY_MPS2
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
 
 
@@ -41,3 +42,11 @@ def shaft_power_w(vehicle: Vehicle, density: float, speed_radps: float) -> float
     prop = vehicle.propulsion
     k_q = prop.torque_coefficient_nm_per_radps2 * density / prop.reference_air_density_kgpm3
     return ROTOR_COUNT * k_q * speed_radps**3
+
+
+def hover_thrust_coefficient(vehicle: Vehicle, speed_radps: float, density: float) -> float:
+    """k_T at the vehicle's reference air density from the hover rotor speed measured at
+    ``density``: the rotors together hold the weight, N·k_T·ω_h² = mg."""
+    reference = vehicle.propulsion.reference_air_density_kgpm3
+    weight = vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2
+    return weight / (ROTOR_COUNT * speed_radps**2) * reference / density

@@ -21,6 +21,7 @@ from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
 from rig.autopilots.reference.control import ControlAllocator
 from rig.autopilots.reference.params import Parameters
+from rig.identify.bounds import bounded
 from rig.identify.results import AXES, MAX_RELATIVE_UNCERTAINTY, AxisIdentification, Estimate
 
 #: Below this log rate the rate loop's torque noise (D term) folds into the analysis band and
@@ -250,16 +251,23 @@ def identify_axis(
         reason="; ".join(problems),
         band_hz=fit.band_hz,
         fit_points=fit.points,
-        control_effectiveness_radps2=Estimate(fit.gain, gain_spread, method, window),
-        motor_time_constant_s=Estimate(fit.tau, fit.std[1], lag_method, window),
+        control_effectiveness_radps2=bounded(
+            "control effectiveness", Estimate(fit.gain, gain_spread, method, window)
+        ),
+        motor_time_constant_s=bounded(
+            "motor time constant", Estimate(fit.tau, fit.std[1], lag_method, window)
+        ),
         motor_lag_identified=lag_identified,
-        delay_s=Estimate(fit.delay, fit.std[2], lag_method, window),
+        delay_s=bounded("delay", Estimate(fit.delay, fit.std[2], lag_method, window)),
         torque_per_unit_nm=float(torque_per_unit),
-        inertia_kgm2=Estimate(
-            inertia,
-            inertia * gain_spread / fit.gain,
-            f"I = {torque_per_unit:.3g} N·m/unit (mixer + thrust stand) / B; B: {method}",
-            window,
+        inertia_kgm2=bounded(
+            "inertia",
+            Estimate(
+                inertia,
+                inertia * gain_spread / fit.gain,
+                f"I = {torque_per_unit:.3g} N·m/unit (mixer + thrust stand) / B; B: {method}",
+                window,
+            ),
         ),
         cross_check_inertia_kgm2=None if cross_gain is None else torque_per_unit / cross_gain,
     )

@@ -6,6 +6,7 @@ import numpy as np
 from rich.table import Table
 
 from quad_model.vehicle import Vehicle
+from rig.identify.bounds import motor_refusal
 from rig.identify.results import Estimate, Identification
 
 
@@ -25,16 +26,20 @@ def identification_table(result: Identification) -> Table:
 
     def add(name: str, estimate: Estimate | None, text: str | None = None) -> None:
         window = f"{estimate.window_s[0]:.1f}-{estimate.window_s[1]:.1f} s" if estimate else ""
+        if estimate is not None and estimate.refused:
+            table.add_row(name, "refused", estimate.refused, window)
+            return
         table.add_row(
             name, text or format_estimate(estimate), estimate.method if estimate else "", window
         )
 
     hover_spans = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in hover.windows_s)
     table.add_row("hover windows", f"{hover_spans} s", "airborne, small |v| and rates", "")
+    impossible = motor_refusal(hover.motor_command)
     table.add_row(
         "motor commands",
-        " ".join(f"{u:.3f}" for u in hover.motor_command),
-        "mean actuator_motors per motor",
+        "refused" if impossible else " ".join(f"{u:.3f}" for u in hover.motor_command),
+        impossible or "mean actuator_motors per motor",
         "",
     )
     add("hover throttle", hover.throttle)
@@ -45,25 +50,31 @@ def identification_table(result: Identification) -> Table:
         "vehicle_thrust_setpoint / hover_thrust_estimate",
         "",
     )
-    line = hover.rotor_line
+    line, measured = hover.rotor_line, hover.measured_rotor_speed
+    if measured is not None:
+        add("hover rotor speed rad/s", measured)
     if line is None:
         table.add_row("rotor line", "not identified", hover.rotor_line_reason, "")
+    else:
+        add("rotor line Hz", line.frequency)
+    speed = f"{hover.rotor_speed_radps:.0f} rad/s"
+    if (measured is None or measured.refused) and line is None:
         table.add_row(
             "hover rotor speed",
-            f"{hover.rotor_speed_radps:.0f} rad/s",
+            speed,
             f"√(mg/4k_T) at ρ {hover.air_density_kgpm3:.3f} kg/m³, {hover.battery_voltage_v:.2f} V",
             "",
         )
-    else:
-        add("rotor line Hz", line.frequency)
-        speed = f"{hover.rotor_speed_radps:.0f} rad/s"
+    elif measured is None or measured.refused:
         table.add_row("hover rotor speed", speed, "2π × the line", "")
-        add("thrust_coefficient", line.thrust_coefficient)
+    if hover.thrust_coefficient is not None:
+        add("thrust_coefficient", hover.thrust_coefficient)
     add("speed_offset_radps", hover.speed_offset_radps)
+    offset_refused = hover.speed_offset_radps.refused
     table.add_row(
         "speed_slope_radps",
-        f"{hover.speed_slope_radps:.1f}",
-        "ω(1) of the vehicle kept: slope = ω(1) − offset",
+        "refused" if offset_refused else f"{hover.speed_slope_radps:.1f}",
+        offset_refused or "ω(1) of the vehicle kept: slope = ω(1) − offset",
         "",
     )
     for axis in result.axes:
@@ -104,11 +115,12 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
     tags = []
     for index, axis in enumerate(result.axes):
         estimate = axis.inertia_kgm2
-        if axis.reliable and estimate is not None:
+        if axis.reliable and estimate is not None and not estimate.refused:
             inertia[index, index] = estimate.value
             tags.append(f"I_{'xyz'[index] * 2} [identified] {format_estimate(estimate, digits=3)}")
         else:
-            tags.append(f"I_{'xyz'[index] * 2} kept ({axis.reason.split(';')[0]})")
+            why = estimate.refused if estimate and estimate.refused else axis.reason.split(";")[0]
+            tags.append(f"I_{'xyz'[index] * 2} kept ({why})")
     window = hover.speed_offset_radps.window_s
     offset = hover.speed_offset_radps
     hubs = np.array(prop.position_frd_m)
@@ -120,27 +132,33 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
         f"inertia_kgm2 = {[[round(float(v), 5) for v in row] for row in inertia]}",
         "",
         "[propulsion]",
-        f"# {source}: the hover motors balance about x {centre[0] * 1e3:+.1f} mm, "
-        f"y {centre[1] * 1e3:+.1f} mm from the rotors' centre (the centre of mass)",
-        f"position_frd_m = {[[round(float(v), 4) for v in row] for row in positions]}",
-        f"speed_slope_radps = {hover.speed_slope_radps:.1f}   # [identified] {source}, "
-        f"ω(1) = {prop.speed_slope_radps + prop.speed_offset_radps:.0f} rad/s kept",
-        f"speed_offset_radps = {offset.value:.1f}   # [identified] {source}, hover "
-        f"{window[0]:.1f}-{window[1]:.1f} s, ± {offset.uncertainty:.0f} rad/s",
     ]
-    line = hover.rotor_line
-    if line is None:
-        lines.append(f"# thrust_coefficient_n_per_radps2 kept: {hover.rotor_line_reason}")
-    else:
-        k_t = line.thrust_coefficient
+    if hover.throttle.refused:
         lines.append(
-            f"thrust_coefficient_n_per_radps2 = {k_t.value:.4g}   # [identified] {source}, "
-            f"hover rotor line {line.frequency.value:.1f} ± {line.frequency.uncertainty:.1f} Hz"
+            f"# position_frd_m kept: the hover throttle is refused ({hover.throttle.refused})"
         )
+    else:
+        lines += [
+            f"# {source}: the hover motors balance about x {centre[0] * 1e3:+.1f} mm, "
+            f"y {centre[1] * 1e3:+.1f} mm from the rotors' centre (the centre of mass)",
+            f"position_frd_m = {[[round(float(v), 4) for v in row] for row in positions]}",
+        ]
+    if offset.refused:
+        lines.append(f"# speed_slope_radps, speed_offset_radps kept: {offset.refused}")
+    else:
+        lines += [
+            f"speed_slope_radps = {hover.speed_slope_radps:.1f}   # [identified] {source}, "
+            f"ω(1) = {prop.speed_slope_radps + prop.speed_offset_radps:.0f} rad/s kept",
+            f"speed_offset_radps = {offset.value:.1f}   # [identified] {source}, hover "
+            f"{window[0]:.1f}-{window[1]:.1f} s, ± {offset.uncertainty:.0f} rad/s",
+        ]
+    lines.append(_thrust_coefficient_line(result, source))
     lags = [
         a.motor_time_constant_s
         for a in result.axes
-        if a.motor_lag_identified and a.motor_time_constant_s is not None  # identified: estimated
+        if a.motor_lag_identified
+        and a.motor_time_constant_s is not None  # identified: estimated
+        and not a.motor_time_constant_s.refused
     ]
     if lags:
         tau = float(np.mean([e.value for e in lags]))
@@ -162,11 +180,28 @@ def identification_toml(result: Identification, vehicle: Vehicle) -> str:
             ("avionics_power_w", battery.avionics_power_w, 3, "no current after the disarm"),
             ("propulsion_efficiency", battery.propulsion_efficiency, 3, battery.efficiency_reason),
         ):
-            if estimate is None:
-                lines.append(f"# {key} kept: {why}")
+            if estimate is None or estimate.refused:
+                lines.append(f"# {key} kept: {estimate.refused if estimate else why}")
             else:
                 lines.append(
                     f"{key} = {estimate.value:.{digits}g}   # [identified] {source}, "
                     f"± {estimate.uncertainty:.2g}"
                 )
     return "\n".join(lines) + "\n"
+
+
+def _thrust_coefficient_line(result: Identification, source: str) -> str:
+    hover = result.hover
+    k_t, line, measured = hover.thrust_coefficient, hover.rotor_line, hover.measured_rotor_speed
+    if k_t is None or k_t.refused:
+        why = k_t.refused if k_t else hover.rotor_line_reason
+        return f"# thrust_coefficient_n_per_radps2 kept: {why}"
+    if measured is not None and not measured.refused:
+        basis = (
+            f"hover ω_h {measured.value:.0f} ± {measured.uncertainty:.0f} rad/s measured by "
+            "the ESCs"
+        )
+    else:
+        assert line is not None  # k_T is identified from a measured ω_h or the line
+        basis = f"hover rotor line {line.frequency.value:.1f} ± {line.frequency.uncertainty:.1f} Hz"
+    return f"thrust_coefficient_n_per_radps2 = {k_t.value:.4g}   # [identified] {source}, {basis}"

@@ -24,12 +24,14 @@ class IdentificationError(RigError):
 
 @dataclass(frozen=True)
 class Estimate:
-    """One identified number: value ± uncertainty (same unit), how, and from which data."""
+    """One identified number: value ± uncertainty (same unit), how, and from which data;
+    ``refused`` says why it is not a result (:mod:`rig.identify.bounds`), "" when it is."""
 
     value: float
     uncertainty: float
     method: str
     window_s: tuple[float, float]
+    refused: str = ""
 
     @property
     def relative_uncertainty(self) -> float:
@@ -82,9 +84,16 @@ class HoverIdentification:
     #: rotors' centre): a centre of mass off the middle makes the autopilot trim the motors
     #: apart, and the rotors then turn at different speeds (their IMU tones beat).
     centre_of_mass_frd_m: tuple[float, float] = (0.0, 0.0)
-    #: The measured hover rotor speed; None (``rotor_line_reason`` says why): ω_h from k_T.
+    #: The rotors' line in the IMU; None (``rotor_line_reason`` says why).
     rotor_line: RotorLine | None = None
     rotor_line_reason: str = ""
+    #: ω_h the ESCs measured (``esc_status``), first choice for ω_h; None:
+    #: ``measured_speed_reason`` says why.
+    measured_rotor_speed: Estimate | None = None
+    measured_speed_reason: str = ""
+    #: k_T = mg/(Nω_h²) at the reference density from the measured ω_h (ESCs, else the
+    #: rotor line); None when ω_h is the vehicle's own √(mg/4k_T).
+    thrust_coefficient: Estimate | None = None
 
 
 @dataclass(frozen=True)

@@ -10,9 +10,8 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from px4_logs import FlightLog
-from quad_model.frames import STANDARD_GRAVITY_MPS2
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
-from rig.identify.power import hover_power_into_motors, shaft_power_w
+from rig.identify.power import hover_power_into_motors, hover_thrust_coefficient, shaft_power_w
 from rig.identify.results import Estimate, RotorLine
 
 #: The rotor line: the strongest peak of the accelerometer PSD (three axes summed, 1 Hz
@@ -102,10 +101,7 @@ def identify_rotor_line(
             )
     span = (windows[0][0], windows[-1][1])
     reference = vehicle.propulsion.reference_air_density_kgpm3
-    k_t = (
-        vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * speed**2)
-        * reference / density
-    )  # fmt: skip
+    k_t = hover_thrust_coefficient(vehicle, speed, density)
     method = (
         f"strongest accelerometer line above {ROTOR_LINE_MIN_HZ:g} Hz in hover, in the "
         f"{rate:.0f} Hz stream, ± the rotors' spread; it rises with command × voltage "

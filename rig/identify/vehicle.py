@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from px4_logs import FlightLog, motor_pwm_range
+from px4_logs import FlightLog, MotorOutputs, OutputProtocol, motor_outputs
 from quad_model.vehicle import Vehicle
 from rig.identify.battery import identify_battery
 from rig.identify.hover import identify_hover
@@ -33,7 +33,8 @@ def identify_vehicle(
     """
     sample_rate_hz = _sample_rate_hz(log)
     gyro_cutoff_hz = float(log.parameters.get("IMU_GYRO_CUTOFF", 0.0))
-    pwm_range = motor_pwm_range(log.parameters, log.path)
+    outputs = motor_outputs(log)
+    pwm_range = outputs.pwm_range_us
     airborne = log.airborne_span()
     window = excitation_window_s or airborne
     if not (airborne[0] <= window[0] < window[1] <= airborne[1]):
@@ -41,7 +42,7 @@ def identify_vehicle(
             f"{log.path}: excitation window {window[0]:g}-{window[1]:g} s is not inside the "
             f"airborne span {airborne[0]:.1f}-{airborne[1]:.1f} s"
         )
-    hover = identify_hover(log, vehicle, pwm_range)
+    hover = identify_hover(log, vehicle, outputs)
     identified_vehicle = replace(
         vehicle,
         propulsion=replace(
@@ -64,6 +65,8 @@ def identify_vehicle(
         )
         for axis in range(2)
     ]
+    if hover.throttle.refused:  # the torque per unit is the mixer's at the hover command
+        axes = [_without_hover(axis, hover.throttle.refused) for axis in axes]
     axes.append(
         AxisIdentification(
             "yaw",
@@ -81,10 +84,25 @@ def identify_vehicle(
         pwm_range_us=pwm_range,
         hover=hover,
         axes=tuple(axes),
-        notes=(*log.derived, *_notes(sample_rate_hz, log.parameters)),
+        notes=(*log.derived, *_output_notes(log, outputs), *_notes(sample_rate_hz, log.parameters)),
         battery=battery,
         battery_reason=battery_reason,
     )
+
+
+def _without_hover(axis: AxisIdentification, why: str) -> AxisIdentification:
+    inertia = axis.inertia_kgm2
+    if inertia is None:
+        return axis
+    refused = f"the hover throttle is refused ({why})"
+    return replace(axis, inertia_kgm2=replace(inertia, refused=inertia.refused or refused))
+
+
+def _output_notes(log: FlightLog, outputs: MotorOutputs) -> tuple[str, ...]:
+    """How the motors reached the ESCs, where it is not the plain one PWM output."""
+    if outputs.protocol is OutputProtocol.PWM and len(log.instances("actuator_outputs")) <= 1:
+        return ()
+    return (f"motor outputs: {outputs.reason}",)
 
 
 def _notes(sample_rate_hz: float, params: Mapping[str, float]) -> tuple[str, ...]:

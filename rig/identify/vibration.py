@@ -29,7 +29,7 @@ from scipy import optimize, signal
 from scipy.ndimage import uniform_filter1d
 
 from credibility.signals import highpass
-from px4_logs import FlightLog, motor_pwm_range
+from px4_logs import FlightLog, motor_outputs
 from quad_model.frames import pwm_to_throttle
 from quad_model.model import Mount, QuadModel
 from quad_model.sensors import ImuModel
@@ -145,7 +145,7 @@ def read_log_vibration(log: FlightLog) -> LogVibration:
         [imu[f"{field}[{axis}]"] for field in _TRIAD_FIELDS for axis in range(3)]
     ).astype(float)
     windows = _windows(log, (float(imu_time[0]), float(imu_time[-1])))
-    pwm_range = motor_pwm_range(params, path)
+    pwm_range = motor_outputs(log).pwm_range_us
     bands = bands_for(stream_rate_hz)
     motors = topics["actuator_motors"]
     motor_time = motors["timestamp"] * 1e-6

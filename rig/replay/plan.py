@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from hil_config import FieldError, read_toml
-from px4_logs import FlightLog, motor_pwm_range
+from px4_logs import FlightLog, motor_outputs
 from quad_model.environment import (
     DRY_AIR_GAS_CONSTANT,
     PX4_DEFAULT_HOME,
@@ -529,11 +529,12 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
         lead_in_s = ready_s + start_height_m / TAKEOFF_CLIMB_MPS + LEAD_IN_SETTLE_S
     vehicle, reason = _vehicle_choice(log, options.vehicle)
     vehicle_document, cell_count, battery = _vehicle_document(vehicle, log)
-    pwm_range_us = motor_pwm_range(log.parameters, path)
+    outputs = motor_outputs(log)
+    pwm_range_us = outputs.pwm_range_us  # the same ESC throttle whatever the log's protocol
     try:
         PwmOutput(1, 400, pwm_range_us)  # the rig's outputs span what the ESC input does
     except ValueError as error:
-        raise ReplayError(f"{path}: motor outputs' PWM_*_MIN/MAXn: {error}") from None
+        raise ReplayError(f"{path}: the motor outputs' range ({outputs.reason}): {error}") from None
     battery_voltage_v = log.battery_voltage_v(start_s)
     if battery_voltage_v is not None:
         try:
