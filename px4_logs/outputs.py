@@ -196,13 +196,13 @@ def _motor_channels(
         dshot = _Driver(prefix, OutputProtocol.DSHOT, "DShot", (0.0, DSHOT_FULL_SCALE))
         return dshot, channels, (floor, DSHOT_FULL_SCALE)
     ranges = set()
-    for output in (c + 1 for c in channels):
+    for motor, output in enumerate((c + 1 for c in channels), start=1):
         limits = (f"{prefix}_MIN{output}", f"{prefix}_MAX{output}")
         for name in limits:
             if name not in parameters:
                 raise LogError(
                     f"{source}: parameter {name} is not in the log "
-                    f"({prefix}_FUNC{output} is a motor output)"
+                    f"({prefix}_FUNC{output} = {100 + motor} is a motor output)"
                 )
         ranges.add((float(parameters[limits[0]]), float(parameters[limits[1]])))
     if len(ranges) > 1:

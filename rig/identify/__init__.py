@@ -10,11 +10,12 @@ flight met (:mod:`rig.identify.wind`) and the IMU's noise and vibration per oper
 Methods, each reported with its data window and an uncertainty:
 
 - **Hover**: steady windows found automatically (airborne, small velocity and body rates).
-  The ESC throttle there is ``actuator_motors`` mapped through the log's PWM range
-  (``PWM_MAIN/AUX_MINn/MAXn`` of the motor outputs) onto the model's 1000-2000 µs throttle
-  (:func:`quad_model.frames.pwm_to_throttle`). The hover rotor speed ω_h must sit at that
-  throttle on the speed curve; the curve's full-throttle point is kept and its offset solved
-  for. ω_h is measured where the log shows it, else ω_h = √(mg/4k_T) with the vehicle's k_T.
+  The ESC throttle there is ``actuator_motors`` mapped through the range of the driver that
+  runs the motors (:func:`px4_logs.motor_outputs`: PWM, DShot, UAVCAN ESCs) onto the model's
+  1000-2000 µs throttle (:func:`quad_model.frames.pwm_to_throttle`). The hover rotor speed ω_h
+  must sit at that throttle on the speed curve; the curve's full-throttle point is kept and
+  its offset solved for. ω_h is measured where the log shows it (the ESCs' ``esc_status``,
+  else the rotor line), else ω_h = √(mg/4k_T) with the vehicle's k_T.
 - **Rotor line**: the rotors' once-per-revolution line (prop and motor imbalance) is the
   strongest peak of the accelerometer's spectrum in hover. A logged stream folds lines above
   its Nyquist frequency, so the line must also *rise* with the motor command × voltage
@@ -43,6 +44,9 @@ Methods, each reported with its data window and an uncertainty:
   the log's hover voltage, turns them into a moment.
 - **Yaw** is not identified: its reaction-torque path (rotor drag plus spin-up torque) is not
   the rate model above, and ordinary flying excites it little; the result says so.
+
+An estimate outside its physical bounds (:mod:`rig.identify.bounds`) is refused with its
+reason, never shown or written as a result; the vehicle keeps its prior value.
 """
 
 from rig.identify.report import identification_table, identification_toml

@@ -21,7 +21,7 @@ from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
 from rig.autopilots.reference.control import ControlAllocator
 from rig.autopilots.reference.params import Parameters
-from rig.identify.bounds import bounded
+from rig.identify.bounds import bounded, refusal
 from rig.identify.results import AXES, MAX_RELATIVE_UNCERTAINTY, AxisIdentification, Estimate
 
 #: Below this log rate the rate loop's torque noise (D term) folds into the analysis band and
@@ -269,5 +269,12 @@ def identify_axis(
                 window,
             ),
         ),
-        cross_check_inertia_kgm2=None if cross_gain is None else torque_per_unit / cross_gain,
+        cross_check_inertia_kgm2=_possible_inertia(torque_per_unit, cross_gain),
     )
+
+
+def _possible_inertia(torque_per_unit: float, gain: float | None) -> float | None:
+    """The cross-check's inertia, None without a fit or outside the inertia's bound."""
+    if gain is None or refusal("inertia", torque_per_unit / gain):
+        return None
+    return torque_per_unit / gain

@@ -145,7 +145,7 @@ def _line_against_drive(
         voltage = float(np.interp(start + FOLD_WINDOW_S / 2, t_volt, volts))
         drive.append(float(command[commanded].mean()) * voltage)
         heard.append(_weighted_frequency(freqs, power, line_hz, FOLD_BAND)[0])
-    if len(drive) < 2:
+    if len(drive) < 2 or np.ptp(drive) == 0.0 or np.ptp(heard) == 0.0:  # r undefined
         return 0.0, len(drive)
     return float(np.corrcoef(drive, heard)[0, 1]), len(drive)
 

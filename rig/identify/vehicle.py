@@ -95,7 +95,8 @@ def _without_hover(axis: AxisIdentification, why: str) -> AxisIdentification:
     if inertia is None:
         return axis
     refused = f"the hover throttle is refused ({why})"
-    return replace(axis, inertia_kgm2=replace(inertia, refused=inertia.refused or refused))
+    inertia = replace(inertia, refused=inertia.refused or refused)
+    return replace(axis, inertia_kgm2=inertia, cross_check_inertia_kgm2=None)
 
 
 def _output_notes(log: FlightLog, outputs: MotorOutputs) -> tuple[str, ...]:

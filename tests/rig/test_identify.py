@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pyulog import ULog
+from rich.console import Console
 
-from px4_logs import FlightLog, LogError
+from px4_logs import FlightLog, LogError, OutputProtocol, motor_outputs
 from quad_model.environment import (
     DRY_AIR_GAS_CONSTANT,
     PX4_DEFAULT_HOME,
@@ -25,8 +26,14 @@ from quad_model.model import Mount, QuadModel
 from quad_model.vehicle import VEHICLES_DIR, load_vehicle
 from rig import cli
 from rig.autopilots.reference.flight_log import TOPICS as AUTOPILOT_TOPICS
-from rig.identify import IdentificationError, identification_toml, identify_vehicle
+from rig.identify import (
+    IdentificationError,
+    identification_table,
+    identification_toml,
+    identify_vehicle,
+)
 from rig.identify.battery import identify_battery
+from rig.identify.hover import identify_hover
 from rig.identify.rate_plant import ALIASING_BIAS
 from rig.identify.rotor_line import identify_rotor_line
 from rig.lockstep.loop import RunOptions, run_scenario
@@ -622,3 +629,140 @@ def test_a_log_without_voltage_or_a_logged_disarm_leaves_just_those_parts_out(
     assert battery is not None, reason
     assert battery.internal_resistance_ohm.value == pytest.approx(0.05, rel=1e-6)
     assert battery.avionics_power_w is None
+
+
+# -- the same flight on other outputs: CAN ESCs with speeds, DShot; a doctored log -----------
+X500_LOG = FLIGHT_LOGS / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
+#: UAVCAN raw command range that gives the X500's ESC throttle 0.1..0.9 (of 8191).
+CAN_RANGE = (819.0, 7372.0)
+
+
+@pytest.fixture(scope="module")
+def x500_flight():
+    return FlightLog.read(X500_LOG)
+
+
+def _relaid(log: FlightLog, replace_topics: dict, drop: tuple[str, ...], parameters: dict):
+    """``log``'s topics (every instance) with some replaced or dropped, its parameters
+    without the PWM motor functions, plus ``parameters``."""
+    topics = {name: log.instances(name) for name in log.topics if name not in drop}
+    kept = {k: v for k, v in log.parameters.items() if not k.startswith("PWM_AUX_FUNC")}
+    return FlightLog(log.path, topics | replace_topics, kept | parameters)
+
+
+def test_a_can_log_identifies_as_its_pwm_original_with_the_escs_speeds(
+    x500_flight, real_identification
+):
+    """The X500 flight re-laid as a UAVCAN log: actuator_outputs instance 0 all zero (the PWM
+    driver, nothing on it), instance 1 the motors in raw units (UAVCAN_EC_MIN/MAX 819/7372 of
+    8191: throttle 0.09999-0.9, the PWM original's 0.1-0.9), no actuator_motors (derived from
+    instance 1), esc_status with each motor's speed 1 %·(m − 2.5) off the original's ω_h.
+    Known answers: the motor commands are the original's to 1e-9, the throttle within 1e-4,
+    ω_h is the ESCs' mean and its spread, and so the speed offset within 0.5 rad/s and the
+    roll/pitch inertia within 0.5 % (the torque per unit through the 1e-4 throttle shift)."""
+    original, vehicle = real_identification
+    motors = x500_flight.topics["actuator_motors"]
+    stamps = motors["timestamp"]
+    commands = [motors[f"control[{m}]"] for m in range(4)]
+    zeros = {"timestamp": stamps, **{f"output[{i}]": np.zeros(stamps.size) for i in range(8)}}
+    low, high = CAN_RANGE
+    raw = {"timestamp": stamps, **{f"output[{m}]": low + (high - low) * u
+                                   for m, u in enumerate(commands)}}  # fmt: skip
+    hover_speed = original.hover.rotor_speed_radps
+    speeds = [hover_speed * (1.0 + 0.01 * (m - 1.5)) for m in range(4)]
+    esc = {"timestamp": stamps}
+    for m, speed in enumerate(speeds):
+        esc[f"esc[{m}].esc_rpm"] = np.full(stamps.size, speed * 60.0 / (2.0 * np.pi))
+        esc[f"esc[{m}].actuator_function"] = np.full(stamps.size, 101 + m)
+    parameters = {f"UAVCAN_EC_FUNC{m}": 100 + m for m in range(1, 5)}
+    parameters |= {f"UAVCAN_EC_MIN{m}": low for m in range(1, 5)}
+    parameters |= {f"UAVCAN_EC_MAX{m}": high for m in range(1, 5)}
+    can = _relaid(x500_flight, {"actuator_outputs": (zeros, raw), "esc_status": esc},
+                  ("actuator_motors",), parameters)  # fmt: skip
+    outputs = motor_outputs(can)
+    assert (outputs.protocol, outputs.instance, outputs.unit) == (OutputProtocol.CAN, 1, "CAN raw")
+    result = identify_vehicle(can, vehicle, REAL_WINDOW_S)
+    hover = result.hover
+    np.testing.assert_allclose(hover.motor_command, original.hover.motor_command, atol=1e-9)
+    assert hover.throttle.value == pytest.approx(original.hover.throttle.value, abs=1e-4)
+    measured = hover.measured_rotor_speed
+    assert measured is not None
+    assert not measured.refused
+    assert measured.value == pytest.approx(np.mean(speeds), rel=1e-6)
+    assert measured.uncertainty == pytest.approx(np.std(speeds), rel=1e-6)
+    assert hover.rotor_speed_radps == pytest.approx(np.mean(speeds), rel=1e-6)
+    assert "measured by the ESCs" in hover.speed_offset_radps.method
+    offset = original.hover.speed_offset_radps.value
+    assert hover.speed_offset_radps.value == pytest.approx(offset, abs=0.5)
+    for name in ("roll", "pitch"):
+        expected = original.axis(name).inertia_kgm2.value
+        assert result.axis(name).inertia_kgm2.value == pytest.approx(expected, rel=0.005)
+    assert any(note.startswith("motor outputs: can 819-7372 CAN raw") for note in result.notes)
+    printed = identification_toml(result, vehicle)
+    assert "measured by the ESCs" in printed.split("thrust_coefficient_n_per_radps2 = ")[1]
+
+
+def test_a_dshot_log_maps_its_commands_through_dshots_full_range(x500_flight, real_identification):
+    """The same flight on DShot (PWM_AUX_TIM0 = −3, DSHOT_MIN 0.1): the driver sends
+    int(0.1·1999) = 199 .. 1999 of 1999, so the hover throttle is 199/1999 + (1 − 199/1999)·u
+    of the original's mean command u (the PWM limits are not DShot's)."""
+    original, vehicle = real_identification
+    dshot = _relaid(x500_flight, {}, (), {f"PWM_AUX_FUNC{m}": 100 + m for m in range(1, 5)}
+                    | {"PWM_AUX_TIM0": -3, "DSHOT_MIN": 0.1})  # fmt: skip
+    outputs = motor_outputs(dshot)
+    assert outputs.protocol is OutputProtocol.DSHOT
+    hover = identify_hover(dshot, vehicle, outputs)
+    u = np.mean(original.hover.motor_command)
+    floor = 199 / 1999
+    assert hover.throttle.value == pytest.approx(floor + (1 - floor) * u, abs=1e-9)
+    assert "DSHOT 199-1999 DShot" in hover.throttle.method
+
+
+def test_a_log_whose_fits_are_impossible_prints_refusals_and_keeps_the_prior(
+    x500_flight, real_identification
+):
+    """The X500 flight doctored: every motor command 0 (the commands of an output with
+    nothing on it), the current ×10 and the voltage rising with it (+0.1 V/A). The hover
+    throttle, the speed curve, the centre of mass and the inertias (through the torque at
+    the hover command), the resistance (≈ −0.005 Ω) and the efficiency (≈ 0.06) are refused
+    with their reasons in the table and as comments in the TOML, which keeps the vehicle's
+    values; the avionics power (V·I after the disarm) is the original's ×10 and stays."""
+    original, vehicle = real_identification
+    motors = dict(x500_flight.topics["actuator_motors"])
+    motors |= {f"control[{m}]": np.zeros(motors["timestamp"].size) for m in range(4)}
+    battery = dict(x500_flight.topics["battery_status"])
+    battery["current_a"] = battery["current_a"] * 10.0
+    battery["voltage_v"] = battery["voltage_v"] + 0.01 * battery["current_a"]
+    doctored = FlightLog(
+        x500_flight.path,
+        {name: x500_flight.instances(name) for name in x500_flight.topics}
+        | {"actuator_motors": motors, "battery_status": battery},
+        x500_flight.parameters,
+    )
+    result = identify_vehicle(doctored, vehicle, REAL_WINDOW_S)
+    assert "motor 1: motor command 0 is outside (0, 1)" in result.hover.throttle.refused
+    assert result.hover.speed_offset_radps.refused.startswith("the hover throttle is refused")
+    for name in ("roll", "pitch"):
+        assert result.axis(name).inertia_kgm2.refused
+    assert "internal resistance -0.00" in result.battery.internal_resistance_ohm.refused
+    assert result.battery.propulsion_efficiency is None
+    assert "outside [0.2, 1]" in result.battery.efficiency_reason
+    console = Console(width=250, record=True)
+    console.print(identification_table(result))
+    table = console.export_text()
+    rows = {line.split("│")[1].strip(): line for line in table.splitlines() if line.count("│") > 3}
+    for quantity in ("motor commands", "hover throttle", "speed_offset_radps", "speed_slope_radps",
+                     "roll inertia kg·m² (unreliable)", "pitch inertia kg·m² (unreliable)",
+                     "internal_resistance_ohm"):  # fmt: skip
+        assert rows[quantity].split("│")[2].strip() == "refused", quantity
+    assert "0.000 0.000" not in table
+    printed = identification_toml(result, vehicle)
+    sections = tomllib.loads(printed)
+    assert sections["body"]["inertia_kgm2"] == [list(row) for row in vehicle.body.inertia_kgm2]
+    assert "speed_offset_radps" not in sections["propulsion"]
+    assert "position_frd_m" not in sections["propulsion"]
+    avionics = original.battery.avionics_power_w.value * 10.0
+    assert sections["battery"] == {"avionics_power_w": pytest.approx(avionics, rel=0.02)}
+    assert "whole flight │ 0 " not in table
+    assert "# internal_resistance_ohm kept: internal resistance -0.00" in printed
+    assert "# propulsion_efficiency kept: " in printed

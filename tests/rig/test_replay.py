@@ -166,7 +166,7 @@ def test_bad_battery_and_pwm_configurations_fail_with_one_line(tmp_path):
         tmp_path / "x.ulg", {**motors, "PWM_AUX_MIN2": 1000, "PWM_AUX_MAX2": 1900}
     )
     assert _error(mixed) == (
-        f"{mixed}: the motor outputs have different PWM ranges [(1000.0, 1900.0), (1100.0, 1900.0)]"
+        f"{mixed}: the motor outputs have different ranges [(1000.0, 1900.0), (1100.0, 1900.0)]"
     )
 
 
