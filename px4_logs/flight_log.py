@@ -16,14 +16,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Self
+from typing import Any, NamedTuple, Self
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter1d
 
 from px4_logs.errors import LogError
-from px4_logs.layouts import derive_missing
+from px4_logs.layouts import LogParts, derive_missing
 from px4_logs.outputs import MOTOR_FUNCTIONS
 from px4_logs.ulog import firmware_name, read_ulog
 
@@ -47,6 +47,13 @@ AIRBORNE_THRUST_FRACTION = 0.8
 ARMING_STATE_ARMED = 2
 
 Topic = Mapping[str, NDArray[Any]]
+
+
+class _Airborne(NamedTuple):
+    time_s: NDArray[np.float64]
+    airborne: NDArray[np.bool_]
+    #: How it was derived where the log has no land detector, else "".
+    note: str
 
 
 class FlightLog:
@@ -84,13 +91,13 @@ class FlightLog:
         }
         own = {name: group[0] for name, group in instances.items()}  # derive_missing adds to it
         #: Notes of what was derived: topics of an older PX4's layout, the airborne span.
-        self.derived = derive_missing(own, self.parameters, instances)
+        self.derived = derive_missing(LogParts(own, instances, self.parameters, self.path))
         self.topics: dict[str, dict[str, NDArray[Any]]] = own
         self._instances = {name: (own[name], *instances.get(name, ())[1:]) for name in own}
         self._time_s = {name: _stamp(name, data) * 1e-6 for name, data in own.items()}
         self._airborne = self._airborne_samples()
-        if isinstance(self._airborne, tuple) and self._airborne[2]:
-            self.derived = (*self.derived, self._airborne[2])
+        if isinstance(self._airborne, _Airborne) and self._airborne.note:
+            self.derived = (*self.derived, self._airborne.note)
 
     @classmethod
     def read(cls, path: str | Path) -> Self:
@@ -174,7 +181,7 @@ class FlightLog:
         reports its ESCs in its output order); N is ``CA_ROTOR_COUNT``, else the ESCs."""
         for data in self.instances("esc_status"):
             rpm_by_motor = {}
-            reporting = (esc for esc in range(len(data)) if f"esc[{esc}].esc_rpm" in data)
+            reporting = [int(f[4 : f.index("]")]) for f in data if f.endswith("].esc_rpm")]
             for esc in reporting:
                 rpm = data[f"esc[{esc}].esc_rpm"]
                 function = data.get(f"esc[{esc}].actuator_function")
@@ -251,15 +258,14 @@ class FlightLog:
     def _airborne_or_raise(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         if isinstance(self._airborne, str):
             raise LogError(f"{self.path}: {self._airborne}")
-        return self._airborne[0], self._airborne[1]
+        return self._airborne.time_s, self._airborne.airborne
 
-    def _airborne_samples(self) -> tuple[NDArray[np.float64], NDArray[np.bool_], str] | str:
-        """(time s, airborne, how it was derived or "") from the land detector; without one
-        from the arming state and the height (AIRBORNE_HEIGHT_M) or the thrust
-        (AIRBORNE_THRUST_FRACTION); else the one line saying what is missing."""
+    def _airborne_samples(self) -> _Airborne | str:
+        """Airborne or not at each sample of the land detector; without one from the arming
+        state and the height or the thrust; else the one line saying what is missing."""
         if "landed" in self.topics.get("vehicle_land_detected", {}):
             time_s, landed = self.series("vehicle_land_detected", "landed", "airborne span")
-            return time_s, landed < 0.5, ""
+            return _Airborne(time_s, landed < 0.5, "")
         missing = "no vehicle_land_detected"
         arming = self._armed_samples()
         if arming is None:
@@ -267,50 +273,54 @@ class FlightLog:
                 f"{missing}, and no arming state (actuator_armed, vehicle_status) to derive "
                 "the airborne span from"
             )
-        t_armed, armed = arming
         if "z" in self.topics.get("vehicle_local_position", {}):
-            time_s, down = self.series("vehicle_local_position", "z", "")
-            on = _step_at(t_armed, armed, time_s)
-            ground = np.full(time_s.size, np.nan)
-            starts = np.flatnonzero(on & ~np.concatenate(([False], on[:-1])))
-            ends = np.append(np.flatnonzero(~on & np.concatenate(([False], on[:-1]))), on.size)
-            for start in starts:
-                end = ends[ends > start][0]
-                first = (time_s >= time_s[start]) & (time_s < time_s[start] + ARMED_GROUND_S)
-                first[start] = True  # a height logged slower than ARMED_GROUND_S
-                ground[start:end] = np.median(down[first])
-            with np.errstate(invalid="ignore"):  # NaN outside the armed spans: not airborne
-                airborne = on & (ground - down > AIRBORNE_HEIGHT_M)
-            return (
-                time_s,
-                airborne,
-                (
-                    f"airborne span derived ({missing}): armed and more than "
-                    f"{AIRBORNE_HEIGHT_M:g} m above the height of the first {ARMED_GROUND_S:g} s "
-                    "armed (vehicle_local_position.z)"
-                ),
-            )
+            airborne = self._airborne_by_height(*arming)
+            return airborne._replace(note=f"airborne span derived ({missing}): {airborne.note}")
         if "xyz[2]" in self.topics.get("vehicle_thrust_setpoint", {}):
-            time_s, thrust = self.series("vehicle_thrust_setpoint", "xyz[2]", "")
-            thrust = -thrust
-            on = _step_at(t_armed, armed, time_s)
-            if not on.any():
-                return time_s, on, ""
-            strong = on & (thrust >= 0.5 * float(np.max(thrust[on])))
-            level = float(np.median(thrust[strong]))
-            return (
-                time_s,
-                on & (thrust >= AIRBORNE_THRUST_FRACTION * level),
-                (
-                    f"airborne span derived ({missing}, no vehicle_local_position height): armed "
-                    f"and the thrust set-point above {AIRBORNE_THRUST_FRACTION:g} of its hover "
-                    f"level {level:.2f}"
-                ),
+            airborne = self._airborne_by_thrust(*arming)
+            return airborne._replace(
+                note=f"airborne span derived ({missing}, no vehicle_local_position height): "
+                f"{airborne.note}"
             )
         return (
             f"{missing}, and neither a height (vehicle_local_position.z) nor a thrust "
             "set-point to derive the airborne span from"
         )
+
+    def _airborne_by_height(
+        self, t_armed: NDArray[np.float64], armed: NDArray[np.bool_]
+    ) -> _Airborne:
+        """Armed and more than AIRBORNE_HEIGHT_M above the height of each arming's first
+        ARMED_GROUND_S (a baro's offset drifts from flight to flight)."""
+        time_s, down = self.series("vehicle_local_position", "z", "")
+        on = _step_at(t_armed, armed, time_s)
+        was_on = np.concatenate(([False], on[:-1]))
+        ground = np.full(time_s.size, np.nan)
+        ends = np.append(np.flatnonzero(~on & was_on), on.size)
+        for start in np.flatnonzero(on & ~was_on):
+            first = (time_s >= time_s[start]) & (time_s < time_s[start] + ARMED_GROUND_S)
+            first[start] = True  # a height logged slower than ARMED_GROUND_S
+            ground[start : ends[ends > start][0]] = np.median(down[first])
+        with np.errstate(invalid="ignore"):  # NaN outside the armed spans: not airborne
+            airborne = on & (ground - down > AIRBORNE_HEIGHT_M)
+        return _Airborne(time_s, airborne, (
+            f"armed and more than {AIRBORNE_HEIGHT_M:g} m above the height of the first "
+            f"{ARMED_GROUND_S:g} s armed (vehicle_local_position.z)"
+        ))  # fmt: skip
+
+    def _airborne_by_thrust(
+        self, t_armed: NDArray[np.float64], armed: NDArray[np.bool_]
+    ) -> _Airborne:
+        """Armed and the thrust set-point above AIRBORNE_THRUST_FRACTION of its hover level."""
+        time_s, thrust = self.series("vehicle_thrust_setpoint", "xyz[2]", "")
+        thrust, on = -thrust, _step_at(t_armed, armed, time_s)
+        if not on.any():
+            return _Airborne(time_s, on, "never armed")
+        level = float(np.median(thrust[on & (thrust >= 0.5 * float(np.max(thrust[on])))]))
+        return _Airborne(time_s, on & (thrust >= AIRBORNE_THRUST_FRACTION * level), (
+            f"armed and the thrust set-point above {AIRBORNE_THRUST_FRACTION:g} of its hover "
+            f"level {level:.2f}"
+        ))  # fmt: skip
 
     def _armed_samples(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
         """(time s, armed) from actuator_armed, else vehicle_status.arming_state."""

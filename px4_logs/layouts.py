@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,50 +21,56 @@ from numpy.typing import NDArray
 from px4_logs.outputs import motor_layout
 
 Topics = dict[str, dict[str, NDArray]]
-#: Every instance of each topic (``multi_id`` order), each sorted by time.
-Instances = Mapping[str, Sequence[Mapping[str, NDArray]]]
+
+
+@dataclass(frozen=True)
+class LogParts:
+    """What a derivation reads: the first instance of each topic (with the topics derived
+    before it), every instance in ``multi_id`` order, the parameters, the file (messages)."""
+
+    topics: Topics
+    instances: Mapping[str, Sequence[Mapping[str, NDArray]]]
+    parameters: Mapping[str, float]
+    source: str | Path
 
 
 @dataclass(frozen=True)
 class Derivation:
-    """How to make ``topic`` from ``sources`` when a log lacks it."""
+    """How to make ``topic`` from ``sources`` when a log lacks it (None: the log cannot)."""
 
     topic: str
     sources: tuple[str, ...]
     note: str
-    derive: Callable[[Topics, Mapping[str, float], Instances], dict[str, NDArray]]
+    derive: Callable[[LogParts], dict[str, NDArray] | None]
 
 
-def _rates_from_gyro(topics: Topics, *_: object) -> dict[str, NDArray]:
-    gyro = topics["sensor_combined"]
+def _rates_from_gyro(log: LogParts) -> dict[str, NDArray]:
+    gyro = log.topics["sensor_combined"]
     rates = {f"xyz[{i}]": gyro[f"gyro_rad[{i}]"] for i in range(3)}
     return {"timestamp": gyro["timestamp"], "timestamp_sample": gyro["timestamp"], **rates}
 
 
-def _torque_from_controls(topics: Topics, *_: object) -> dict[str, NDArray]:
-    controls = topics["actuator_controls_0"]
+def _torque_from_controls(log: LogParts) -> dict[str, NDArray]:
+    controls = log.topics["actuator_controls_0"]
     torque = {f"xyz[{i}]": controls[f"control[{i}]"] for i in range(3)}
     return {"timestamp": controls["timestamp"], **torque}
 
 
-def _thrust_from_controls(topics: Topics, *_: object) -> dict[str, NDArray]:
-    controls = topics["actuator_controls_0"]
+def _thrust_from_controls(log: LogParts) -> dict[str, NDArray]:
+    controls = log.topics["actuator_controls_0"]
     zero = np.zeros_like(controls["control[3]"])
     # FRD body: thrust points up, along −z
     return {"timestamp": controls["timestamp"], "xyz[0]": zero, "xyz[1]": zero,
             "xyz[2]": -controls["control[3]"]}  # fmt: skip
 
 
-def _motors_from_outputs(
-    topics: Topics, parameters: Mapping[str, float], instances: Instances
-) -> dict[str, NDArray]:
+def _motors_from_outputs(log: LogParts) -> dict[str, NDArray] | None:
     # the instance whose motor channels move with the thrust: another driver's may log zeros
-    outputs = instances["actuator_outputs"]
-    layout = motor_layout(
-        parameters, outputs, topics.get("vehicle_thrust_setpoint"), topics.get("actuator_armed"), ""
-    )
+    outputs = log.instances["actuator_outputs"]
+    thrust, armed = log.topics.get("vehicle_thrust_setpoint"), log.topics.get("actuator_armed")
+    layout = motor_layout(log.parameters, outputs, thrust, armed, log.source)
     if layout.instance is None:
-        raise KeyError("actuator_outputs")
+        return None
     chosen = outputs[layout.instance]
     commands = layout.commands(chosen)
     motors = {"timestamp": np.asarray(chosen["timestamp"])}
@@ -87,18 +94,18 @@ DERIVATIONS = (
 )  # fmt: skip
 
 
-def derive_missing(
-    topics: Topics, parameters: Mapping[str, float], instances: Instances
-) -> tuple[str, ...]:
-    """Add each topic the log lacks and can derive (``topics`` is changed in place);
+def derive_missing(log: LogParts) -> tuple[str, ...]:
+    """Add each topic the log lacks and can derive (``log.topics`` is changed in place);
     returns the notes of what was derived."""
     notes = []
     for derivation in DERIVATIONS:
-        sources_present = all(source in topics for source in derivation.sources)
-        if derivation.topic not in topics and sources_present:
+        sources_present = all(source in log.topics for source in derivation.sources)
+        if derivation.topic not in log.topics and sources_present:
             try:
-                topics[derivation.topic] = derivation.derive(topics, parameters, instances)
-            except KeyError:  # a source without what it needs (a damaged log) gives none
+                derived = derivation.derive(log)
+            except KeyError:  # a source without the fields it needs (a damaged log)
                 continue
-            notes.append(derivation.note)
+            if derived is not None:
+                log.topics[derivation.topic] = derived
+                notes.append(derivation.note)
     return tuple(notes)

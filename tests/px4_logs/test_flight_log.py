@@ -319,3 +319,18 @@ def test_the_x500_flight_without_its_land_detector(x500_log: Path):
         assert derived.derived[-1].startswith("airborne span derived")
         if "vehicle_local_position" in derived.topics:
             assert derived.hover_windows() == log.hover_windows()
+
+
+def test_the_x8_octo_runs_its_motors_on_dshot(auriol_log: Path):
+    """The X8's log: Motor 1..8 on PWM_AUX whose timers 0-7 are DShot600 (−3), DSHOT_MIN
+    0.15, no actuator_outputs logged; no land detector and no arming state, so its airborne
+    span is one line saying so."""
+    log = FlightLog.read(auriol_log)
+    outputs = motor_outputs(log)
+    assert (outputs.protocol, outputs.rotor_count, outputs.instance) == (
+        OutputProtocol.DSHOT, 8, None,
+    )  # fmt: skip
+    assert outputs.output_range == (299.0, 1999.0)
+    assert "actuator_outputs not logged" in outputs.reason
+    with pytest.raises(LogError, match="no vehicle_land_detected, and no arming state"):
+        log.airborne_span()

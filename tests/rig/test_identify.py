@@ -459,10 +459,20 @@ def test_cli_prints_the_table_and_fails_in_one_line(capsys, tmp_path, real_ident
     assert "flight log not found" in err
 
 
+def test_a_ground_run_without_land_detector_or_arming_is_one_line(capsys, auriol_log):
+    """The X8's 6.8 s ground run has neither a land detector nor an arming state: `rig
+    identify` says so in one line."""
+    assert cli.main(["identify", str(auriol_log), "--vehicle", "x500_v2"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"{auriol_log}: no vehicle_land_detected, and no arming state" in err
+
+
 def _write_older_layout(source: Path, path: Path) -> None:
     """The real X500 flight as a PX4 before 1.10 logged it: body rates only in
     sensor_combined, torque and thrust in actuator_controls_0, the motors only as PWM in
-    actuator_outputs (range PWM_MAIN_MIN/MAX), no vehicle_angular_velocity,
+    actuator_outputs (range PWM_MAIN_MIN/MAX; its second instance, the first all zero), no
+    vehicle_angular_velocity,
     vehicle_torque_setpoint, vehicle_thrust_setpoint or actuator_motors."""
     names = ["vehicle_local_position", "vehicle_land_detected", "battery_status",
              "vehicle_air_data", "hover_thrust_estimate", "vehicle_rates_setpoint",
@@ -497,10 +507,14 @@ def _write_older_layout(source: Path, path: Path) -> None:
               {"control": [*(torque[f"xyz[{k}]"][i] for k in range(3)), lift[i], 0, 0, 0, 0]})
              for i, t in enumerate(torque["timestamp"])]  # fmt: skip
     motors = data["actuator_motors"]
+    # the motors on the second instance; the first an output driver with nothing on it
     rows += [(int(t), "actuator_outputs",
-              {"noutputs": 4, "output": [*(low + (high - low) * motors[f"control[{k}]"][i]
-                                           for k in range(4)), *[0.0] * 12]})
+              {"multi_id": 1, "noutputs": 4,
+               "output": [*(low + (high - low) * motors[f"control[{k}]"][i] for k in range(4)),
+                          *[0.0] * 12]})
              for i, t in enumerate(motors["timestamp"])]  # fmt: skip
+    rows += [(int(t), "actuator_outputs", {"noutputs": 8, "output": [0.0] * 16})
+             for t in motors["timestamp"]]  # fmt: skip
     parameters = {"SYS_AUTOSTART": 4019, "PWM_MAIN_MIN": low, "PWM_MAIN_MAX": high,
                   "IMU_GYRO_CUTOFF": float(real.initial_parameters["IMU_GYRO_CUTOFF"])}  # fmt: skip
     with ULogWriter(path, topics, parameters=parameters) as log:
@@ -524,6 +538,7 @@ def test_an_older_px4_layout_is_identified_from_what_it_logged(tmp_path, real_id
         "actuator_motors",
     ]  # fmt: skip
     assert result.pwm_range_us == (1100.0, 1900.0)
+    assert any("actuator_outputs instance 1 carries them" in note for note in result.notes)
     assert result.hover.throttle.value == pytest.approx(current.hover.throttle.value, rel=0.015)
     assert result.hover.thrust_setpoint == pytest.approx(current.hover.thrust_setpoint, rel=0.015)
 
