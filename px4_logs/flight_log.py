@@ -174,6 +174,11 @@ class FlightLog:
             raise LogError(f"{self.path}: the vehicle never left the ground")
         return float(flying[0]), float(flying[-1])
 
+    def airborne_at(self, time_s: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Whether the vehicle was airborne at each of ``time_s``: the land detector's state
+        in force then, or without one as derived (``derived`` says how)."""
+        return _step_at(*self._airborne_or_raise(), np.asarray(time_s, dtype=float))
+
     def rotor_speeds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
         """The rotor speeds the ESCs measured: (time s, rad/s per sample × motor 1..N) from
         ``esc_status.esc[i].esc_rpm``; None when no instance reports a speed. Motor m is the
@@ -224,7 +229,7 @@ class FlightLog:
             # a hover
             horizontal_sq *= self.series("vehicle_local_position", "v_xy_valid", why)[1]
         speed_sq = vz**2 + horizontal_sq
-        airborne = _step_at(*self._airborne_or_raise(), time_s)
+        airborne = self.airborne_at(time_s)
         # averaged over HOVER_SMOOTH_S: a pilot's small corrections are hover, a manoeuvre not
         span = max(1, round(HOVER_SMOOTH_S / np.median(np.diff(time_s))))
         # a running mean of squares can dip below zero by rounding: clip before the root

@@ -29,7 +29,7 @@ from scipy import optimize, signal
 from scipy.ndimage import uniform_filter1d
 
 from credibility.signals import highpass
-from px4_logs import FlightLog, motor_outputs
+from px4_logs import FlightLog, LogError, motor_outputs
 from quad_model.frames import pwm_to_throttle
 from quad_model.model import Mount, QuadModel
 from quad_model.sensors import ImuModel
@@ -214,10 +214,12 @@ def _windows(log: FlightLog, imu_span: tuple[float, float]) -> dict[str, list[tu
     is_armed = _held(armed["timestamp"] * 1e-6, armed["armed"], grid) > 0.5
     command = np.max([motors[f"control[{m}]"] for m in range(ROTOR_COUNT)], axis=0)
     masks = {"stopped": ~is_armed, "idle": is_armed & (command <= IDLE_COMMAND_MAX)}
-    land = topics.get("vehicle_land_detected")
     position = topics.get("vehicle_local_position")
-    if land is not None:
-        landed = _held(land["timestamp"] * 1e-6, land["landed"], grid) > 0.5
+    try:
+        landed = ~log.airborne_at(grid)
+    except LogError:  # no land detector nor what derives it: no climb, descent or hover
+        landed = None
+    if landed is not None:
         masks["idle"] &= landed
         if position is not None:
             time_s = position["timestamp"] * 1e-6
@@ -230,7 +232,7 @@ def _windows(log: FlightLog, imu_span: tuple[float, float]) -> dict[str, list[tu
         span = _longest(grid, mask, imu_span)
         if span is not None:
             windows[name] = [span]
-    if position is not None and land is not None:
+    if position is not None and landed is not None:
         windows["hover"] = [_clip(w, imu_span) for w in log.hover_windows()]
     settled = {}
     for name, spans in windows.items():

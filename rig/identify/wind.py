@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from px4_logs import FlightLog
+from px4_logs import FlightLog, LogError
 from quad_model.frames import STANDARD_GRAVITY_MPS2, body_to_ned
 from quad_model.vehicle import ROTOR_COUNT, Vehicle
 from rig.errors import RigError
@@ -75,18 +75,18 @@ class WindEstimate:
 def estimate_wind(log: FlightLog, vehicle: Vehicle) -> WindEstimate:
     """The steady wind of the log's hover windows for ``vehicle``'s drag."""
     path, topics = log.path, log.topics
-    for name in ("vehicle_attitude", "vehicle_land_detected"):
-        if name not in topics:
-            raise WindEstimateError(f"{path}: no topic {name!r} (the wind estimate's tilt)")
-    windows = log.hover_windows()
+    if "vehicle_attitude" not in topics:
+        raise WindEstimateError(f"{path}: no topic 'vehicle_attitude' (the wind estimate's tilt)")
+    try:  # the log's one line (no airborne span, no velocity) is why there is no estimate
+        windows, take_off = log.hover_windows(), log.airborne_span()[0]
+    except LogError as error:
+        raise WindEstimateError(str(error)) from None
     if not windows:
         raise WindEstimateError(f"{path}: no steady hover to estimate the wind from")
     attitude = topics["vehicle_attitude"]
     time_s = attitude["timestamp"] * 1e-6
     quats = np.column_stack([attitude[f"q[{i}]"] for i in range(4)]).astype(float)
     thrust_axes = np.array([body_to_ned(q, np.array([0.0, 0.0, -1.0])) for q in quats])
-    land = topics["vehicle_land_detected"]
-    take_off = float(land["timestamp"][np.argmax(land["landed"] < 0.5)] * 1e-6)
     on_ground = time_s < take_off
     levels = [np.array([0.0, 0.0, -1.0])]
     if on_ground.any():
