@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from px4_logs import FlightLog, MotorOutputs, OutputProtocol, motor_outputs
-from quad_model.vehicle import Vehicle
+from quad_model.vehicle import ROTOR_COUNT, Vehicle
 from rig.identify.battery import identify_battery
 from rig.identify.hover import identify_hover
 from rig.identify.rate_plant import (
@@ -34,6 +34,11 @@ def identify_vehicle(
     sample_rate_hz = _sample_rate_hz(log)
     gyro_cutoff_hz = float(log.parameters.get("IMU_GYRO_CUTOFF", 0.0))
     outputs = motor_outputs(log)
+    if outputs.rotor_count != ROTOR_COUNT:  # the model, its mixer and thrust stand are a quad's
+        raise IdentificationError(
+            f"{log.path}: {outputs.rotor_count} rotors ({outputs.reason}); the vehicle model "
+            f"identified has {ROTOR_COUNT}"
+        )
     pwm_range = outputs.pwm_range_us
     airborne = log.airborne_span()
     window = excitation_window_s or airborne
