@@ -34,7 +34,8 @@ def identify_vehicle(
     sample_rate_hz = _sample_rate_hz(log)
     gyro_cutoff_hz = float(log.parameters.get("IMU_GYRO_CUTOFF", 0.0))
     outputs = motor_outputs(log)
-    if outputs.rotor_count != ROTOR_COUNT:  # the model, its mixer and thrust stand are a quad's
+    # the model, its mixer and thrust stand are a quad's; a PX4 before 1.13 logs no count
+    if "CA_ROTOR_COUNT" in log.parameters and outputs.rotor_count != ROTOR_COUNT:
         raise IdentificationError(
             f"{log.path}: {outputs.rotor_count} rotors ({outputs.reason}); the vehicle model "
             f"identified has {ROTOR_COUNT}"
