@@ -120,7 +120,7 @@ def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Pa
     base, _, angle = field.rpartition(".")
     quaternion = [f"{base}[{i}]" for i in range(4)]
     if angle in _EULER and all(q in fields for q in quaternion):
-        return _euler(*(fields[q].astype(float) for q in quaternion))[_EULER.index(angle)]
+        return euler_zyx(*(fields[q].astype(float) for q in quaternion))[_EULER.index(angle)]
     if field in _HEADING_FRAME and all(f in fields for f in ("vx", "vy", "heading")):
         north, east = fields["vx"].astype(float), fields["vy"].astype(float)
         heading = fields["heading"].astype(float)
@@ -134,7 +134,7 @@ def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Pa
     )
 
 
-def _euler(
+def euler_zyx(
     w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZYX (yaw-pitch-roll) angles of a Hamilton quaternion, as PX4's matrix::Euler; yaw
