@@ -128,3 +128,31 @@ def test_cli_bad_input_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert "missing.ulg: flight log not found" in err
+
+
+def test_a_velocity_ramp_between_holds_is_one_step():
+    """0 m/s until 10 s, a ramp to 3 m/s over 2 s, then held: one step from the last
+    sample of the first level (10.0 s) to the first of the second (12.0 s)."""
+    time_s = np.arange(0.0, 20.0, 0.1)
+    values = np.clip((time_s - 10.0) * 1.5, 0.0, 3.0)
+    (step,) = autoplan.steps(time_s, values, autoplan.VELOCITY_STEP)
+    # each level's band (0.4 m/s) reaches 0.4/1.5 = 0.27 s into the ramp
+    assert step.start_s == pytest.approx(10.2, abs=0.051)
+    assert step.end_s == pytest.approx(11.8, abs=0.051)
+    assert step.change == pytest.approx(3.0 - 2 * 0.3, abs=0.16)
+
+
+def test_a_slow_drift_is_not_a_step():
+    time_s = np.arange(0.0, 20.0, 0.1)
+    assert autoplan.steps(time_s, 0.2 * time_s, autoplan.VELOCITY_STEP) == []
+
+
+def test_the_coherent_band_spans_a_dip_but_not_a_gap():
+    freqs = np.geomspace(0.1, 10.0, 61)  # 30 points a decade
+    coherence = np.where((freqs >= 0.5) & (freqs <= 5.0), 0.9, 0.2)
+    coherence[np.argmin(np.abs(freqs - 1.0))] = 0.4  # one incoherent point inside
+    band = autoplan.coherent_band(freqs, coherence, 0.6)
+    assert band == pytest.approx((freqs[freqs >= 0.5][0], freqs[freqs <= 5.0][-1]))
+    # less than an octave is no band
+    narrow = np.where((freqs >= 1.0) & (freqs <= 1.8), 0.9, 0.2)
+    assert autoplan.coherent_band(freqs, narrow, 0.6) is None
