@@ -25,8 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from credibility import indices, spectral
+from credibility.assess import ARMING_STATE_ARMED
 from credibility.errors import CredibilityError
-from credibility.logs import euler_zyx
+from credibility.logs import euler_zyx, heading_frame
 from credibility.plan import NotScorable
 from px4_logs import FlightLog, LogError
 
@@ -67,7 +68,6 @@ IDLE_MOTOR_MAX = 0.01
 PILOT_MODES = frozenset({0, 1, 2, 6, 10, 15})
 #: Of those, the modes whose horizontal sticks command a velocity in the heading frame.
 HEADING_FRAME_MODES = frozenset({2, 6})
-ARMING_STATE_ARMED = 2
 
 # --- set-point steps (η_t) ----------------------------------------------------------------
 
@@ -91,11 +91,10 @@ class StepShape:
     group_gap_s: float
 
 
-#: Velocity: between levels held within 0.4 m/s (more than a stick's jitter) for 1 s (a
-#: ramp of 0.4 m/s² or more holds no level that long),
-#: 1 m/s within 4 s, as a mission start (0 → 4.8 m/s in 2 s), a take-off (0 → 1.5 m/s up in
-#: 1.5 s) or a pilot's stick (0 → 3.4 m/s in 3.3 s) commands it; a multicopter's velocity
-#: settles within 4 s.
+#: Velocity: 1 m/s within 4 s, as a mission start (0 → 4.8 m/s in 2 s), a take-off (0 →
+#: 1.5 m/s up in 1.5 s) or a pilot's stick (0 → 3.4 m/s in 3.3 s) commands it, between
+#: levels held within 0.4 m/s (more than a stick's jitter) for 1 s (a ramp of 0.4 m/s² or
+#: more holds no level that long); a multicopter's velocity settles within 4 s.
 VELOCITY_STEP = StepShape(hold_band=0.4, hold_s=1.0, min_change=1.0, max_rise_s=4.0, lead_s=0.5,
                           settle_s=4.0, group_gap_s=1.0)  # fmt: skip
 #: Attitude: between levels held within 3° for 0.2 s (four samples at 20 Hz), 10° within
@@ -141,6 +140,9 @@ RESPONSES = tuple(
         ("torque_to_rate", "vehicle_torque_setpoint", f"xyz[{index}]", TORQUE_CAVEAT),
     )
 )
+
+#: The responses' topics; the slowest one's rate is every response's sample rate.
+RATE_TOPICS = ("vehicle_rates_setpoint", "vehicle_torque_setpoint", "vehicle_angular_velocity")
 
 IMU_SIGNALS = tuple(
     (f"{sensor}_{axis}", f"sensor_combined.{field}[{index}]", unit)
@@ -196,6 +198,8 @@ class Step:
 
 #: A finder gives its tests, or the entries it could not plan.
 Found = tuple[list[PlannedTest], list[NotScorable]]
+#: A state's segment and how it was found; None when the log has no such state.
+StateSegment = tuple[tuple[float, float], str] | None
 
 
 # --- the vehicle's states: rest, idle, hover (η_p) ------------------------------------------
@@ -215,7 +219,7 @@ def imu_rate_hz(log: FlightLog) -> float:
 
 
 def _noise_tests(
-    log: FlightLog, state: str, segment: tuple[float, float], armed: bool | None, how: str
+    log: FlightLog, state: str, segment: tuple[float, float], armed: bool, how: str
 ) -> Found:
     """The six σ tests of one state over ``segment``, or why its σ would be unreliable."""
     rate = imu_rate_hz(log)
@@ -232,9 +236,7 @@ def _noise_tests(
     tests = []
     for prefix, signal, unit in IMU_SIGNALS:
         keys: dict[str, Any] = {"kind": "performance", "parameter": "std", "signal": signal,
-                                "segment_s": segment}  # fmt: skip
-        if armed is not None:
-            keys["armed"] = armed
+                                "segment_s": segment, "armed": armed}  # fmt: skip
         if state == "hover":
             keys["highpass_hz"] = HOVER_HIGHPASS_HZ
         keys |= {"k_p": SENSOR_NOISE_K_P, "average_hz": rate, "unit": unit}
@@ -265,7 +267,7 @@ def _armed_changes(log: FlightLog) -> tuple[NDArray[np.float64], NDArray[np.bool
     return time_s, state == ARMING_STATE_ARMED
 
 
-def rest_segment(log: FlightLog) -> tuple[tuple[float, float], str] | None:
+def rest_segment(log: FlightLog) -> StateSegment:
     """The longest stretch with the motors stopped (disarmed), DISARM_COAST_S after a
     disarm while the props coast down: the IMU's own noise floor. None when the log never
     shows the vehicle disarmed."""
@@ -288,7 +290,7 @@ def rest_segment(log: FlightLog) -> tuple[tuple[float, float], str] | None:
     return None if best is None else (best, how)
 
 
-def idle_segment(log: FlightLog) -> tuple[tuple[float, float], str] | None:
+def idle_segment(log: FlightLog) -> StateSegment:
     """Armed on the ground with every motor at idle (≤ IDLE_MOTOR_MAX) before the take-off:
     the vibration of the idling rotors. None when the log has no such stretch."""
     arm_s, _, _ = log.armed_span()
@@ -315,7 +317,7 @@ def idle_segment(log: FlightLog) -> tuple[tuple[float, float], str] | None:
     return _span(start, end), how
 
 
-def hover_segment(log: FlightLog) -> tuple[tuple[float, float], str] | None:
+def hover_segment(log: FlightLog) -> StateSegment:
     """The longest steady hover (:meth:`px4_logs.FlightLog.hover_windows`: slow, level,
     thrust near its median), high-passed at HOVER_HIGHPASS_HZ so the pilot's corrections
     are not counted as vibration."""
@@ -335,7 +337,7 @@ def noise_tests(log: FlightLog) -> Found:
     if "sensor_combined" not in log.topics:
         reason = "the log has no sensor_combined: no IMU to compare"
         return [], [NotScorable(name="imu_sigma", kind="performance", reason=reason)]
-    states: tuple[tuple[str, Callable[[FlightLog], Any], bool], ...] = (
+    states: tuple[tuple[str, Callable[[FlightLog], StateSegment], bool], ...] = (
         ("rest", rest_segment, False),
         ("idle", idle_segment, True),
         ("hover", hover_segment, True),
@@ -531,11 +533,11 @@ def velocity_steps(log: FlightLog, airborne: tuple[float, float]) -> Found:
         skipped.append(NotScorable(name="level_flight", kind="time", reason=reason))
         return tests, skipped
     heading = np.interp(time_s, *log.series("vehicle_local_position", "heading", why))
+    forward, right = heading_frame(north, east, heading)
     frames = {
         "ned": (("vx", north), ("vy", east)),
-        "heading": (("v_forward", north * np.cos(heading) + east * np.sin(heading)),
-                    ("v_right", east * np.cos(heading) - north * np.sin(heading))),
-    }  # fmt: skip
+        "heading": (("v_forward", forward), ("v_right", right)),
+    }
     level = []
     for frame, axes in frames.items():
         for axis, values in axes:
@@ -633,10 +635,11 @@ def pilot_spans(log: FlightLog) -> list[tuple[float, float]]:
 
 
 def logged_rate_hz(log: FlightLog, topic: str) -> float:
-    """The rate the logger wrote ``topic`` at (Hz, whole): its median interval between
-    log stamps, which the logger's dropouts and the sample-time jitter do not move."""
-    stamps = np.asarray(log.topic(topic, "its logging rate", ("timestamp",))["timestamp"], float)
-    return float(round(1e6 / float(np.median(np.diff(np.unique(stamps))))))
+    """The rate the logger wrote ``topic`` at (Hz, whole): its samples over its span. Each
+    interval jitters around the logger's period (the X500's body rates: median 21 ms for a
+    20 ms period), the mean does not."""
+    time_s = log.time_s(topic)
+    return float(round((time_s.size - 1) / float(time_s[-1] - time_s[0])))
 
 
 def _uniform(log: FlightLog, path: str, grid: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -676,7 +679,7 @@ def response_tests(log: FlightLog) -> Found:
     span that gives it the widest band."""
     try:
         spans = pilot_spans(log)
-        sample_rate = logged_rate_hz(log, "vehicle_rates_setpoint")
+        sample_rate = min(logged_rate_hz(log, topic) for topic in RATE_TOPICS)
     except LogError as error:
         reason = f"no flight dynamics: {_without_path(error)}"
         return [], [NotScorable(name="frequency_responses", kind="frequency", reason=reason)]
@@ -743,10 +746,10 @@ def log_limits(log: FlightLog) -> list[NotScorable]:
     """What the log's topics and rates rule out whatever the flight: a band above the rate
     topics' Nyquist frequency, rotor speeds without esc_status."""
     limits = []
-    if "vehicle_angular_velocity" in log.topics:
-        rate = logged_rate_hz(log, "vehicle_angular_velocity")
+    if all(topic in log.topics for topic in RATE_TOPICS):
+        rate = min(logged_rate_hz(log, topic) for topic in RATE_TOPICS)
         reason = (
-            f"the body rates are logged at {rate:g} Hz: nothing above the "
+            f"the rate and torque topics are logged at {rate:g} Hz: nothing above the "
             f"{rate / 2:g} Hz Nyquist frequency"
         )
         limits.append(NotScorable(name=f"response_above_{rate / 2:g}_hz", kind="frequency",
@@ -833,14 +836,17 @@ def _relative(path: Path, start: Path) -> str:
 def plan_toml(draft: Draft, real: Path, sim: Path | None, plan_dir: Path) -> str:
     """The plan file's text; log paths relative to ``plan_dir``, where it will be written."""
     sim_text = _relative(sim, plan_dir) if sim is not None else SIM_PLACEHOLDER
-    lines = [
-        f"# Written by `credibility plan` from {real.name}: every segment below was found",
-        "# automatically, with what was found and by what criterion above each test. Edit it",
-        "# freely; `credibility report PLAN --log sim=RUN.ulg` scores a simulation with it.",
-    ]
+    header = (
+        f"Written by `credibility plan` from {real.name}: every segment below was found "
+        "automatically, with what was found and by what criterion above each test. Edit it "
+        "freely; `credibility report PLAN --log sim=RUN.ulg` scores a simulation with it."
+    )
     if sim is None:
-        lines.append(f"# [logs] sim is a placeholder ({SIM_PLACEHOLDER}): point it at your "
-                     "simulation's log, or pass --log sim=PATH.")  # fmt: skip
+        header += (
+            f" [logs] sim is a placeholder ({SIM_PLACEHOLDER}): point it at your simulation's "
+            "log, or pass --log sim=PATH."
+        )
+    lines = _comment(header)
     lines += [
         "",
         "[plan]",
