@@ -49,6 +49,19 @@ def test_x500_segments_match_the_hand_plan(x500_draft):
     assert 418.0 <= found["gyro_x_sigma_hover"][0] < found["gyro_x_sigma_hover"][1] <= 436.0
 
 
+def test_x500_rest_starts_after_the_props_stopped(x500_draft):
+    """The hand plan's 503.2-504.0 s starts 0.13 s after the disarm (503.07 s), while the
+    props still coast: its accelerometer σ (0.108 m/s² in x) is three times the floor the
+    log shows from 503.6 s on. The automatic segment must be at that floor."""
+    start, end = _segments(x500_draft)["accel_x_sigma_rest"]
+    assert start >= 503.07 + autoplan.DISARM_COAST_S
+    log = FlightLog.read(X500_LOG)
+    time_s = log.time_s("sensor_combined")
+    accel = log.topics["sensor_combined"]["accelerometer_m_s2[0]"]
+    assert accel[(time_s >= start) & (time_s <= end)].std() < 0.04
+    assert accel[(time_s >= 503.2) & (time_s <= 504.0)].std() > 0.1
+
+
 def test_x500_comments_give_the_numbers(x500_draft):
     doublet = next(t for t in x500_draft.tests if t.name == "pitch_doublet_474s")
     assert "+0 → +13.4 ° in 0.10 s at 474.34 s" in doublet.found
