@@ -613,10 +613,11 @@ def step_tests(log: FlightLog) -> Found:
 
 
 def pilot_spans(log: FlightLog) -> list[tuple[float, float]]:
-    """Airborne spans in one pilot-flown mode (PILOT_MODES) of at least MIN_EXCITATION_S:
-    the pilot's stick inputs are the only broadband excitation a flight without a sweep
-    has. (start, end), the most excited first (the highest RMS of the roll and
-    pitch rate set-points: larger inputs stand further above the noise)."""
+    """Airborne spans flown in pilot modes (PILOT_MODES) of at least MIN_EXCITATION_S, at
+    least GROUND_S from the lift-off and the touch-down: the pilot's stick inputs are the
+    only broadband excitation of a flight without a sweep. (start, end), the most excited
+    first (the highest RMS of the roll and pitch rate set-points: larger inputs stand
+    further above the noise)."""
     airborne = log.airborne_span()
     time_s, mode = log.series("vehicle_status", "nav_state", "flight modes")
     spans = []
@@ -675,9 +676,9 @@ def coherent_band(
 
 
 def response_tests(log: FlightLog) -> Found:
-    """rate_sp → rate and torque_sp → rate per axis over the pilot's inputs, each where
-    its coherence is at least the plan's ``coherence_min`` (credibility.spectral), on the
-    span that gives it the widest band."""
+    """rate_sp → rate and torque_sp → rate per axis over the most excited pilot-flown span,
+    each over the band where its coherence reaches the plan's ``coherence_min``
+    (:func:`coherent_band`, from :func:`credibility.spectral.estimate_response`)."""
     try:
         spans = pilot_spans(log)
         sample_rate = min(logged_rate_hz(log, topic) for topic in RATE_TOPICS)
@@ -689,54 +690,45 @@ def response_tests(log: FlightLog) -> Found:
                   "(nav_state Manual, Altitude, Position, Acro or Stabilized): no broadband "
                   "excitation without a sweep")  # fmt: skip
         return [], [NotScorable(name="frequency_responses", kind="frequency", reason=reason)]
+    start, end = spans[0]
+    # the longest window half the span: three averages at 50 % overlap
+    windows = tuple(math.floor((end - start) / 2**k * 100) / 100 for k in (4, 3, 2, 1))
+    grid = np.arange(start, end, 1.0 / sample_rate)
+    top_hz = BAND_TOP_NYQUIST * sample_rate / 2
+    lowest_hz = math.ceil(spectral.MIN_CYCLES / windows[-1] * 100) / 100
+    freqs = np.geomspace(lowest_hz, top_hz, COHERENCE_GRID_POINTS)
     minimum = indices.DEFAULT_COHERENCE_MIN
     tests: list[PlannedTest] = []
     skipped: list[NotScorable] = []
     for name, input_path, output_path, caveat in RESPONSES:
-        best = None
-        for start, end in spans[:1]:
-            # the longest window half the span: three averages at 50 % overlap
-            windows = tuple(math.floor((end - start) / 2**k * 100) / 100 for k in (4, 3, 2, 1))
-            grid = np.arange(start, end, 1.0 / sample_rate)
-            freqs = np.geomspace(
-                math.ceil(spectral.MIN_CYCLES / windows[-1] * 100) / 100,
-                BAND_TOP_NYQUIST * sample_rate / 2,
-                COHERENCE_GRID_POINTS,
-            )
-            try:
-                estimate = spectral.estimate_response(
-                    _uniform(log, input_path, grid), _uniform(log, output_path, grid),
-                    sample_rate, freqs, windows)  # fmt: skip
-            except (LogError, CredibilityError) as error:
-                skipped.append(NotScorable(name=name, kind="frequency",
-                                           reason=_without_path(error)))  # fmt: skip
-                break
-            band = coherent_band(freqs, estimate.coherence, minimum)
-            if band is not None and (best is None or band[1] / band[0] > best[1][1] / best[1][0]):
-                in_band = (freqs >= band[0]) & (freqs <= band[1])
-                share = float(np.mean(estimate.coherence[in_band] >= minimum))
-                best = ((start, end), band, windows, share)
-        else:
-            if best is None:
-                reason = (
-                    f"{input_path} → {output_path}: γ² < {minimum:g} over every "
-                    f"octave up to {BAND_TOP_NYQUIST * sample_rate / 2:g} Hz in the "
-                    "pilot-flown spans: too little excitation on this axis"
-                )
-                skipped.append(NotScorable(name=name, kind="frequency", reason=reason))
-                continue
-            (start, end), band, windows, share = best
-            band = (round(band[0], 2), round(band[1], 2))
-            found = (
-                f"Pilot's inputs, {start:.2f}-{end:.2f} s (the pilot-flown span with the "
-                f"largest rate set-points): γ² ≥ {minimum:g} at {share:.0%} of the grid "
-                f"over {band[0]:g}-{band[1]:g} Hz (the widest band at least "
-                f"{COHERENT_SHARE:.0%} coherent; logged at {sample_rate:g} Hz). {caveat}"
-            ).strip()
-            keys = {"kind": "frequency", "input": input_path, "output": output_path,
-                    "segment_s": (start, end), "sample_rate_hz": sample_rate,
-                    "band_hz": band, "windows_s": windows, "n_points": N_POINTS}  # fmt: skip
-            tests.append(PlannedTest(name, "frequency", found, keys))
+        try:
+            estimate = spectral.estimate_response(
+                _uniform(log, input_path, grid), _uniform(log, output_path, grid),
+                sample_rate, freqs, windows)  # fmt: skip
+        except (LogError, CredibilityError) as error:
+            skipped.append(NotScorable(name=name, kind="frequency", reason=_without_path(error)))
+            continue
+        band = coherent_band(freqs, estimate.coherence, minimum)
+        if band is None:
+            reason = (f"{input_path} → {output_path}: no octave between {lowest_hz:g} and "
+                      f"{top_hz:g} Hz with γ² ≥ {minimum:g} at {COHERENT_SHARE:.0%} of it "
+                      f"over the pilot's inputs {start:.2f}-{end:.2f} s: too little "
+                      "excitation on this axis")  # fmt: skip
+            skipped.append(NotScorable(name=name, kind="frequency", reason=reason))
+            continue
+        in_band = (freqs >= band[0]) & (freqs <= band[1])
+        share = float(np.mean(estimate.coherence[in_band] >= minimum))
+        band = (round(band[0], 2), round(band[1], 2))
+        found = (
+            f"Pilot's inputs, {start:.2f}-{end:.2f} s (the pilot-flown span with the "
+            f"largest rate set-points): γ² ≥ {minimum:g} at {share:.0%} of the grid "
+            f"over {band[0]:g}-{band[1]:g} Hz (the widest band at least "
+            f"{COHERENT_SHARE:.0%} coherent; logged at {sample_rate:g} Hz). {caveat}"
+        ).strip()
+        keys = {"kind": "frequency", "input": input_path, "output": output_path,
+                "segment_s": (start, end), "sample_rate_hz": sample_rate,
+                "band_hz": band, "windows_s": windows, "n_points": N_POINTS}  # fmt: skip
+        tests.append(PlannedTest(name, "frequency", found, keys))
     return tests, skipped
 
 

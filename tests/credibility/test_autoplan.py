@@ -169,3 +169,12 @@ def test_the_coherent_band_spans_a_dip_but_not_a_gap():
     # less than an octave is no band
     narrow = np.where((freqs >= 1.0) & (freqs <= 1.8), 0.9, 0.2)
     assert autoplan.coherent_band(freqs, narrow, 0.6) is None
+
+
+def test_cli_writes_a_plan_that_loads(tmp_path, capsys):
+    out = tmp_path / "plans" / "x500.toml"
+    assert main(["plan", str(X500_LOG), "--out", str(out)]) == 0
+    assert f"→ {out}" in capsys.readouterr().out
+    plan = load_plan(out)
+    assert plan.logs["sim"] == (out.parent / autoplan.SIM_PLACEHOLDER).resolve()
+    assert any(test.name == "pitch_doublet_474s" for test in plan.tests)
