@@ -264,8 +264,13 @@ def _armed_changes(log: FlightLog) -> tuple[NDArray[np.float64], NDArray[np.bool
     if "actuator_armed" in log.topics:
         time_s, armed = log.series("actuator_armed", "armed", "arming state")
         return time_s, armed > 0.5
-    time_s, state = log.series("vehicle_status", "arming_state", "arming state")
-    return time_s, state == ARMING_STATE_ARMED
+    if "vehicle_status" in log.topics:
+        time_s, state = log.series("vehicle_status", "arming_state", "arming state")
+        return time_s, state == ARMING_STATE_ARMED
+    raise LogError(
+        f"{log.path}: no arming state in the log (neither actuator_armed nor vehicle_status): "
+        "motors stopped and at idle cannot be told apart"
+    )
 
 
 def rest_segment(log: FlightLog) -> StateSegment:
@@ -294,7 +299,10 @@ def rest_segment(log: FlightLog) -> StateSegment:
 def idle_segment(log: FlightLog) -> StateSegment:
     """Armed on the ground with every motor at idle (≤ IDLE_MOTOR_MAX) before the take-off:
     the vibration of the idling rotors. None when the log has no such stretch."""
-    arm_s, _, _ = log.armed_span()
+    time_s, armed = _armed_changes(log)
+    if not armed.any():
+        return None
+    arm_s = float(time_s[np.argmax(armed)])
     try:
         lift_s = log.airborne_span()[0]
     except LogError:

@@ -178,3 +178,17 @@ def test_cli_writes_a_plan_that_loads(tmp_path, capsys):
     plan = load_plan(out)
     assert plan.logs["sim"] == (out.parent / autoplan.SIM_PLACEHOLDER).resolve()
     assert any(test.name == "pitch_doublet_474s" for test in plan.tests)
+
+
+def test_without_an_arming_state_rest_and_idle_are_not_planned():
+    """The X8's high-rate log has neither actuator_armed nor vehicle_status: its motors at
+    0 may be stopped or idling, so neither state is planned, and the reason says so."""
+    time_s = np.arange(0.0, 10.0, 0.005)
+    stamps = (time_s * 1e6).astype(np.int64)
+    imu = {f"gyro_rad[{i}]": np.zeros(time_s.size) for i in range(3)}
+    log = FlightLog("bench.ulg", {"sensor_combined": {"timestamp": stamps, **imu}}, {})
+    tests, skipped = autoplan.noise_tests(log)
+    assert tests == []
+    reasons = {item.name: item.reason for item in skipped}
+    for state in ("rest", "idle"):
+        assert "no arming state in the log" in reasons[f"imu_sigma_{state}"]
