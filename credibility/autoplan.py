@@ -15,6 +15,7 @@ import itertools
 import json
 import math
 import os
+import textwrap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -820,14 +821,8 @@ def _value(value: Any) -> str:
     return "[" + ", ".join(_value(v) for v in value) + "]"
 
 
-def _comment(text: str, width: int = 92) -> list[str]:
-    lines, line = [], "#"
-    for word in text.split():
-        if len(line) + 1 + len(word) > width:
-            lines.append(line)
-            line = "#"
-        line += " " + word
-    return [*lines, line]
+def _comment(text: str) -> list[str]:
+    return textwrap.wrap(text, 92, initial_indent="# ", subsequent_indent="# ")
 
 
 def _relative(path: Path, start: Path) -> str:
