@@ -1,4 +1,5 @@
-"""``credibility`` command line: ``report PLAN.toml``, ``summary REPORT.json ...`` and ``paper``.
+"""``credibility`` command line: ``report PLAN.toml``, ``plan LOG``, ``summary REPORT.json ...``
+and ``paper``.
 
 Exit codes: 0 when η_min ≥ ε_min, 1 when not, 2 for bad input or usage (one line on
 stderr), 3 when the inputs were read but too few tests could be scored for a verdict.
@@ -17,6 +18,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from credibility.assess import assess, steps
+from credibility.autoplan import write_plan
 from credibility.errors import CredibilityError
 from credibility.indices import KINDS
 from credibility.paper import paper_comparison
@@ -89,6 +91,7 @@ EPILOG = """\
 examples:
   credibility report credibility/plans/quad4001_repeatability.toml --out out/
   credibility report PLAN.toml --log sim=runs/RUN/rig.ulg
+  credibility plan flight.ulg --sim runs/RUN/px4.ulg --out flight_plan.toml
   credibility summary out/*/*.json --out summary.md
   credibility paper
 
@@ -144,6 +147,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     summary.add_argument("reports", type=Path, nargs="+", help="reports' JSON (report --out)")
     summary.add_argument("--out", type=Path, default=None, help="also write it here (Markdown)")
+    plan = commands.add_parser(
+        "plan",
+        help="find the segments the paper's tests need in a real PX4 log; write a plan",
+        description="Find in a real PX4 log the segments the paper's tests need (rest, idle "
+        "and hover noise, set-point steps, the pilot's inputs for frequency responses) and "
+        "write a test plan to edit and score; every test the log cannot support is listed "
+        "in it as [[not_scorable]] with the reason.",
+    )
+    plan.add_argument("log", type=Path, help="the real flight's ULog")
+    plan.add_argument(
+        "--sim",
+        type=Path,
+        default=None,
+        help="the simulation log to score (default: a placeholder to replace in [logs])",
+    )
+    plan.add_argument(
+        "--out", type=Path, default=None, help="plan file to write (default: <log>_plan.toml)"
+    )
     commands.add_parser(
         "paper",
         help="recompute the paper's tables beside its printed numbers",
@@ -232,6 +253,15 @@ def _summary(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plan(args: argparse.Namespace) -> int:
+    out = args.out or Path(f"{args.log.stem}_plan.toml")
+    draft = write_plan(args.log, out, args.sim)
+    print(f"{len(draft.tests)} tests planned, {len(draft.not_scorable)} not scorable → {out}")
+    for item in draft.not_scorable:
+        print(f"not scorable: {item.name} ({item.kind}): {item.reason}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # A pipe gets 80 columns from rich; the paper table needs about 130.
@@ -242,6 +272,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _paper(out)
         if args.command == "summary":
             return _summary(args)
+        if args.command == "plan":
+            return _plan(args)
         return _report(args, err)
     except CredibilityError as exc:
         print(f"credibility: error: {exc}", file=sys.stderr)

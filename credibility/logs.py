@@ -120,21 +120,27 @@ def _field_values(fields: dict[str, np.ndarray], field: str, name: str, path: Pa
     base, _, angle = field.rpartition(".")
     quaternion = [f"{base}[{i}]" for i in range(4)]
     if angle in _EULER and all(q in fields for q in quaternion):
-        return _euler(*(fields[q].astype(float) for q in quaternion))[_EULER.index(angle)]
+        return euler_zyx(*(fields[q].astype(float) for q in quaternion))[_EULER.index(angle)]
     if field in _HEADING_FRAME and all(f in fields for f in ("vx", "vy", "heading")):
-        north, east = fields["vx"].astype(float), fields["vy"].astype(float)
-        heading = fields["heading"].astype(float)
-        cos_h, sin_h = np.cos(heading), np.sin(heading)
-        return (
-            north * cos_h + east * sin_h if field == "v_forward" else east * cos_h - north * sin_h
+        forward, right = heading_frame(
+            fields["vx"].astype(float), fields["vy"].astype(float), fields["heading"].astype(float)
         )
+        return forward if field == "v_forward" else right
     listed = ", ".join(sorted(f for f in fields if f != "timestamp_s")[:20])
     raise NotScorable(
         "missing_topic", f"{path}: no field {field!r} (signal {name!r}); fields: {listed}"
     )
 
 
-def _euler(
+def heading_frame(
+    north: np.ndarray, east: np.ndarray, heading: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(forward, right): a horizontal NED velocity along the heading (rad) and to its right."""
+    cos_h, sin_h = np.cos(heading), np.sin(heading)
+    return north * cos_h + east * sin_h, east * cos_h - north * sin_h
+
+
+def euler_zyx(
     w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZYX (yaw-pitch-roll) angles of a Hamilton quaternion, as PX4's matrix::Euler; yaw
