@@ -21,7 +21,7 @@ import numpy as np
 
 from px4_logs import FlightLog, motor_pwm_range
 from quad_model.vehicle import ROTOR_COUNT, Vehicle, vehicle_from_dict
-from rig.identify.generic import generic_vehicle
+from rig.identify.generic import frame_class, generic_vehicle
 from rig.identify.results import Estimate, Identification, IdentificationError
 from rig.identify.vehicle import identify_vehicle
 from rig.identify.vibration import FITTED_POINTS, fit_vibration, read_log_vibration, rest_point
@@ -105,8 +105,8 @@ def vehicle_from_log(
     sources: dict[str, Source] = {key: ("default", why) for key, why in generic.notes.items()}
     prior = generic.vehicle
     if not metres:  # PX4's generic airframes give the unit square: its shape, the class's arm
-        hubs = hubs * prior.propulsion.position_frd_m[0][0] / max(abs(hubs[0, 0]), 1e-9)
-    if not hubs[:, 2].any():
+        hubs[:, :2] *= frame_class(mass_kg)[1] / arm
+    if not hubs[:, 2].any():  # PZ unset: the generic rotor plane
         hubs[:, 2] = prior.propulsion.position_frd_m[0][2]
     prior = replace(
         prior,
@@ -157,11 +157,13 @@ def _parameter(params: Mapping[str, float], path: Path, name: str, what: str) ->
 
 
 def _rotors(params: Mapping[str, float], path: Path) -> tuple[np.ndarray, list[int], bool]:
-    """The hubs (CA_ROTORn_PX/PY/PZ), the spin directions (CA_ROTORn_KM: PX4's allocator
-    takes KM > 0 for a counter-clockwise rotor, as the model's +1), and whether the hubs are
-    in metres: a largest |PX|, |PY| of exactly 1 is PX4's normalised square."""
+    """The hubs (CA_ROTORn_PX/PY/PZ; PZ 0 where not logged, as by the rig's own autopilot),
+    the spin directions (CA_ROTORn_KM: PX4's allocator takes KM > 0 for a counter-clockwise
+    rotor, as the model's +1), and whether the hubs are in metres: a largest |PX|, |PY| of
+    exactly 1 is PX4's normalised square."""
     hubs = np.array([[_parameter(params, path, f"CA_ROTOR{i}_P{axis}", "rotor position")
-                      for axis in "XYZ"] for i in range(ROTOR_COUNT)])  # fmt: skip
+                      for axis in "XY"] + [float(params.get(f"CA_ROTOR{i}_PZ", 0.0))]
+                     for i in range(ROTOR_COUNT)])  # fmt: skip
     spins = []
     for i in range(ROTOR_COUNT):
         km = _parameter(params, path, f"CA_ROTOR{i}_KM", "rotor spin direction")
