@@ -20,6 +20,9 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", type=Path, help="PX4 ULog of the vehicle (a flight with a hover)")
     parser.add_argument("--mass", type=float, default=None, metavar="KG",
                         help="the take-off mass, required (a log holds no weight)")  # fmt: skip
+    parser.add_argument("--window", type=float, nargs=2, metavar=("START", "END"),
+                        help="boot seconds of a manual roll/pitch excitation: the inertia and "
+                             "motor lag are fitted there (default: not fitted)")  # fmt: skip
     parser.add_argument("--out", type=Path, default=None, metavar="FILE",
                         help="write the vehicle file here and print a summary per table "
                              "(default: the file on stdout)")  # fmt: skip
@@ -30,9 +33,12 @@ def _vehicle(args: argparse.Namespace, console: Console) -> int:
     if args.mass is None:  # here, not argparse's required: its error is the usage, two lines
         raise IdentificationError(f"{args.log}: --mass KG is required (a log holds no weight)")
     command = ["rig", "vehicle", args.log.name, "--mass", f"{args.mass:g}"]
+    window = tuple(args.window) if args.window else None
+    if window:
+        command += ["--window", *(f"{t:g}" for t in window)]
     if args.out is not None:
         command += ["--out", args.out.name]
-    result = vehicle_from_log(FlightLog.read(args.log), args.mass, shlex.join(command))
+    result = vehicle_from_log(FlightLog.read(args.log), args.mass, shlex.join(command), window)
     if args.out is None:
         print(result.toml(), end="")
         return 0

@@ -41,6 +41,12 @@ BOUNDS = {
 #: Above the armed idle's throttle where the ESCs do not start there (the 8S quad's 0.12).
 ESC_START_MARGIN = 0.02
 
+#: Why the rate plant's values are not taken without an excitation window.
+UNCONFIRMED = (
+    "rate plant not fitted: give --window START END of a manual excitation (over the whole "
+    "flight its cross-check would be the same data)"
+)
+
 Source = tuple[str, str]  # (tag, why with its ±)
 
 
@@ -81,10 +87,17 @@ class VehicleFromLog:
 
 
 def vehicle_from_log(
-    log: FlightLog, mass_kg: float, command: str, imu_rate_hz: float = IMU_RATE_HZ
+    log: FlightLog,
+    mass_kg: float,
+    command: str,
+    excitation_window_s: tuple[float, float] | None = None,
+    imu_rate_hz: float = IMU_RATE_HZ,
 ) -> VehicleFromLog:
     """The vehicle of ``log`` weighing ``mass_kg``; ``command`` is named in the file's header.
-    A log the model cannot fly (not 4 rotors), or without the parameters, is one line."""
+    The inertia and motor lag are taken from the rate-loop fit only over an
+    ``excitation_window_s``: without one the fit's whole-flight cross-check is the same data
+    and confirms nothing. A log the model cannot fly (not 4 rotors), or without the
+    parameters, is one line."""
     if not (math.isfinite(mass_kg) and mass_kg > 0):
         raise IdentificationError(f"--mass {mass_kg:g}: a mass is a positive number of kg")
     params, path = log.parameters, log.path
@@ -116,8 +129,9 @@ def vehicle_from_log(
             spin_direction=(spins[0], spins[1], spins[2], spins[3]),
         ),
     )
-    result = identify_vehicle(log, prior)
-    vehicle, identified = _identified(prior, result, hubs, metres, generic.notes)
+    result = identify_vehicle(log, prior, excitation_window_s)
+    rate_plant = excitation_window_s is not None
+    vehicle, identified = _identified(prior, result, hubs, metres, rate_plant, generic.notes)
     vehicle, fitted = _vibration(
         log,
         vehicle,
@@ -179,11 +193,12 @@ def _identified(
     result: Identification,
     hubs: np.ndarray,
     metres: bool,
+    rate_plant: bool,
     defaults: Mapping[str, str],
 ) -> tuple[Vehicle, dict[str, Source]]:
-    """``prior`` with what ``rig identify`` fitted; a value outside what is physically
-    possible is refused and the generic one (``defaults`` says how it was sized) kept, the
-    line says why."""
+    """``prior`` with what ``rig identify`` fitted (the rate plant's inertia and motor lag
+    only if ``rate_plant``); a value outside what is physically possible is refused and the
+    generic one (``defaults`` says how it was sized) kept, the line says why."""
     source = f"rig identify {result.log.name}"
     hover, prop, body, battery = result.hover, prior.propulsion, prior.body, prior.battery
     sources: dict[str, Source] = {}
@@ -233,7 +248,7 @@ def _identified(
     axes = []
     for index, axis in enumerate(result.axes[:2]):
         estimate = axis.inertia_kgm2
-        if axis.reliable and estimate is not None and estimate.value > 0:
+        if rate_plant and axis.reliable and estimate is not None and estimate.value > 0:
             inertia[index, index] = estimate.value
             axes.append(f"I_{'xyz'[index] * 2} {_pm(estimate)} ({_window(estimate)})")
     if axes:
@@ -243,18 +258,22 @@ def _identified(
             f"the other axes {defaults['body.inertia_kgm2']}",
         )
         body = replace(body, inertia_kgm2=_rows(inertia))
+    elif not rate_plant:
+        keep("body.inertia_kgm2", UNCONFIRMED)
     else:
-        keep("body.inertia_kgm2", "the rate plant is not reliable in this log")
+        keep("body.inertia_kgm2", f"not identified: {result.axes[0].reason.split(';')[0]}")
     lags = [a.motor_time_constant_s for a in result.axes
             if a.motor_lag_identified and a.motor_time_constant_s is not None
             and a.motor_time_constant_s.value > 0]  # fmt: skip
-    if lags:
+    if rate_plant and lags:
         tau = float(np.mean([e.value for e in lags]))
         prop = replace(prop, motor_time_constant_s=tau)
         spread = max(e.uncertainty for e in lags)
         sources["propulsion.motor_time_constant_s"] = (
             "identified", f"{source}, rate plant, mean of {len(lags)} axes, ± {spread:.2g} s"
         )  # fmt: skip
+    elif not rate_plant:
+        keep("propulsion.motor_time_constant_s", UNCONFIRMED)
     fitted = result.battery
     for key in BOUNDS:
         name = key.split(".")[1]
