@@ -41,7 +41,7 @@ examples:
   rig run takeoff_hover_land              a bundled scenario (or a TOML path)
   rig run level_step --autopilot px4 --px4 DIR
   rig replay LOG.ulg                      a real flight through the rig
-  rig vehicle LOG.ulg --mass 2.0 --out my.toml   a vehicle file for the log's airframe
+  rig vehicle LOG.ulg --mass 2.0          a vehicle file for the log's airframe
   rig campaign motor_faults               a fault-injection campaign
   rig schema --out schemas                the configuration files' JSON Schema
 

@@ -41,6 +41,8 @@ BOUNDS = {
 #: Above the armed idle's throttle where the ESCs do not start there (the 8S quad's 0.12).
 ESC_START_MARGIN = 0.02
 
+#: A smaller mean hub distance is no geometry (PX4's CA_ROTORn_PX/PY default to 0).
+MIN_ARM_M = 1e-3
 #: Why the rate plant's values are not taken without an excitation window.
 UNCONFIRMED = (
     "rate plant not fitted: give --window START END of a manual excitation (over the whole "
@@ -106,14 +108,18 @@ def vehicle_from_log(
         raise IdentificationError(
             f"{path}: CA_ROTOR_COUNT = {count}: the model flies {ROTOR_COUNT} rotors"
         )
-    cells = int(params.get("BAT1_N_CELLS", params.get("BAT_N_CELLS", 0)))
-    if cells < 1:
+    cells_name = next((n for n in ("BAT1_N_CELLS", "BAT_N_CELLS") if params.get(n, 0) >= 1), None)
+    if cells_name is None:
         raise IdentificationError(
             f"{path}: parameter BAT1_N_CELLS (BAT_N_CELLS in older PX4) is not set in the log: "
             "the pack's cell count"
         )
+    cells = int(params[cells_name])
     hubs, spins, metres = _rotors(params, path)
     arm = float(np.mean(np.hypot(*(hubs[:, :2] - hubs[:, :2].mean(axis=0)).T)))
+    if arm < MIN_ARM_M:
+        raise IdentificationError(f"{path}: parameters CA_ROTORn_PX/PY place every rotor at "
+                                  "the centre: no rotor geometry")  # fmt: skip
     generic = generic_vehicle(mass_kg, cells, arm if metres else None)
     sources: dict[str, Source] = {key: ("default", why) for key, why in generic.notes.items()}
     prior = generic.vehicle
@@ -142,15 +148,14 @@ def vehicle_from_log(
     )
     vehicle, logged = _logged(vehicle, params)
     sources |= identified | fitted | logged
-    sources["name"] = ("log", f"the airframe of {path.name}")
+    airframe = f"{int(params['SYS_AUTOSTART'])}" if "SYS_AUTOSTART" in params else "not logged"
+    sources["name"] = ("log", f"SYS_AUTOSTART {airframe}, {path.name}")
     sources["body.mass_kg"] = ("given", "--mass: a log holds no weight")
-    sources["battery.cell_count"] = ("log", f"BAT1_N_CELLS = {cells}")
-    vehicle = replace(vehicle, name=f"PX4 airframe {int(params.get('SYS_AUTOSTART', 0))} "
-                      f"from {path.name}")  # fmt: skip
+    sources["battery.cell_count"] = ("log", f"{cells_name} = {cells}")
+    vehicle = replace(vehicle, name=f"PX4 airframe {airframe} from {path.name}")
     header = (
         f"Vehicle file written by `{command}`",
-        f"from {path.name}: {log.firmware}, airframe SYS_AUTOSTART = "
-        f"{int(params.get('SYS_AUTOSTART', 0))}.",
+        f"from {path.name}: {log.firmware}, airframe SYS_AUTOSTART {airframe}.",
         "Sources: [log] a parameter or a statistic of the log; [identified] fitted by rig "
         "identify (method, window, ±);",
         "[default] the generic multicopter of this mass (rig/identify/generic.py), ± how far "

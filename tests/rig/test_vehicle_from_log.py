@@ -159,7 +159,7 @@ def test_every_value_is_tagged_and_the_file_loads(x500_file, tmp_path):
     assert comments["battery.cell_count"] == "[log] BAT1_N_CELLS = 4"
     assert "`rig vehicle px4_x500v2_v6xrt_flight_2026-03-20.ulg`" in text.splitlines()[0]
     assert "PX4 v1.17.0rc" in text
-    assert "SYS_AUTOSTART = 4019" in text
+    assert "SYS_AUTOSTART 4019" in text
     path = tmp_path / "x500.toml"
     path.write_text(text, encoding="utf-8")
     vehicle = load_vehicle(path)
@@ -299,7 +299,8 @@ def test_a_log_of_another_rotor_count_is_one_line_and_no_file(auriol_log, tmp_pa
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):
-    """No --mass, a negative or NaN mass, a log without the rotor geometry or the cell count."""
+    """No --mass, a negative or NaN mass, a log without the rotor count, a rotor's position,
+    the cell count, or with PX4's default (all-zero) rotor geometry."""
     cases = [
         ([str(X500_LOG)], "--mass KG is required"),
         ([str(X500_LOG), "--mass", "-1"], "--mass -1: a mass is a positive number of kg"),
@@ -316,8 +317,11 @@ def test_bad_input_is_one_line(tmp_path, capsys):
         ("CA_ROTOR_COUNT", "parameter CA_ROTOR_COUNT is not in the log"),
         ("CA_ROTOR2_PY", "parameter CA_ROTOR2_PY is not in the log"),
         ("BAT1_N_CELLS", "parameter BAT1_N_CELLS (BAT_N_CELLS in older PX4) is not set"),
+        ("CA_ROTOR*_P", "CA_ROTORn_PX/PY place every rotor at the centre: no rotor geometry"),
     ):
         parameters = {k: v for k, v in log.parameters.items() if k != removed}
+        if removed == "CA_ROTOR*_P":  # PX4's default geometry: every rotor at 0
+            parameters |= {f"CA_ROTOR{i}_P{a}": 0.0 for i in range(4) for a in "XYZ"}
         stripped = FlightLog(log.path, log.topics, parameters)
         with pytest.raises(IdentificationError) as error:
             vehicle_from_log(stripped, 2.0, "rig vehicle")
