@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from quad_model.environment import isa_density_kgpm3
 from quad_model.frames import STANDARD_GRAVITY_MPS2
 from quad_model.vehicle import (
     BatteryParams,
@@ -39,7 +40,10 @@ FRAME_CLASSES = (
 #: 2π·0.016/0.254) and of the F450's bench k_Q/k_T (0.42).
 THRUST_COEFFICIENT = 0.10
 POWER_COEFFICIENT = 0.04
-ISA_DENSITY_KGPM3 = 1.225
+ISA_DENSITY_KGPM3 = isa_density_kgpm3(0.0)
+#: The frame the scale rules below start from: the X500's 10-inch prop and 0.246 m arm.
+REFERENCE_PROP_M = 0.254
+REFERENCE_ARM_M = 0.246
 #: Thrust to weight at full throttle: a common multicopter's 2 (the X500's curve).
 FULL_THROTTLE_THRUST_TO_WEIGHT = 2.0
 #: The generic hover throttle on the speed curve (before a log's hover moves it).
@@ -112,14 +116,14 @@ def generic_vehicle(mass_kg: float, cell_count: int, arm_m: float | None = None)
     plane = -ROTOR_PLANE_PER_ARM * arm
     capacity = PACK_MASS_FRACTION * mass_kg * PACK_WH_PER_KG / (cell_count * CELL_NOMINAL_V)
     sensors = load_vehicle(SENSOR_SOURCE)
-    scale = diameter / 0.254  # against the X500's 10-inch prop
+    scale = diameter / REFERENCE_PROP_M
     vehicle = Vehicle(
         name=f"generic {mass_kg:g} kg quad X",
         body=BodyParams(
             mass_kg=mass_kg,
             inertia_kgm2=((i_xx, 0.0, 0.0), (0.0, i_xx, 0.0), (0.0, 0.0, i_zz)),
             drag_area_m2=(arm**2, arm**2, 2 * arm**2),
-            angular_drag_nms2=(0.004 * (arm / 0.246) ** 4,) * 3,
+            angular_drag_nms2=(0.004 * (arm / REFERENCE_ARM_M) ** 4,) * 3,
         ),
         propulsion=PropulsionParams(
             position_frd_m=((h, h, plane), (-h, -h, plane), (h, -h, plane), (-h, h, plane)),
