@@ -204,7 +204,9 @@ def generic_vehicle(mass_kg: float, cell_count: int, arm_m: float | None = None)
     }
     for table in ("imu", "baro", "mag", "gps"):
         for key in getattr(vehicle, table).__dataclass_fields__:
-            notes[f"{table}.{key}"] = f"the bundled {SENSOR_SOURCE}'s (a Pixhawk 6X-class board)"
+            notes[f"{table}.{key}"] = (
+                f"the bundled {SENSOR_SOURCE}'s (a Pixhawk 6X-class board), unchecked on this one"
+            )
     for key in vehicle.vibration.__dataclass_fields__:
         notes[f"vibration.{key}"] = f"the bundled {SENSOR_SOURCE}'s spectrum shape"
     notes["vibration.reference_rotor_speed_radps"] = "the generic hover rotor speed"

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from px4_logs import FlightLog, motor_pwm_range
+from px4_logs import FlightLog, LogError, motor_pwm_range
 from quad_model.vehicle import ROTOR_COUNT, Vehicle, vehicle_from_dict
 from rig.identify.generic import frame_class, generic_vehicle
 from rig.identify.results import Estimate, Identification, IdentificationError
@@ -339,7 +339,7 @@ def _vibration(
         fitted, _ = fit_vibration(
             vehicle, measured, imu_rate_hz, tuple(n for n in FITTED_POINTS if n in names)
         )
-    except IdentificationError as error:
+    except (IdentificationError, LogError) as error:  # the rest of the file needs none of it
         for key in VIBRATION_KEYS + NOISE_KEYS:
             sources[key] = ("default", f"{defaults[key]}; not identified: {error}")
         return vehicle, sources
