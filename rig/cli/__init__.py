@@ -14,7 +14,7 @@ from rich.console import Console
 
 from px4_logs import LogError
 from quad_model.vehicle import VehicleFileError
-from rig.cli import campaign, identify, plot, replay, run, schema, view
+from rig.cli import campaign, identify, plot, replay, run, schema, vehicle, view
 from rig.cli.command import Command
 from rig.errors import RigError
 
@@ -27,6 +27,7 @@ COMMANDS: tuple[Command, ...] = (
     plot.COMMAND,
     view.COMMAND,
     identify.COMMAND,
+    vehicle.COMMAND,
     schema.COMMAND,
 )
 
@@ -40,6 +41,7 @@ examples:
   rig run takeoff_hover_land              a bundled scenario (or a TOML path)
   rig run level_step --autopilot px4 --px4 DIR
   rig replay LOG.ulg                      a real flight through the rig
+  rig vehicle LOG.ulg --mass 2.0          a vehicle file for the log's airframe
   rig campaign motor_faults               a fault-injection campaign
   rig schema --out schemas                the configuration files' JSON Schema
 

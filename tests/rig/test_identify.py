@@ -89,18 +89,25 @@ def _decimate(time_us: np.ndarray, period_us: float) -> list[int]:
     return keep
 
 
-def _px4_style_log(autopilot_log: Path, rig_log: Path, out: Path, rate_hz: float) -> Path:
-    """The autopilot's log at PX4's logging rates (rate loop at ``rate_hz``, the rest 10 Hz),
-    plus what a real PX4 log has and the reference autopilot does not write:
-    ``battery_status.voltage_v`` (the model's battery) and ``vehicle_air_data.rho`` (ISA at the
-    true altitude)."""
+def _px4_style_log(
+    autopilot_log: Path,
+    rig_log: Path,
+    out: Path,
+    rate_hz: float,
+    fast_topics: tuple[str, ...] = FAST_TOPICS,
+    parameters: dict[str, float] | None = None,
+) -> Path:
+    """The autopilot's log at PX4's logging rates (``fast_topics`` at ``rate_hz``, the rest
+    10 Hz), plus what a real PX4 log has and the reference autopilot does not write:
+    ``battery_status.voltage_v`` (the model's battery), ``vehicle_air_data.rho`` (ISA at the
+    true altitude) and ``parameters``."""
     autopilot, rig = ULog(str(autopilot_log)), ULog(str(rig_log))
-    topics = {name: AUTOPILOT_TOPICS[name] for name in FAST_TOPICS + SLOW_TOPICS}
+    topics = {name: AUTOPILOT_TOPICS[name] for name in fast_topics + SLOW_TOPICS}
     topics |= {"battery_status": [("float", "voltage_v")], "vehicle_air_data": [("float", "rho")]}
     rows = []
-    for name in FAST_TOPICS + SLOW_TOPICS:
+    for name in fast_topics + SLOW_TOPICS:
         data = autopilot.get_dataset(name).data
-        for i in _decimate(data["timestamp"], 1e6 / (rate_hz if name in FAST_TOPICS else 10.0)):
+        for i in _decimate(data["timestamp"], 1e6 / (rate_hz if name in fast_topics else 10.0)):
             values = {}
             for kind, field in AUTOPILOT_TOPICS[name]:
                 size = re.search(r"\[(\d+)\]$", kind)
@@ -118,7 +125,8 @@ def _px4_style_log(autopilot_log: Path, rig_log: Path, out: Path, rate_hz: float
         rho = isa_density_kgpm3(PX4_DEFAULT_HOME.alt_amsl_m - position["z"][i])
         rows.append((int(position["timestamp"][i]), "vehicle_air_data", {"rho": rho}))
     rows.sort(key=lambda row: row[0])
-    with ULogWriter(out, topics, parameters=autopilot.initial_parameters) as log:
+    parameters = autopilot.initial_parameters | (parameters or {})
+    with ULogWriter(out, topics, parameters=parameters) as log:
         for time_us, name, values in rows:
             log.write(name, time_us, **values)
     return out
