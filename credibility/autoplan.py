@@ -104,6 +104,12 @@ VELOCITY_STEP = StepShape(hold_band=0.4, hold_s=1.0, min_change=1.0, max_rise_s=
 #: second, and a doublet's reversal follows within 1.5 s.
 ATTITUDE_STEP = StepShape(hold_band=3.0, hold_s=0.2, min_change=10.0, max_rise_s=1.0, lead_s=0.1,
                           settle_s=0.5, group_gap_s=1.5)  # fmt: skip
+#: Position: a jump of the set-point by 1 m within half a second between levels held within
+#: 0.2 m for 1 s (a goto an autopilot hands its position loop unsmoothed, as the paper's
+#: level-flight step and the rig's level_step scenario command it; PX4 smooths its own
+#: set-points into ramps, which the velocity steps find); a position settles within 8 s.
+POSITION_STEP = StepShape(hold_band=0.2, hold_s=1.0, min_change=1.0, max_rise_s=0.5, lead_s=0.5,
+                          settle_s=8.0, group_gap_s=1.0)  # fmt: skip
 #: A horizontal step starts from a hover: the set-point below this before it (m/s).
 HOVER_SPEED_MPS = 0.5
 #: A step whose change takes at most this many samples is a step, else a ramp-step.
@@ -288,7 +294,8 @@ def rest_segment(log: FlightLog) -> StateSegment:
         after_disarm = start > time_s[0]
         first = start + (DISARM_COAST_S if after_disarm else 0.0)
         first = max(first, float(sensor[0])) + STATE_MARGIN_S
-        last = min(end, float(sensor[-1])) - (STATE_MARGIN_S if end < log.last_s else 0.0)
+        # a margin at the log's end too: a replay's last sample may fall a little earlier
+        last = min(end, float(sensor[-1])) - STATE_MARGIN_S
         if last > first and (best is None or last - first > best[1] - best[0]):
             best = _span(first, last)
             how = (f"Disarmed (motors stopped) from {start:.2f} s"
@@ -312,7 +319,8 @@ def idle_segment(log: FlightLog) -> StateSegment:
     motors = log.topic("actuator_motors", "motor commands")
     columns = [np.asarray(values, float) for field, values in motors.items()
                if field.startswith("control[") and np.any(np.isfinite(values))]  # fmt: skip
-    highest = np.nanmax(np.column_stack(columns), axis=1)
+    # a stopped motor logs NaN (PX4, and the reference autopilot while disarmed)
+    highest = np.max(np.nan_to_num(np.column_stack(columns), nan=0.0), axis=1)
     spinning = time_s[(time_s >= arm_s) & (highest > IDLE_MOTOR_MAX)]
     spin_up_s = float(spinning[0]) if spinning.size else log.last_s
     sensor = log.time_s("sensor_combined")
@@ -587,6 +595,28 @@ def velocity_steps(log: FlightLog, airborne: tuple[float, float]) -> Found:
     return tests, skipped
 
 
+def position_steps(log: FlightLog, airborne: tuple[float, float]) -> list[PlannedTest]:
+    """Steps of the position set-point in the air (POSITION_STEP: a goto handed to the
+    position loop as it is), each scored on the velocity along its axis (NED): the level
+    flight the step commands, which a replay reproduces where its position may have drifted
+    (the reference autopilot replays velocity set-points, open loop on position)."""
+    why = "position set-point steps"
+    data = log.topic("vehicle_local_position_setpoint", why, ("x", "y", "z"))
+    time_s = log.time_s("vehicle_local_position_setpoint")
+    tests = []
+    for axis in ("x", "y", "z"):
+        for step in steps(time_s, np.asarray(data[axis], float), POSITION_STEP):
+            if not airborne[0] <= step.start_s <= airborne[1] - POSITION_STEP.settle_s:
+                continue
+            segment = _segment([step], POSITION_STEP, airborne)
+            found = (f"Position step: {axis} set-point {_describe([step], 'm')} (NED), "
+                     f"handed to the position loop unsmoothed; scored on v{axis}.")  # fmt: skip
+            tests.append(PlannedTest(f"position_step_{axis}_{step.start_s:.0f}s", "time", found,
+                                     _time_test(f"vehicle_local_position.v{axis}", segment,
+                                                "m/s", 0.5)))  # fmt: skip
+    return sorted(tests, key=lambda test: test.keys["segment_s"])
+
+
 def step_tests(log: FlightLog) -> Found:
     """Every step response the flight holds; a log never airborne has none."""
     try:
@@ -615,7 +645,21 @@ def step_tests(log: FlightLog) -> Found:
     except LogError as error:
         more, less = [], [NotScorable(name="velocity_steps", kind="time",
                                       reason=_without_path(error))]  # fmt: skip
-    return tests + more, skipped + less
+    try:
+        position = position_steps(log, airborne)
+    except LogError as error:
+        position = []
+        skipped.append(NotScorable(name="position_steps", kind="time",
+                                   reason=_without_path(error)))  # fmt: skip
+    else:
+        if not position:
+            reason = (
+                f"no position set-point step of ≥ {POSITION_STEP.min_change:g} m within "
+                f"{POSITION_STEP.max_rise_s:g} s in the air (PX4 smooths its set-points: "
+                "its steps are the velocity ones)"
+            )
+            skipped.append(NotScorable(name="position_steps", kind="time", reason=reason))
+    return tests + more + position, skipped + less
 
 
 # --- frequency responses (η_f) --------------------------------------------------------------
@@ -772,7 +816,8 @@ def _without_path(error: Exception) -> str:
 def describe(log: FlightLog) -> tuple[str, str]:
     """A name and a description from what the log says of itself: airframe, rotors,
     firmware and, when GNSS gave it, the date."""
-    airframe = int(log.parameters.get("SYS_AUTOSTART", 0))
+    autostart = log.parameters.get("SYS_AUTOSTART")
+    airframe = f"PX4 airframe {int(autostart)}" if autostart else "airframe not logged"
     rotors = int(log.parameters.get("CA_ROTOR_COUNT", 0))
     vehicle = f"{rotors}-rotor vehicle" if rotors else "vehicle"
     date = ""
@@ -780,8 +825,8 @@ def describe(log: FlightLog) -> tuple[str, str]:
     if utc is not None and np.any(np.asarray(utc) > 0):
         stamp = float(np.asarray(utc)[np.asarray(utc) > 0][0]) / 1e6
         date = datetime.fromtimestamp(stamp, UTC).strftime("%Y-%m-%d")
-    name = f"{vehicle.capitalize()} (PX4 airframe {airframe}): automatic plan from {log.path.name}"
-    description = (f"{vehicle.capitalize()}, PX4 airframe {airframe}, {log.firmware}"
+    name = f"{vehicle.capitalize()} ({airframe}): automatic plan from {log.path.name}"
+    description = (f"{vehicle.capitalize()}, {airframe}, {log.firmware}"
                    + (f", flown {date}" if date else "")
                    + f"; log {log.first_s:.1f}-{log.last_s:.1f} s. Segments found by "
                    "credibility plan; every test it could not plan is listed below "
@@ -871,16 +916,13 @@ def plan_toml(draft: Draft, real: Path, sim: Path | None, plan_dir: Path) -> str
     return "\n".join(lines) + "\n"
 
 
-def write_plan(log_path: Path, out: Path, sim: Path | None = None) -> Draft:
-    """Find the plan in the log at ``log_path`` and write it to ``out``."""
-    try:
-        log = FlightLog.read(log_path)
-    except LogError as error:
-        raise CredibilityError(str(error)) from None
+def write_plan(log: FlightLog, out: Path, sim: Path | None = None) -> Draft:
+    """Find the plan in ``log`` and write it to ``out``; a log that supports no test is one
+    line with every reason."""
     draft = draft_plan(log)
     if not draft.tests:
         reasons = "; ".join(f"{item.name}: {item.reason}" for item in draft.not_scorable)
-        raise CredibilityError(f"{log_path}: no test can be planned from this log ({reasons})")
+        raise CredibilityError(f"{log.path}: no test can be planned from this log ({reasons})")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(plan_toml(draft, log_path, sim, out.parent), encoding="utf-8")
+    out.write_text(plan_toml(draft, log.path, sim, out.parent), encoding="utf-8")
     return draft

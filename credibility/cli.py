@@ -25,6 +25,7 @@ from credibility.paper import paper_comparison
 from credibility.plan import load_plan, with_weights
 from credibility.report import ExitCode, exit_code, write_report
 from credibility.study import read_report, summary_markdown
+from px4_logs import FlightLog, LogError
 
 #: ``credibility report --help`` ends with what each exit code means.
 EXIT_CODES = """exit codes:
@@ -255,7 +256,11 @@ def _summary(args: argparse.Namespace) -> int:
 
 def _plan(args: argparse.Namespace) -> int:
     out = args.out or Path(f"{args.log.stem}_plan.toml")
-    draft = write_plan(args.log, out, args.sim)
+    try:
+        log = FlightLog.read(args.log)
+    except LogError as error:
+        raise CredibilityError(str(error)) from None
+    draft = write_plan(log, out, args.sim)
     print(f"{len(draft.tests)} tests planned, {len(draft.not_scorable)} not scorable → {out}")
     for item in draft.not_scorable:
         print(f"not scorable: {item.name} ({item.kind}): {item.reason}")

@@ -14,7 +14,7 @@ from rich.console import Console
 
 from px4_logs import LogError
 from quad_model.vehicle import VehicleFileError
-from rig.cli import campaign, identify, plot, replay, run, schema, vehicle, view
+from rig.cli import campaign, identify, plot, replay, run, schema, study, vehicle, view
 from rig.cli.command import Command
 from rig.errors import RigError
 
@@ -23,6 +23,7 @@ COMMANDS: tuple[Command, ...] = (
     run.RUN,
     run.HIL_SIM,
     replay.COMMAND,
+    study.COMMAND,
     campaign.COMMAND,
     plot.COMMAND,
     view.COMMAND,
@@ -42,6 +43,7 @@ examples:
   rig run level_step --autopilot px4 --px4 DIR
   rig replay LOG.ulg                      a real flight through the rig
   rig vehicle LOG.ulg --mass 2.0          a vehicle file for the log's airframe
+  rig study LOG.ulg --px4 DIR             a real flight to a credibility verdict
   rig campaign motor_faults               a fault-injection campaign
   rig schema --out schemas                the configuration files' JSON Schema
 

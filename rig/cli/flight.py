@@ -9,6 +9,7 @@ import math
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 from rich.console import Console
 from rich.live import Live
@@ -24,6 +25,8 @@ from rig.plots import plot_run
 from rig.scenarios.scenario import SensorLayer
 from rig.view import VIEW_PORT, ViewError, ViewServer
 
+#: What a flight with progress returns (a run's result, or a study stage's line).
+Flown = TypeVar("Flown")
 #: Pacing per command: the demo flight is watched in a ground station, so real time.
 DEFAULT_SPEED = {"hil-sim": 1.0}
 #: Without a terminal (a pipe, a CI log) progress is a plain line this often, in simulated s.
@@ -108,7 +111,7 @@ def fly(
     """Fly ``run`` with progress (and the live view with ``--view``), then print the summary
     and make the plots."""
     with _live_view(args, console, name) as view:
-        result = _run_with_progress(console, run, view)
+        result = run_with_progress(console, run, view)
     console.print(
         f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "
         f"(RTF {result.real_time_factor:.2f}x, {result.frames} frames)\n"
@@ -159,11 +162,11 @@ def _status(progress: Progress) -> str:
     )
 
 
-def _run_with_progress(
+def run_with_progress(
     console: Console,
-    run: Callable[[Callable[[Progress], None]], RunResult],
+    run: Callable[[Callable[[Progress], None]], Flown],
     view: Callable[[Progress], None] | None = None,
-) -> RunResult:
+) -> Flown:
     """Run with a live status line (simulated time, RTF, altitude, mode) on a terminal,
     and one plain line every LOG_PROGRESS_EVERY_S of simulated time otherwise; every
     report also goes to ``view`` (the live view's slot) when there is one."""

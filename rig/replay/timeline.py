@@ -129,7 +129,9 @@ class ReplayLog(FlightLog):
     sticks and mission, home, and the set-point tracks of each drive."""
 
     def landed_at(self, time_s: float) -> bool:
-        return bool(self.value_at("vehicle_land_detected", "landed", time_s, "landed at --start"))
+        """On the ground at ``time_s``: the land detector's state, or without one as derived
+        from the arming state and the height (:meth:`FlightLog.airborne_at`)."""
+        return not bool(self.airborne_at(np.array([time_s]))[0])
 
     def height_at(self, time_s: float) -> float:
         """Height above the estimator's origin (where it booted, on the ground) at ``time_s``."""

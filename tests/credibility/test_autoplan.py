@@ -86,9 +86,9 @@ def test_x500_plan_loads_back_and_names_the_log(x500_draft, tmp_path):
     assert f'sim = "{autoplan.SIM_PLACEHOLDER}"' in placeholder
 
 
-def _synthetic(with_velocity_setpoint: bool) -> FlightLog:
-    """100 s at 20 Hz, airborne from 10 to 90 s in Position mode, the pitch set-point
-    stepping 0 → 15° at 50.0 s."""
+def _synthetic(with_velocity_setpoint: bool, flies: bool = True) -> FlightLog:
+    """100 s at 20 Hz, airborne from 10 to 90 s (``flies``, else never) in Position mode,
+    the pitch set-point stepping 0 → 15° at 50.0 s."""
     time_s = np.arange(0.0, 100.0, 0.05)
     stamps = (time_s * 1e6).astype(np.int64)
     pitch = np.radians(np.where(time_s >= 50.0, 15.0, 0.0))
@@ -99,7 +99,8 @@ def _synthetic(with_velocity_setpoint: bool) -> FlightLog:
             "q_d[2]": np.sin(pitch / 2), "q_d[3]": np.zeros_like(pitch),
         },
         "vehicle_land_detected": {"timestamp": stamps,
-                                  "landed": ((time_s < 10) | (time_s > 90)).astype(float)},
+                                  "landed": ((time_s < 10) | (time_s > 90) | (not flies))
+                                  .astype(float)},
         "vehicle_status": {"timestamp": stamps, "nav_state": np.full(time_s.size, 2),
                            "arming_state": np.full(time_s.size, 2)},
         "actuator_armed": {"timestamp": stamps, "armed": np.ones(time_s.size)},
@@ -129,9 +130,7 @@ def test_a_missing_topic_is_listed_with_the_reason():
 
 
 def test_a_log_never_airborne_plans_no_flight_dynamics():
-    log = _synthetic(with_velocity_setpoint=True)
-    log.topics["vehicle_land_detected"]["landed"][:] = 1.0
-    tests, skipped = autoplan.step_tests(log)
+    tests, skipped = autoplan.step_tests(_synthetic(with_velocity_setpoint=True, flies=False))
     assert tests == []
     assert "never left the ground" in skipped[0].reason
 
@@ -192,3 +191,25 @@ def test_without_an_arming_state_rest_and_idle_are_not_planned():
     reasons = {item.name: item.reason for item in skipped}
     for state in ("rest", "idle"):
         assert "no arming state in the log" in reasons[f"imu_sigma_{state}"]
+
+
+def test_a_position_step_is_scored_on_the_velocity_along_its_axis():
+    """A goto handed to the position loop unsmoothed: x set-point 0 → 5 m at 20.0 s, in the
+    air from 5 to 55 s; the segment from POSITION_STEP's lead before the last sample at 0 m
+    to its settling time after the first at 5 m."""
+    time_s = np.arange(0.0, 60.0, 0.05)
+    stamps = (time_s * 1e6).astype(np.int64)
+    zero = np.zeros(time_s.size)
+    log = FlightLog("goto.ulg", {
+        "vehicle_local_position_setpoint": {"timestamp": stamps, "x": np.where(time_s >= 20.0,
+                                            5.0, 0.0), "y": zero, "z": zero - 4.0},
+        "vehicle_land_detected": {"timestamp": stamps,
+                                  "landed": ((time_s < 5) | (time_s > 55)).astype(float)},
+    }, {})  # fmt: skip
+    (test,) = autoplan.position_steps(log, log.airborne_span())
+    assert test.name == "position_step_x_20s"
+    assert test.keys["signal"] == "vehicle_local_position.vx"
+    shape = autoplan.POSITION_STEP
+    assert test.keys["segment_s"] == pytest.approx((19.95 - shape.lead_s, 20.0 + shape.settle_s),
+                                                   abs=0.011)  # fmt: skip
+    assert "+0 → +5 m in 0.05 s at 19.95 s" in test.found
