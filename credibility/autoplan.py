@@ -59,6 +59,10 @@ SIM_PLACEHOLDER = "REPLACE-WITH-YOUR-SIMULATION.ulg"
 #: after it. The X500's accelerometer σ over 0.1 s falls from 0.18 to 0.03 m/s² within
 #: 0.5 s of its disarm and then stays there; the X8's large props coast for 0.46 s.
 DISARM_COAST_S = 0.5
+#: No segment starts this soon after the log's first sample: a log that starts armed (PX4
+#: logs from the arming) is replayed by an autopilot that must start up first (the rig's
+#: reference autopilot arms 1 s in), so the sim is not in the log's state there yet.
+LOG_START_S = 1.0
 #: A state's segment keeps this far from its ends: one sample of the 10 Hz motor outputs, so
 #: no transition (spool-up, arming) falls inside.
 STATE_MARGIN_S = 0.1
@@ -293,7 +297,7 @@ def rest_segment(log: FlightLog) -> StateSegment:
             continue
         after_disarm = start > time_s[0]
         first = start + (DISARM_COAST_S if after_disarm else 0.0)
-        first = max(first, float(sensor[0])) + STATE_MARGIN_S
+        first = max(first, float(sensor[0]), log.first_s + LOG_START_S) + STATE_MARGIN_S
         # a margin at the log's end too: a replay's last sample may fall a little earlier
         last = min(end, float(sensor[-1])) - STATE_MARGIN_S
         if last > first and (best is None or last - first > best[1] - best[0]):
@@ -324,7 +328,7 @@ def idle_segment(log: FlightLog) -> StateSegment:
     spinning = time_s[(time_s >= arm_s) & (highest > IDLE_MOTOR_MAX)]
     spin_up_s = float(spinning[0]) if spinning.size else log.last_s
     sensor = log.time_s("sensor_combined")
-    start = max(arm_s, float(sensor[0])) + STATE_MARGIN_S
+    start = max(arm_s, float(sensor[0]), log.first_s + LOG_START_S) + STATE_MARGIN_S
     end = min(spin_up_s, lift_s, float(sensor[-1])) - STATE_MARGIN_S
     if end <= start:
         return None

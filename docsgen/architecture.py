@@ -31,11 +31,13 @@ GUIDES: dict[str, tuple[str, ...]] = {
     "rig.scenarios": ("guide/closed-loop.md", "reference/configuration/scenario.md"),
     "rig.autopilots": ("guide/reference-autopilot.md", "guide/px4.md"),
     "rig.replay": ("guide/replay.md", "tutorials/replay-a-log.md"),
-    "rig.identify": ("guide/identify.md",),
+    "rig.identify": ("guide/identify.md", "guide/vehicle-from-log.md"),
+    "rig.study": ("tutorials/study-your-log.md",),
     "rig.campaign": ("guide/campaigns.md", "tutorials/run-a-campaign.md"),
     "rig.view": ("tutorials/fly-the-demo.md",),
     "px4_logs": ("guide/replay.md", "guide/identify.md"),
     "credibility": ("guide/credibility.md",),
+    "credibility.autoplan": ("guide/plan-from-a-log.md",),
 }
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from credibility import CredibilityError, assess, load_plan
 from credibility.autoplan import pilot_spans, write_plan
-from credibility.report import ExitCode, exit_code, write_report
+from credibility.report import exit_code, write_report
 from px4_logs import FlightLog, LogError
 from quad_model.vehicle import (
     VEHICLES_DIR,
@@ -92,12 +92,14 @@ class Verdict:
     not_scorable: int
     html: Path
     exit_code: int
+    #: Why there are no indices ("" when there are).
+    unscorable_reason: str = ""
 
     def line(self) -> str:
         indices = (
             f"η_all {self.eta_all:.1%}, η_min {self.eta_min:.1%}"
             if self.eta_all is not None and self.eta_min is not None
-            else "no indices"
+            else f"no indices ({self.unscorable_reason})"
         )
         return (
             f"{self.outcome}: {indices} ({self.scored} of {self.tests} tests scored, "
@@ -119,6 +121,10 @@ class Study:
         instance: int = 0,
         force: bool = False,
     ) -> None:
+        if vehicle is not None and mass_kg is not None:
+            raise StudyError(
+                "--vehicle and --mass: give one (--mass writes the vehicle file from the log)"
+            )
         if mass_kg is not None and not (math.isfinite(mass_kg) and mass_kg > 0):
             raise StudyError(f"--mass {mass_kg:g}: a vehicle's mass is a positive number of kg")
         self.log = FlightLog.read(log_path)
@@ -263,7 +269,6 @@ class Study:
             raise StudyError(str(error)) from None
         assessment = assess(plan, advance or (lambda _label: None), strict=False)
         html, _ = write_report(assessment, self.out_dir / REPORT_DIR)
-        code = exit_code(assessment)
         return Verdict(
             outcome=assessment.outcome,
             eta_all=assessment.eta_all,
@@ -272,7 +277,8 @@ class Study:
             tests=len(plan.tests),
             not_scorable=len(plan.not_scorable),
             html=html,
-            exit_code=int(code if code is not ExitCode.BAD_INPUT else ExitCode.NOT_SCORED),
+            exit_code=int(exit_code(assessment)),
+            unscorable_reason=assessment.unscorable_reason or "",
         )
 
 

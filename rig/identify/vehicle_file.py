@@ -247,11 +247,8 @@ def _identified(
             f"{source}: ± {k_t.relative_uncertainty:.0%} ({_window(k_t)}); {k_t.method}",
         )
     else:
-        why = (
-            k_t.refused
-            if k_t is not None
-            else (hover.measured_speed_reason or hover.rotor_line_reason)
-        )
+        reasons = (hover.measured_speed_reason, f"rotor line: {hover.rotor_line_reason}")
+        why = k_t.refused if k_t is not None else "; ".join(r for r in reasons if r)
         keep("propulsion.thrust_coefficient_n_per_radps2", f"not identified: {why}")
     inertia = np.array(body.inertia_kgm2)
     axes = []

@@ -133,5 +133,8 @@ def test_bad_input_is_one_line(tmp_path, capsys):
     assert cli.main(["study", str(tmp_path / "none.ulg")]) == 1
     assert capsys.readouterr().err == f"rig: error: {tmp_path / 'none.ulg'}: flight log not found\n"
     logs = Path(__file__).resolve().parents[2] / "data" / "flight_logs"
+    x500 = logs / "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
     with pytest.raises(StudyError, match="--mass -1: a vehicle's mass is a positive number"):
-        Study(logs / "px4_x500v2_v6xrt_flight_2026-03-20.ulg", tmp_path, mass_kg=-1.0)
+        Study(x500, tmp_path, mass_kg=-1.0)
+    with pytest.raises(StudyError, match="--vehicle and --mass: give one"):
+        Study(x500, tmp_path, vehicle="x500_v2", mass_kg=2.0)
