@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from credibility import CredibilityError, assess, load_plan
-from credibility.autoplan import pilot_spans, write_plan
+from credibility.autoplan import write_plan
+from credibility.autoplan.responses import pilot_spans
 from credibility.report import exit_code, write_report
 from px4_logs import FlightLog, LogError
 from quad_model.vehicle import (

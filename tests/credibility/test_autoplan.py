@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from credibility import autoplan
+from credibility.autoplan import draft, noise, plan_file, responses, setpoints
 from credibility.cli import main
 from credibility.plan import load_plan
 from px4_logs import FlightLog
@@ -16,11 +17,11 @@ X500_LOG /= "px4_x500v2_v6xrt_flight_2026-03-20.ulg"
 
 
 @pytest.fixture(scope="module")
-def x500_draft() -> autoplan.Draft:
+def x500_draft() -> draft.Draft:
     return autoplan.draft_plan(FlightLog.read(X500_LOG))
 
 
-def _segments(draft: autoplan.Draft) -> dict[str, tuple[float, float]]:
+def _segments(draft: draft.Draft) -> dict[str, tuple[float, float]]:
     return {test.name: test.keys["segment_s"] for test in draft.tests}
 
 
@@ -54,7 +55,7 @@ def test_x500_rest_starts_after_the_props_stopped(x500_draft):
     props still coast: its accelerometer σ (0.108 m/s² in x) is three times the floor the
     log shows from 503.6 s on. The automatic segment must be at that floor."""
     start, end = _segments(x500_draft)["accel_x_sigma_rest"]
-    assert start >= 503.07 + autoplan.DISARM_COAST_S
+    assert start >= 503.07 + noise.DISARM_COAST_S
     log = FlightLog.read(X500_LOG)
     time_s = log.time_s("sensor_combined")
     accel = log.topics["sensor_combined"]["accelerometer_m_s2[0]"]
@@ -83,7 +84,7 @@ def test_x500_plan_loads_back_and_names_the_log(x500_draft, tmp_path):
     assert {item.name for item in plan.not_scorable} >= {"rotor_speeds"}
     # without --sim: a placeholder that `credibility report` names as missing
     placeholder = autoplan.plan_toml(x500_draft, X500_LOG, None, tmp_path)
-    assert f'sim = "{autoplan.SIM_PLACEHOLDER}"' in placeholder
+    assert f'sim = "{plan_file.SIM_PLACEHOLDER}"' in placeholder
 
 
 def _synthetic(with_velocity_setpoint: bool, flies: bool = True) -> FlightLog:
@@ -113,24 +114,24 @@ def _synthetic(with_velocity_setpoint: bool, flies: bool = True) -> FlightLog:
 
 
 def test_a_known_step_gives_its_segment():
-    tests, _ = autoplan.step_tests(_synthetic(with_velocity_setpoint=True))
+    tests, _ = setpoints.step_tests(_synthetic(with_velocity_setpoint=True))
     (step,) = [test for test in tests if test.kind == "time"]
     assert step.name == "pitch_step_50s"
-    lead, settle = autoplan.ATTITUDE_STEP.lead_s, autoplan.ATTITUDE_STEP.settle_s
+    lead, settle = setpoints.ATTITUDE_STEP.lead_s, setpoints.ATTITUDE_STEP.settle_s
     # the step lies between the last sample at 0° (49.95 s) and the first at 15° (50.0 s)
     assert step.keys["segment_s"] == pytest.approx((49.95 - lead, 50.0 + settle), abs=0.011)
     assert "+0 → +15 ° in 0.05 s at 49.95 s" in step.found
 
 
 def test_a_missing_topic_is_listed_with_the_reason():
-    _, skipped = autoplan.step_tests(_synthetic(with_velocity_setpoint=False))
+    _, skipped = setpoints.step_tests(_synthetic(with_velocity_setpoint=False))
     (velocity,) = [item for item in skipped if item.name == "velocity_steps"]
     assert "vehicle_local_position_setpoint" in velocity.reason
     assert velocity.kind == "time"
 
 
 def test_a_log_never_airborne_plans_no_flight_dynamics():
-    tests, skipped = autoplan.step_tests(_synthetic(with_velocity_setpoint=True, flies=False))
+    tests, skipped = setpoints.step_tests(_synthetic(with_velocity_setpoint=True, flies=False))
     assert tests == []
     assert "never left the ground" in skipped[0].reason
 
@@ -147,7 +148,7 @@ def test_a_velocity_ramp_between_holds_is_one_step():
     sample of the first level (10.0 s) to the first of the second (12.0 s)."""
     time_s = np.arange(0.0, 20.0, 0.1)
     values = np.clip((time_s - 10.0) * 1.5, 0.0, 3.0)
-    (step,) = autoplan.steps(time_s, values, autoplan.VELOCITY_STEP)
+    (step,) = setpoints.steps(time_s, values, setpoints.VELOCITY_STEP)
     # each level's band (0.4 m/s) reaches 0.4/1.5 = 0.27 s into the ramp
     assert step.start_s == pytest.approx(10.2, abs=0.051)
     assert step.end_s == pytest.approx(11.8, abs=0.051)
@@ -156,18 +157,18 @@ def test_a_velocity_ramp_between_holds_is_one_step():
 
 def test_a_slow_drift_is_not_a_step():
     time_s = np.arange(0.0, 20.0, 0.1)
-    assert autoplan.steps(time_s, 0.2 * time_s, autoplan.VELOCITY_STEP) == []
+    assert setpoints.steps(time_s, 0.2 * time_s, setpoints.VELOCITY_STEP) == []
 
 
 def test_the_coherent_band_spans_a_dip_but_not_a_gap():
     freqs = np.geomspace(0.1, 10.0, 61)  # 30 points a decade
     coherence = np.where((freqs >= 0.5) & (freqs <= 5.0), 0.9, 0.2)
     coherence[np.argmin(np.abs(freqs - 1.0))] = 0.4  # one incoherent point inside
-    band = autoplan.coherent_band(freqs, coherence, 0.6)
+    band = responses.coherent_band(freqs, coherence, 0.6)
     assert band == pytest.approx((freqs[freqs >= 0.5][0], freqs[freqs <= 5.0][-1]))
     # less than an octave is no band
     narrow = np.where((freqs >= 1.0) & (freqs <= 1.8), 0.9, 0.2)
-    assert autoplan.coherent_band(freqs, narrow, 0.6) is None
+    assert responses.coherent_band(freqs, narrow, 0.6) is None
 
 
 def test_cli_writes_a_plan_that_loads(tmp_path, capsys):
@@ -175,7 +176,7 @@ def test_cli_writes_a_plan_that_loads(tmp_path, capsys):
     assert main(["plan", str(X500_LOG), "--out", str(out)]) == 0
     assert f"→ {out}" in capsys.readouterr().out
     plan = load_plan(out)
-    assert plan.logs["sim"] == (out.parent / autoplan.SIM_PLACEHOLDER).resolve()
+    assert plan.logs["sim"] == (out.parent / plan_file.SIM_PLACEHOLDER).resolve()
     assert any(test.name == "pitch_doublet_474s" for test in plan.tests)
 
 
@@ -186,7 +187,7 @@ def test_without_an_arming_state_rest_and_idle_are_not_planned():
     stamps = (time_s * 1e6).astype(np.int64)
     imu = {f"gyro_rad[{i}]": np.zeros(time_s.size) for i in range(3)}
     log = FlightLog("bench.ulg", {"sensor_combined": {"timestamp": stamps, **imu}}, {})
-    tests, skipped = autoplan.noise_tests(log)
+    tests, skipped = noise.noise_tests(log)
     assert tests == []
     reasons = {item.name: item.reason for item in skipped}
     for state in ("rest", "idle"):
@@ -206,10 +207,10 @@ def test_a_position_step_is_scored_on_the_velocity_along_its_axis():
         "vehicle_land_detected": {"timestamp": stamps,
                                   "landed": ((time_s < 5) | (time_s > 55)).astype(float)},
     }, {})  # fmt: skip
-    (test,) = autoplan.position_steps(log, log.airborne_span())
+    (test,) = setpoints.position_steps(log, log.airborne_span())
     assert test.name == "position_step_x_20s"
     assert test.keys["signal"] == "vehicle_local_position.vx"
-    shape = autoplan.POSITION_STEP
+    shape = setpoints.POSITION_STEP
     assert test.keys["segment_s"] == pytest.approx((19.95 - shape.lead_s, 20.0 + shape.settle_s),
                                                    abs=0.011)  # fmt: skip
     assert "+0 → +5 m in 0.05 s at 19.95 s" in test.found

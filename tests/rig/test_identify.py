@@ -36,11 +36,8 @@ from rig.identify.battery import identify_battery
 from rig.identify.hover import identify_hover
 from rig.identify.rate_plant import ALIASING_BIAS
 from rig.identify.rotor_line import identify_rotor_line
-from rig.lockstep.loop import RunOptions, run_scenario
 from rig.logs.ulog_writer import ULogWriter
-from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import scenario_from_dict
-from tests.instances import free_test_instance
+from tests.rig.flights import fly
 
 #: Real flight logs carried with the project (the x500_log fixture's folder; a module-scoped
 #: fixture cannot use the function-scoped one).
@@ -144,12 +141,9 @@ def synthetic_flight(tmp_path_factory):
                 {"at_s": 0.6, "action": "takeoff", "altitude_m": 3.0}]  # fmt: skip
     commands += [{"at_s": 10.0 + 2.5 * i, "action": "goto", "position_ned_m": p}
                  for i, p in enumerate(points)]  # fmt: skip
-    scenario = scenario_from_dict({"name": "identify", "vehicle": str(truth_path),
-                                   "duration_s": 34.0, "seed": 5, "sensor_layer": "tlm",
-                                   "commands": commands})  # fmt: skip
-    options = RunOptions(instance=free_test_instance(), out_dir=folder / "run",
-                         timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
-    result = run_scenario(scenario, options)
+    result = fly({"name": "identify", "vehicle": str(truth_path), "duration_s": 34.0,
+                  "seed": 5, "sensor_layer": "tlm", "commands": commands},
+                 folder / "run")  # fmt: skip
     return folder, load_vehicle(truth_path), result.autopilot_log, result.rig_log
 
 

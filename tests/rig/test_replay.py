@@ -19,7 +19,7 @@ from quad_model.frames import quat_multiply
 from quad_model.vehicle import load_vehicle
 from rig.chips.pwm import PwmOutput
 from rig.cli import main
-from rig.identify import identify_vehicle
+from rig.identify import IdentificationError, identify_vehicle
 from rig.lockstep.loop import RunOptions
 from rig.logs.ulog_writer import ULogWriter
 from rig.replay import ReplayError, ReplayOptions, plan_replay, run_replay
@@ -503,15 +503,18 @@ def test_the_three_real_logs_are_planned_or_refused_naming_what_is_missing(
     x500_path, quad4001_log, auriol_log
 ):
     """The X500 flight and the 8S quad's hover (an airframe we have no file for, flown as the
-    X500 with --vehicle) plan and identify; the X8's ground run never flew, so both say
-    which topic a flight would have."""
+    X500 with --vehicle) plan and identify; the X8's ground run never flew and logged no
+    arming state, so the replay says what its start would need, and identify refuses its
+    eight rotors before anything else."""
     x500 = load_vehicle("x500_v2")
     for log in (x500_path, quad4001_log):
         assert plan_replay(log, ReplayOptions(vehicle="x500_v2")).arm_s is not None
         assert 0.2 < identify_vehicle(FlightLog.read(log), x500).hover.throttle.value < 0.7
-    with pytest.raises(LogError, match=r"topic vehicle_land_detected .* is not in the log$"):
+    with pytest.raises(LogError, match=r"no vehicle_land_detected, and no arming state "
+                       r"\(actuator_armed, vehicle_status\) to derive the airborne span from$"):
         plan_replay(auriol_log, ReplayOptions(vehicle="x500_v2"))
-    with pytest.raises(LogError, match=r"topic vehicle_land_detected \(airborne span\) is not in"):
+    with pytest.raises(IdentificationError, match=r": 8 rotors \(dshot .*\); the vehicle model "
+                       "identified has 4$"):
         identify_vehicle(FlightLog.read(auriol_log), x500)
 
 

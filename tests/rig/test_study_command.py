@@ -10,11 +10,9 @@ import pytest
 
 from px4_logs import FlightLog
 from rig import cli
-from rig.lockstep.loop import RunOptions, run_scenario
-from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import scenario_from_dict
 from rig.study import Study, StudyError, reference_drive
 from tests.instances import free_test_instance
+from tests.rig.flights import fly
 
 pytestmark = pytest.mark.closed_loop
 
@@ -39,10 +37,7 @@ X8_LOG = "px4_octoX8_auriol_v6xrt_highrate_groundrun_2024-10-29.ulg"
 
 @pytest.fixture(scope="module")
 def rig_log(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("flight")
-    options = RunOptions(instance=free_test_instance(), out_dir=folder,
-                         timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
-    result = run_scenario(scenario_from_dict(FLIGHT), options)
+    result = fly(FLIGHT, tmp_path_factory.mktemp("flight"))
     assert result.autopilot_log is not None
     return result.autopilot_log
 

@@ -23,10 +23,7 @@ from rig.identify.generic import (
     generic_vehicle,
 )
 from rig.identify.vehicle_file import TAGS, vehicle_from_log
-from rig.lockstep.loop import RunOptions, run_scenario
-from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import scenario_from_dict
-from tests.instances import free_test_instance
+from tests.rig.flights import fly
 from tests.rig.test_identify import (
     FAST_TOPICS,
     FLIGHT_LOGS,
@@ -193,12 +190,9 @@ def climbing_flight(tmp_path_factory):
                 {"at_s": 0.6, "action": "takeoff", "altitude_m": 3.0}]  # fmt: skip
     commands += [{"at_s": 8.0 + 6.0 * i, "action": "goto", "position_ned_m": [0, 0, -z]}
                  for i, z in enumerate((7.0, 3.0, 7.0, 3.0))]  # fmt: skip
-    scenario = scenario_from_dict({"name": "climbs", "vehicle": str(truth_path),
-                                   "duration_s": 32.0, "seed": 7, "sensor_layer": "tlm",
-                                   "commands": commands})  # fmt: skip
-    options = RunOptions(instance=free_test_instance(), out_dir=folder / "run",
-                         timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
-    result = run_scenario(scenario, options)
+    result = fly({"name": "climbs", "vehicle": str(truth_path), "duration_s": 32.0,
+                  "seed": 7, "sensor_layer": "tlm", "commands": commands},
+                 folder / "run")  # fmt: skip
     log = _px4_style_log(result.autopilot_log, result.rig_log, folder / "px4_style.ulg", 250.0,
                          (*FAST_TOPICS, "sensor_combined"), {"BAT1_N_CELLS": 4})  # fmt: skip
     return load_vehicle(truth_path), log
@@ -235,12 +229,9 @@ def test_the_written_file_flies_a_hover(x500_file, tmp_path):
     path.write_text(text, encoding="utf-8")
     commands = [{"at_s": 0.5, "action": "arm"},
                 {"at_s": 0.6, "action": "takeoff", "altitude_m": 3.0}]  # fmt: skip
-    scenario = scenario_from_dict({"name": "written_hover", "vehicle": str(path),
-                                   "duration_s": 12.0, "seed": 2, "sensor_layer": "tlm",
-                                   "commands": commands})  # fmt: skip
-    options = RunOptions(instance=free_test_instance(), out_dir=tmp_path / "run",
-                         timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
-    result = run_scenario(scenario, options)
+    result = fly({"name": "written_hover", "vehicle": str(path), "duration_s": 12.0,
+                  "seed": 2, "sensor_layer": "tlm", "commands": commands},
+                 tmp_path / "run")  # fmt: skip
     truth = FlightLog.read(result.rig_log)
     t, z = truth.series("vehicle_local_position_groundtruth", "z", "altitude")
     last = t >= t[-1] - 3.0

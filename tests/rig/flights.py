@@ -1,0 +1,18 @@
+"""A scenario flown by the reference autopilot for a test: the known-answer flights the
+identification, the vehicle file and the study are checked against."""
+
+from pathlib import Path
+from typing import Any
+
+from rig.lockstep.loop import RunOptions, RunResult, run_scenario
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import scenario_from_dict
+from tests.instances import free_test_instance
+
+
+def fly(scenario: dict[str, Any], out_dir: Path) -> RunResult:
+    """Fly ``scenario`` (a scenario file's keys) on a free instance into ``out_dir``; the
+    link's timeouts are wide, for a test machine loaded by the other tests."""
+    options = RunOptions(instance=free_test_instance(), out_dir=out_dir,
+                         timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
+    return run_scenario(scenario_from_dict(scenario), options)
