@@ -510,11 +510,11 @@ def test_the_three_real_logs_are_planned_or_refused_naming_what_is_missing(
     for log in (x500_path, quad4001_log):
         assert plan_replay(log, ReplayOptions(vehicle="x500_v2")).arm_s is not None
         assert 0.2 < identify_vehicle(FlightLog.read(log), x500).hover.throttle.value < 0.7
-    with pytest.raises(LogError, match=r"no vehicle_land_detected, and no arming state "
-                       r"\(actuator_armed, vehicle_status\) to derive the airborne span from$"):
+    no_start = r"no vehicle_land_detected, and no arming state \(actuator_armed, vehicle_status\)"
+    with pytest.raises(LogError, match=no_start):
         plan_replay(auriol_log, ReplayOptions(vehicle="x500_v2"))
-    with pytest.raises(IdentificationError, match=r": 8 rotors \(dshot .*\); the vehicle model "
-                       "identified has 4$"):
+    eight_rotors = r": 8 rotors .* the vehicle model identified has 4$"
+    with pytest.raises(IdentificationError, match=eight_rotors):
         identify_vehicle(FlightLog.read(auriol_log), x500)
 
 
