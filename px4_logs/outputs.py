@@ -140,9 +140,9 @@ def motor_layout(
             else "no motor output parameters: PX4's default PWM 1000-2000 µs"
         )
     else:
-        driver, channels, output_range = found
+        driver, channels, output_range, range_from = found
         count = int(parameters.get("CA_ROTOR_COUNT", 0)) or len(channels)
-        decided = f"{driver.prefix or 'PWM'}_FUNCn hold motors 1-{len(channels)}"
+        decided = f"{driver.prefix or 'PWM'}_FUNCn hold motors 1-{len(channels)} ({range_from})"
     instance, moved = _moving_instance(outputs, channels, thrust, armed)
     low, high = driver.full_scale
     return MotorOutputs(
@@ -163,9 +163,10 @@ def motor_layout(
 
 def _motor_channels(
     parameters: Mapping[str, float], source: str | Path
-) -> tuple[_Driver, tuple[int, ...], tuple[float, float]] | None:
-    """The driver holding the motor functions, the channel of each motor and their range;
-    None when no ``<PREFIX>_FUNCn`` is a motor (a PX4 before 1.13)."""
+) -> tuple[_Driver, tuple[int, ...], tuple[float, float], str] | None:
+    """The driver holding the motor functions, the channel of each motor, their range and
+    where the range came from; None when no ``<PREFIX>_FUNCn`` is a motor (a PX4 before
+    1.13)."""
     holders: dict[str, dict[int, int]] = {}  # prefix → motor → 0-based channel
     for key, function in parameters.items():
         prefix, _, channel = key.rpartition("_FUNC")
@@ -194,7 +195,13 @@ def _motor_channels(
             DSHOT_MIN_VALUE, float(int(parameters.get("DSHOT_MIN", 0.0) * DSHOT_FULL_SCALE))
         )
         dshot = _Driver(prefix, OutputProtocol.DSHOT, "DShot", (0.0, DSHOT_FULL_SCALE))
-        return dshot, channels, (floor, DSHOT_FULL_SCALE)
+        return dshot, channels, (floor, DSHOT_FULL_SCALE), "DSHOT_MIN"
+    limits_of = [(f"{prefix}_MIN{c + 1}", f"{prefix}_MAX{c + 1}") for c in channels]
+    if driver.protocol is OutputProtocol.PWM and not any(
+        name in parameters for pair in limits_of for name in pair
+    ):
+        # PX4 SITL's simulated PWM outputs have the functions but no limits to set
+        return driver, channels, DEFAULT_PWM_RANGE_US, f"no {prefix}_MIN/MAXn: PX4's default"
     ranges = set()
     for motor, output in enumerate((c + 1 for c in channels), start=1):
         limits = (f"{prefix}_MIN{output}", f"{prefix}_MAX{output}")
@@ -207,7 +214,7 @@ def _motor_channels(
         ranges.add((float(parameters[limits[0]]), float(parameters[limits[1]])))
     if len(ranges) > 1:
         raise LogError(f"{source}: the motor outputs have different ranges {sorted(ranges)}")
-    return driver, channels, ranges.pop()
+    return driver, channels, ranges.pop(), f"{prefix}_MIN/MAXn"
 
 
 def _output_count(outputs: Sequence[Topic]) -> int:

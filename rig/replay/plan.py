@@ -507,6 +507,10 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
     px4 = options.autopilot is Autopilot.PX4
     log = ReplayLog.read(path)
     start_s = log.first_s if options.start_s is None else options.start_s
+    if options.start_s is None and px4:
+        # PX4 boots PX4_BOOT_S before the start, and a ULog's clock starts at 0: a log from
+        # PX4's boot (PX4 SITL's, the rig's) is replayed from the first second PX4 can reach
+        start_s = max(start_s, PX4_BOOT_S)
     end_s = log.last_s if options.end_s is None else options.end_s
     for flag, value in (("--start", start_s), ("--end", end_s)):
         if not log.first_s <= value <= log.last_s:
@@ -527,6 +531,12 @@ def plan_replay(log_path: str | Path, options: ReplayOptions | None = None) -> R
     if not log.landed_at(start_s):
         start_height_m = log.height_at(start_s)
         lead_in_s = ready_s + start_height_m / TAKEOFF_CLIMB_MPS + LEAD_IN_SETTLE_S
+    if start_s - lead_in_s < 0.0:  # a ULog's clock is unsigned: no run second before 0
+        raise ReplayError(
+            f"{path}: --start {start_s:g} s is too early on the log's clock: the "
+            f"{options.autopilot} replay starts {lead_in_s:g} s before it (PX4 boots first), "
+            "and the clock cannot go below 0: give a later --start"
+        )
     vehicle, reason = _vehicle_choice(log, options.vehicle)
     vehicle_document, cell_count, battery = _vehicle_document(vehicle, log)
     outputs = motor_outputs(log)

@@ -1,5 +1,5 @@
-"""A scenario flown by the reference autopilot for a test: the known-answer flights the
-identification, the vehicle file and the study are checked against."""
+"""A scenario flown for a test: the known-answer flights the identification, the vehicle
+file and the study are checked against."""
 
 from pathlib import Path
 from typing import Any
@@ -10,9 +10,11 @@ from rig.scenarios.scenario import scenario_from_dict
 from tests.instances import free_test_instance
 
 
-def fly(scenario: dict[str, Any], out_dir: Path) -> RunResult:
-    """Fly ``scenario`` (a scenario file's keys) on a free instance into ``out_dir``; the
-    link's timeouts are wide, for a test machine loaded by the other tests."""
+def fly(scenario: dict[str, Any], out_dir: Path, **run_options: Any) -> RunResult:
+    """Fly ``scenario`` (a scenario file's keys) on a free instance into ``out_dir``, with the
+    reference autopilot unless ``run_options`` say otherwise; the link's timeouts are wide,
+    for a test machine loaded by the other tests."""
     options = RunOptions(instance=free_test_instance(), out_dir=out_dir,
-                         timeouts=LinkTimeouts(connect_s=60, answer_s=30))  # fmt: skip
+                         timeouts=LinkTimeouts(connect_s=60, answer_s=30),
+                         **run_options)  # fmt: skip
     return run_scenario(scenario_from_dict(scenario), options)
