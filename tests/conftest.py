@@ -13,14 +13,6 @@ settings.register_profile(
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "test"))
 
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The files marked ``long`` first: `make test` shares files out between two workers in
-    collection order, and a file of minutes collected last runs alone at the end (the two
-    20-minute flights did, about 6 minutes of a 30-minute run)."""
-    items.sort(key=lambda item: item.get_closest_marker("long") is None)
-
-
 REPO = Path(__file__).resolve().parent.parent
 #: Real flight logs carried with the project (MIT, see data/flight_logs/README.md).
 FLIGHT_LOGS = REPO / "data" / "flight_logs"

@@ -18,7 +18,7 @@ from rig.campaign import campaign_executor, campaign_from_dict, read_results, ru
 from rig.campaign.report import write_report
 from tests.instances import worker_instances
 
-pytestmark = [pytest.mark.closed_loop, pytest.mark.long]
+pytestmark = pytest.mark.closed_loop
 #: This worker's instances (tests.instances): campaigns of two workers never share one.
 CAMPAIGN_INSTANCES = worker_instances(20, 40)
 

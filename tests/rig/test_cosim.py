@@ -32,8 +32,6 @@ from rig.chips.layer import ChipFault, ChipFrame, ChipReadout, TlmSensorLayer
 from rig.chips.pwm import MOTOR_CHANNELS, Pulse, PwmOutput
 from rig.errors import CosimError
 
-pytestmark = pytest.mark.long
-
 PWM_HZ = 400
 #: Motor 2's output stops for this span of frames: longer than the capture's 0.1 s
 #: timeout at 1 kHz, so the timeout flag and its clearing are compared too.

@@ -14,7 +14,7 @@ from rig.lockstep.loop import RunOptions, run_scenario
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
 
-pytestmark = [pytest.mark.closed_loop, pytest.mark.long]
+pytestmark = pytest.mark.closed_loop
 
 DURATION_S = 1200
 IMU_HZ = 250

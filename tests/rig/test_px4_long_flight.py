@@ -6,7 +6,7 @@ import pyulog
 
 from tests.rig.px4_flights import fly_px4, inside, takeoff_hover_land, topic
 
-pytestmark = [pytest.mark.closed_loop, pytest.mark.long]
+pytestmark = pytest.mark.closed_loop
 
 
 def test_twenty_minutes_of_px4_flight_without_a_stall(tmp_path, free_instance, px4_dir):

@@ -16,7 +16,7 @@ from rig.study import Study, StudyError, reference_drive
 from tests.instances import free_test_instance
 from tests.rig.flights import fly
 
-pytestmark = [pytest.mark.closed_loop, pytest.mark.long]
+pytestmark = pytest.mark.closed_loop
 
 #: The rig's flight every study below is of: rest, armed idle, take-off, hover, a level step
 #: north, hover, landing and rest after the disarm, so the automatic plan finds each kind of
