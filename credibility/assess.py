@@ -32,6 +32,7 @@ from credibility.caveats import (
 from credibility.errors import CredibilityError, NotScorable, Reason
 from credibility.logs import LogFile, SignalSpec, open_log
 from credibility.plan import FrequencyTest, PerformanceTest, Plan, Test, TimeTest
+from px4_logs import ARMING_STATE_ARMED
 
 Outcome = Literal["pass", "fail", "could not be scored"]
 Row = TypeVar("Row")
@@ -356,8 +357,7 @@ def _windowed(
     return signals.window(log.signal(spec), segment_s, plan.max_gap_s, spec.drop_nan)
 
 
-#: ``vehicle_status.arming_state`` of an armed vehicle (PX4 msg/VehicleStatus.msg).
-ARMING_STATE_ARMED = 2
+#: ``vehicle_status.arming_state``, ARMING_STATE_ARMED when armed.
 _ARMING_STATE = SignalSpec(path="vehicle_status.arming_state")
 
 

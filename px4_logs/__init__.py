@@ -6,11 +6,12 @@ It sits under both ``credibility`` and ``rig`` and imports neither.
 """
 
 from px4_logs.errors import LogError
-from px4_logs.flight_log import FlightLog
+from px4_logs.flight_log import ARMING_STATE_ARMED, FlightLog
 from px4_logs.outputs import MotorOutputs, OutputProtocol, motor_outputs
 from px4_logs.ulog import firmware_name, read_ulog
 
 __all__ = [
+    "ARMING_STATE_ARMED",
     "FlightLog",
     "LogError",
     "MotorOutputs",

@@ -43,7 +43,7 @@ HOVER_THRUST_BAND = 0.2
 AIRBORNE_HEIGHT_M = 0.5
 ARMED_GROUND_S = 1.0
 AIRBORNE_THRUST_FRACTION = 0.8
-#: vehicle_status.arming_state of an armed vehicle.
+#: vehicle_status.arming_state of an armed vehicle (PX4's msg/VehicleStatus.msg).
 ARMING_STATE_ARMED = 2
 
 Topic = Mapping[str, NDArray[Any]]
@@ -272,7 +272,7 @@ class FlightLog:
             time_s, landed = self.series("vehicle_land_detected", "landed", "airborne span")
             return _Airborne(time_s, landed < 0.5, "")
         missing = "no vehicle_land_detected"
-        arming = self._armed_samples()
+        arming = self.armed_samples()
         if arming is None:
             return (
                 f"{missing}, and no arming state (actuator_armed, vehicle_status) to derive "
@@ -327,8 +327,9 @@ class FlightLog:
             f"level {level:.2f}"
         ))  # fmt: skip
 
-    def _armed_samples(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
-        """(time s, armed) from actuator_armed, else vehicle_status.arming_state."""
+    def armed_samples(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+        """(time s, armed) from actuator_armed, else vehicle_status.arming_state; None when
+        the log has neither."""
         if "armed" in self.topics.get("actuator_armed", {}):
             time_s, armed = self.series("actuator_armed", "armed", "")
             return time_s, armed > 0.5

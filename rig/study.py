@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from credibility import CredibilityError, assess, load_plan
+from credibility import assess, load_plan
 from credibility.autoplan import write_plan
 from credibility.autoplan.responses import pilot_spans
 from credibility.report import exit_code, write_report
@@ -149,9 +149,15 @@ class Study:
         """The folder for this study: new, this study's (resumed), or refused."""
         record = self.out_dir / STUDY_FILE
         if record.exists() and not force:
-            held = json.loads(record.read_text(encoding="utf-8"))
-            if held != asdict(self.inputs):
-                differ = sorted(k for k, v in asdict(self.inputs).items() if held.get(k) != v)
+            try:
+                held = json.loads(record.read_text(encoding="utf-8"))
+            except (UnicodeDecodeError, json.JSONDecodeError) as error:
+                raise StudyError(
+                    f"{record}: not a study's record ({error}); pass --force to start over"
+                ) from None
+            recorded = held if isinstance(held, dict) else {}
+            if recorded != asdict(self.inputs):
+                differ = sorted(k for k, v in asdict(self.inputs).items() if recorded.get(k) != v)
                 raise StudyError(
                     f"{self.out_dir}: holds a study of other inputs ({', '.join(differ)} "
                     "differ); choose another --out, or pass --force to start over"
@@ -264,10 +270,7 @@ class Study:
     def report(self, advance: Callable[[str], None] | None = None) -> Verdict:
         """Score the replay with the plan; the report goes to ``report/`` (always redone:
         it is seconds, and a plan edited by hand must count)."""
-        try:
-            plan = load_plan(self.plan_path)
-        except CredibilityError as error:
-            raise StudyError(str(error)) from None
+        plan = load_plan(self.plan_path)
         assessment = assess(plan, advance or (lambda _label: None), strict=False)
         html, _ = write_report(assessment, self.out_dir / REPORT_DIR)
         return Verdict(

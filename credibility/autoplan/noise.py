@@ -8,7 +8,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from credibility.assess import ARMING_STATE_ARMED
 from credibility.autoplan.draft import Found, PlannedTest, runs, span, without_path
 from credibility.plan import NotScorable
 from px4_logs import FlightLog, LogError
@@ -85,18 +84,14 @@ def _noise_tests(
 
 
 def _armed_changes(log: FlightLog) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """When the arming state was logged and whether armed (``actuator_armed``, else
-    ``vehicle_status``): LogError when the log has neither."""
-    if "actuator_armed" in log.topics:
-        time_s, armed = log.series("actuator_armed", "armed", "arming state")
-        return time_s, armed > 0.5
-    if "vehicle_status" in log.topics:
-        time_s, state = log.series("vehicle_status", "arming_state", "arming state")
-        return time_s, state == ARMING_STATE_ARMED
-    raise LogError(
-        f"{log.path}: no arming state in the log (neither actuator_armed nor vehicle_status): "
-        "motors stopped and at idle cannot be told apart"
-    )
+    """When the arming state was logged and whether armed: LogError when the log has none."""
+    arming = log.armed_samples()
+    if arming is None:
+        raise LogError(
+            f"{log.path}: no arming state in the log (neither actuator_armed nor "
+            "vehicle_status): motors stopped and at idle cannot be told apart"
+        )
+    return arming
 
 
 def rest_segment(log: FlightLog) -> StateSegment:

@@ -12,6 +12,7 @@ import sys
 
 from rich.console import Console
 
+from credibility import CredibilityError
 from px4_logs import LogError
 from quad_model.vehicle import VehicleFileError
 from rig.cli import campaign, identify, plot, replay, run, schema, study, vehicle, view
@@ -83,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         return command.run(args, Console(stderr=True))
-    except (RigError, LogError, VehicleFileError) as error:
+    except (RigError, LogError, VehicleFileError, CredibilityError) as error:
         print(f"rig: error: {error}", file=sys.stderr)  # one line, never wrapped
         return 1
     except KeyboardInterrupt:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,7 @@ import numpy as np
 from px4_logs import FlightLog, LogError, motor_outputs
 from quad_model.vehicle import ROTOR_COUNT, Vehicle, vehicle_from_dict
 from rig.identify.generic import frame_class, generic_vehicle
+from rig.identify.report import format_estimate
 from rig.identify.results import Estimate, Identification, IdentificationError
 from rig.identify.vehicle import identify_vehicle
 from rig.identify.vibration import FITTED_POINTS, fit_vibration, read_log_vibration, rest_point
@@ -233,8 +234,8 @@ def _identified(
         )
         sources["propulsion.speed_offset_radps"] = (
             "identified",
-            f"{source}: {_pm(offset)} rad/s, hover throttle {_pm(throttle)} "
-            f"({_window(offset)}); {offset.method}",
+            f"{source}: {format_estimate(offset)} rad/s, hover throttle "
+            f"{format_estimate(throttle)} ({_window(offset)}); {offset.method}",
         )
     else:
         for key in ("propulsion.speed_slope_radps", "propulsion.speed_offset_radps"):
@@ -256,7 +257,7 @@ def _identified(
         estimate = axis.inertia_kgm2
         if rate_plant and axis.reliable and estimate is not None and not estimate.refused:
             inertia[index, index] = estimate.value
-            axes.append(f"I_{'xyz'[index] * 2} {_pm(estimate)} ({_window(estimate)})")
+            axes.append(f"I_{'xyz'[index] * 2} {format_estimate(estimate)} ({_window(estimate)})")
     if axes:
         sources["body.inertia_kgm2"] = (
             "identified",
@@ -286,8 +287,8 @@ def _identified(
         estimate = None if fitted is None else getattr(fitted, name)
         if estimate is not None and not estimate.refused:
             battery = replace(battery, **{name: estimate.value})
-            sources[key] = ("identified", f"{source}: {_pm(estimate)} ({_window(estimate)}); "
-                            f"{estimate.method}")  # fmt: skip
+            sources[key] = ("identified", f"{source}: {format_estimate(estimate)} "
+                            f"({_window(estimate)}); {estimate.method}")  # fmt: skip
         elif estimate is not None:
             keep(key, f"refused: {estimate.refused}")
         elif fitted is None:
@@ -397,10 +398,6 @@ def _spans(windows: tuple[tuple[float, float], ...]) -> str:
     return ", ".join(f"{a:.1f}-{b:.1f}" for a, b in windows) + " s"
 
 
-def _pm(estimate: Estimate) -> str:
-    return f"{estimate.value:.4g} ± {estimate.uncertainty:.2g}"
-
-
 def _window(estimate: Estimate) -> str:
     return f"{estimate.window_s[0]:.1f}-{estimate.window_s[1]:.1f} s"
 
@@ -416,12 +413,8 @@ def _tables(vehicle: Vehicle) -> list[str]:
 
 
 def _document(vehicle: Vehicle) -> dict:
-    """The vehicle as a parsed TOML document would hold it."""
-    document: dict = {"name": vehicle.name}
-    for table in _tables(vehicle):
-        params = getattr(vehicle, table)
-        document[table] = {f.name: getattr(params, f.name) for f in fields(params)}
-    return document
+    """The vehicle as a parsed TOML document would hold it (an absent optional table left out)."""
+    return {key: value for key, value in asdict(vehicle).items() if value is not None}
 
 
 def _toml_value(value: str | float | tuple | list) -> str:

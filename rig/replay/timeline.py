@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from px4_logs import FlightLog
+from px4_logs import ARMING_STATE_ARMED, FlightLog
 from quad_model.environment import GeoPoint
 from quad_model.frames import geodetic_to_ned, ned_to_geodetic
 from rig.mavlink.ground_link import PX4_MODES, MissionItem
@@ -22,8 +22,6 @@ from rig.scenarios.scenario import SetpointTrack
 
 #: PX4's navigation states (vehicle_status.nav_state) a replay acts on.
 NAV_STATE_MISSION, NAV_STATE_LOITER, NAV_STATE_OFFBOARD = 3, 4, 14
-#: PX4 vehicle_status.arming_state ARMED (msg/VehicleStatus.msg).
-ARMING_STATE_ARMED = 2
 
 
 #: The mode the log armed in is selected this long before the arm (PX4 switches modes freely

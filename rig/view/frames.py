@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pyulog
 
-from px4_logs import LogError, read_ulog
+from px4_logs import ARMING_STATE_ARMED, LogError, read_ulog
 from quad_model.frames import pwm_to_throttle
 from rig.errors import RigError
 from rig.lockstep.loop import AUTOPILOT_LOGS, Progress
@@ -30,8 +30,6 @@ from rig.lockstep.loop import AUTOPILOT_LOGS, Progress
 Frame = dict[str, object]
 #: Frames per simulated second of a playback (the live view pushes at most ~25 a wall second).
 PLAYBACK_HZ = 20
-#: PX4 ``vehicle_status.arming_state`` ARMED (msg/VehicleStatus.msg).
-_ARMING_STATE_ARMED = 2
 #: Names QGroundControl shows. PX4 px4_custom_mode.h: HEARTBEAT.custom_mode carries the main
 #: mode in bits 16-23 and, for AUTO (4), the sub mode in bits 24-31.
 _MAIN_MODES = {1: "Manual", 2: "Altitude", 3: "Position", 5: "Acro", 6: "Offboard",
@@ -140,7 +138,7 @@ def load_recording(run_dir: Path) -> Recording:
         if status is not None:
             j = _at(status["timestamp"], time_us)
             if j >= 0:
-                frame["armed"] = bool(status["arming_state"][j] == _ARMING_STATE_ARMED)
+                frame["armed"] = bool(status["arming_state"][j] == ARMING_STATE_ARMED)
                 nav_state = int(status["nav_state"][j])
                 frame["mode"] = _NAV_STATES.get(nav_state, f"nav_state {nav_state}")
         frames.append(frame)

@@ -167,3 +167,6 @@ def test_bad_input_is_one_line(tmp_path, capsys):
         Study(x500, tmp_path, mass_kg=-1.0)
     with pytest.raises(StudyError, match="--vehicle and --mass: give one"):
         Study(x500, tmp_path, vehicle="x500_v2", mass_kg=2.0)
+    (tmp_path / "study.json").write_text("{not json", encoding="utf-8")
+    with pytest.raises(StudyError, match=r"study\.json: not a study's record"):
+        Study(x500, tmp_path, vehicle="x500_v2")
