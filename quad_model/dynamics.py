@@ -38,8 +38,11 @@ from numba import njit, prange
 from quad_model import environment as _env
 from quad_model import frames as _frames
 from quad_model.frames import STANDARD_GRAVITY_MPS2
+from quad_model.vehicle import MAX_ROTORS
 
-ROTORS = 4
+#: Rotor slots in every layout: a vehicle uses the first ones, a batch's kernel loops over
+#: as many as its vehicle with the most rotors has (the throttles' rows).
+ROTORS = MAX_ROTORS
 
 # The rotation's entries as numbers (the Python side's convention): a matrix allocated at
 # each of the four derivative evaluations per substep cost half the step's time.
@@ -130,6 +133,8 @@ P_R_INTERNAL = _p.add(1)
 P_EFFICIENCY = _p.add(1)
 P_AVIONICS_W = _p.add(1)
 P_SPEED_SCALE = _p.add(ROTORS)  # √ of the thrust fraction each motor-propeller unit delivers
+P_THRUST_FACTOR = _p.add(ROTORS)  # thrust vs an isolated rotor (coaxial lower: < 1; absent: 0)
+P_TORQUE_FACTOR = _p.add(ROTORS)  # drag torque vs an isolated rotor (as the thrust factor)
 P_HOME_ALT = _p.add(1)
 P_WIND_STEADY = _p.add(3)
 P_W20 = _p.add(1)
@@ -265,8 +270,10 @@ def _add_rotor(
     w[(X_ROTOR_ANGLE + i) * LANES + dv] = omega
     # Thrust along -z FRD, less in a climb (air through the disc from above, vb2 < 0) and
     # more in a descent, plus induced drag against the in-plane air velocity.
-    thrust = ct * omega * omega + w[P_AXIAL_INFLOW * LANES + pv] * omega * vb2
-    torque = cq * omega * omega
+    ct_i = ct * w[(P_THRUST_FACTOR + i) * LANES + pv]
+    cq_i = cq * w[(P_TORQUE_FACTOR + i) * LANES + pv]
+    thrust = ct_i * omega * omega + w[P_AXIAL_INFLOW * LANES + pv] * omega * vb2
+    torque = cq_i * omega * omega
     w[(A_THRUST + i) * LANES + av] = thrust
     w[(A_TORQUE + i) * LANES + av] = torque
     k_drag = w[P_ROTOR_DRAG * LANES + pv]
@@ -291,11 +298,23 @@ def _add_rotor(
     )
 
 
+@_inlined
+def _shaft_power(w: np.ndarray, v: int, i: int, cq: float) -> float:
+    """Rotor ``i``'s shaft power in lane ``v`` at the stage state."""
+    omega = w[(X_ROTOR_SPEED + i) * LANES + W_STAGE * LANES + v]
+    return cq * w[(P_TORQUE_FACTOR + i) * LANES + W_PARAMS * LANES + v] * omega * omega * omega
+
+
 @_kernel
-def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
+def derivative(w: np.ndarray, mount: int, rotors: int, lanes: int) -> None:
     """Time derivative of lanes ``0..lanes-1`` of a chunk's scratch ``w`` at its RK4 stage
-    state (W_STAGE): writes the slopes (W_SLOPE) and, as a by-product, the outputs
-    (W_OUTPUT). Pure: reads only the stage state, the parameters and the held inputs.
+    state (W_STAGE), for vehicles of ``rotors`` rotor slots: writes the slopes (W_SLOPE)
+    and, as a by-product, the outputs (W_OUTPUT). Pure: reads only the stage state, the
+    parameters and the held inputs.
+
+    Every vehicle has at least four rotors; the slots past them are written out behind
+    tests of ``rotors``, which :func:`_advance_chunk` passes as a compile-time constant,
+    so the tests vanish from the machine code.
     """
     for v in range(lanes):
         xv = W_STAGE * LANES + v
@@ -316,9 +335,20 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
         # Propulsion: shaft power sets the battery load, the battery voltage sets motor speed.
         ct = w[P_CT * LANES + pv] * density_ratio
         cq = w[P_CQ * LANES + pv] * density_ratio
-        w0, w1 = w[X_ROTOR_SPEED * LANES + xv], w[(X_ROTOR_SPEED + 1) * LANES + xv]
-        w2, w3 = w[(X_ROTOR_SPEED + 2) * LANES + xv], w[(X_ROTOR_SPEED + 3) * LANES + xv]
-        shaft_w = cq * w0 * w0 * w0 + cq * w1 * w1 * w1 + cq * w2 * w2 * w2 + cq * w3 * w3 * w3
+        shaft_w = (
+            _shaft_power(w, v, 0, cq)
+            + _shaft_power(w, v, 1, cq)
+            + _shaft_power(w, v, 2, cq)
+            + _shaft_power(w, v, 3, cq)
+        )
+        if rotors > 4:
+            shaft_w += _shaft_power(w, v, 4, cq)
+        if rotors > 5:
+            shaft_w += _shaft_power(w, v, 5, cq)
+        if rotors > 6:
+            shaft_w += _shaft_power(w, v, 6, cq)
+        if rotors > 7:
+            shaft_w += _shaft_power(w, v, 7, cq)
         load_w = shaft_w * w[P_EFFICIENCY_INV * LANES + pv] + w[P_AVIONICS_W * LANES + pv]
         voltage, current = battery_terminal(w, pv, w[X_CHARGE_USED * LANES + xv], load_w)
         voltage_ratio = voltage * w[P_CURVE_VOLTAGE_INV * LANES + pv]
@@ -343,11 +373,20 @@ def derivative(w: np.ndarray, mount: int, lanes: int) -> None:
             0.0,
         )
         # Written out rotor by rotor: a loop here would be the innermost one, and LLVM
-        # vectorizes only innermost loops (the lanes' loop is the one to vectorize).
+        # vectorizes only innermost loops (the lanes' loop is the one to vectorize). The
+        # tests of ``rotors`` fold away for a compile-time count.
         fm = _add_rotor(w, v, 0, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
         fm = _add_rotor(w, v, 1, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
         fm = _add_rotor(w, v, 2, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
         fm = _add_rotor(w, v, 3, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
+        if rotors > 4:
+            fm = _add_rotor(w, v, 4, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
+        if rotors > 5:
+            fm = _add_rotor(w, v, 5, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
+        if rotors > 6:
+            fm = _add_rotor(w, v, 6, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
+        if rotors > 7:
+            fm = _add_rotor(w, v, 7, ct, cq, voltage_ratio, vb0, vb1, vb2, fm)
         fx, fy, fz, mx, my, mz, rotor_momentum_z = fm
 
         p_ = w[X_RATE * LANES + xv]
@@ -531,7 +570,7 @@ _N_DYN = X_DYN * LANES
 
 
 @_kernel
-def _rk4_step(w: np.ndarray, mount: int, dt: float, lanes: int) -> None:
+def _rk4_step(w: np.ndarray, mount: int, rotors: int, dt: float, lanes: int) -> None:
     """One classic RK4 substep of every lane, then the quaternion renormalized, rotor speeds
     kept >= 0 and rotor angles wrapped.
 
@@ -544,19 +583,19 @@ def _rk4_step(w: np.ndarray, mount: int, dt: float, lanes: int) -> None:
     half = 0.5 * dt
     for i in range(_N_DYN):
         w[_STAGE + i] = w[_STATE + i]
-    derivative(w, mount, lanes)
+    derivative(w, mount, rotors, lanes)
     for i in range(_N_DYN):
         w[_SLOPE_SUM + i] = w[_SLOPE + i]
         w[_STAGE + i] = w[_STATE + i] + half * w[_SLOPE + i]
-    derivative(w, mount, lanes)
+    derivative(w, mount, rotors, lanes)
     for i in range(_N_DYN):
         w[_SLOPE_SUM + i] += 2.0 * w[_SLOPE + i]
         w[_STAGE + i] = w[_STATE + i] + half * w[_SLOPE + i]
-    derivative(w, mount, lanes)
+    derivative(w, mount, rotors, lanes)
     for i in range(_N_DYN):
         w[_SLOPE_SUM + i] += 2.0 * w[_SLOPE + i]
         w[_STAGE + i] = w[_STATE + i] + dt * w[_SLOPE + i]
-    derivative(w, mount, lanes)
+    derivative(w, mount, rotors, lanes)
     for i in range(_N_DYN):
         w[_STATE + i] += dt / 6.0 * (w[_SLOPE_SUM + i] + w[_SLOPE + i])
     for v in range(lanes):
@@ -570,7 +609,7 @@ def _rk4_step(w: np.ndarray, mount: int, dt: float, lanes: int) -> None:
         )
         for j in range(4):
             w[(q + j) * LANES + xv] /= norm
-        for i in range(ROTORS):
+        for i in range(rotors):
             w[(X_ROTOR_SPEED + i) * LANES + xv] = max(w[(X_ROTOR_SPEED + i) * LANES + xv], 0.0)
             # Python's angle % 2π (exactly so for one turn per step: a - 2π is exact there),
             # as arithmetic the vector units have instead of a libm fmod call.
@@ -650,6 +689,7 @@ def _substeps(
     noise: np.ndarray,
     first: int,
     mount: int,
+    rotors: int,
     n_steps: int,
     dt: float,
     lanes: int,
@@ -660,14 +700,35 @@ def _substeps(
             w[(W_VEL_START + axis) * LANES + v] = w[(X_VEL + axis) * LANES + _STATE + v]
     for step in range(n_steps):
         _air(w, noise, first, step, dt, lanes)
-        _rk4_step(w, mount, dt, lanes)
+        _rk4_step(w, mount, rotors, dt, lanes)
         if mount == MOUNT_FREE:
             _ground_contact(w, dt, lanes)
     _air(w, noise, first, 0, 0.0, lanes)
     for i in range(_N_DYN):
         w[_STAGE + i] = w[_STATE + i]
-    derivative(w, mount, lanes)
+    derivative(w, mount, rotors, lanes)
     _outputs(w, n_steps * dt, lanes)
+
+
+@_kernel
+def _substeps_of(
+    w: np.ndarray,
+    noise: np.ndarray,
+    first: int,
+    mount: int,
+    rotors: int,
+    n_steps: int,
+    dt: float,
+    lanes: int,
+) -> None:
+    """:func:`_substeps` with the rotor count (one of ROTOR_COUNTS) as a compile-time
+    constant, as :func:`_advance_chunk` does with the lane count."""
+    if rotors == 4:
+        _substeps(w, noise, first, mount, 4, n_steps, dt, lanes)
+    elif rotors == 6:
+        _substeps(w, noise, first, mount, 6, n_steps, dt, lanes)
+    else:
+        _substeps(w, noise, first, mount, 8, n_steps, dt, lanes)
 
 
 @_kernel
@@ -698,7 +759,8 @@ def _advance_chunk(
     for j in range(P_SIZE):
         for v in range(lanes):
             w[(W_PARAMS + j) * LANES + v] = params[j, first + v]
-    for i in range(ROTORS):
+    rotors = throttles.shape[0]
+    for i in range(rotors):
         for v in range(lanes):
             w[(W_INPUT + U_THROTTLE + i) * LANES + v] = throttles[i, first + v]
     # A whole chunk passes its lane count as a compile-time constant: numba compiles the
@@ -706,9 +768,9 @@ def _advance_chunk(
     # the trip-count tests and scalar remainders of a loop of unknown length. A part chunk
     # runs the same source with a run-time count; both do the same IEEE operations.
     if lanes == LANES:
-        _substeps(w, noise, first, mount, n_steps, dt, LANES)
+        _substeps_of(w, noise, first, mount, rotors, n_steps, dt, LANES)
     else:
-        _substeps(w, noise, first, mount, n_steps, dt, lanes)
+        _substeps_of(w, noise, first, mount, rotors, n_steps, dt, lanes)
     for j in range(X_SIZE):
         for v in range(lanes):
             states[j, first + v] = w[(W_STATE + j) * LANES + v]
@@ -740,8 +802,9 @@ def advance_serial(
 ) -> bool:
     """Advance each vehicle ``n_steps`` substeps of ``dt`` with constant throttles.
 
-    Arrays are [slot, vehicle] (``noise`` is [vehicle, step, 3], ``work`` one scratch
-    block per chunk of LANES vehicles). Returns False, without touching any state, when a
+    Arrays are [slot, vehicle] (``throttles`` one row per rotor slot the batch uses,
+    ``noise`` [vehicle, step, 3], ``work`` one scratch block per chunk of LANES vehicles).
+    Returns False, without touching any state, when a
     throttle is not finite.
     """
     if not _finite(throttles):

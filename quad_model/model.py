@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from quad_model import dynamics as dyn
 from quad_model.environment import Environment
 from quad_model.frames import STANDARD_GRAVITY_MPS2
-from quad_model.vehicle import ROTOR_COUNT, BatteryParams, Vehicle
+from quad_model.vehicle import BatteryParams, Vehicle
 
 DEFAULT_PHYSICS_RATE_HZ = 5000
 #: Above this many vehicles the batch runs on all cores (thread start-up costs ~10 µs).
@@ -50,11 +50,14 @@ class VehicleTruth:
     their slots lazily instead of building twenty arrays.
     """
 
-    __slots__ = ("_outputs", "_state")
+    __slots__ = ("_outputs", "_rotors", "_state")
 
-    def __init__(self, state: NDArray[np.float64], outputs: NDArray[np.float64]) -> None:
+    def __init__(
+        self, state: NDArray[np.float64], outputs: NDArray[np.float64], rotors: int
+    ) -> None:
         self._state = state.copy()
         self._outputs = outputs.copy()
+        self._rotors = rotors
         self._state.flags.writeable = False
         self._outputs.flags.writeable = False
 
@@ -101,20 +104,20 @@ class VehicleTruth:
 
     @property
     def rotor_speed_radps(self) -> NDArray[np.float64]:
-        return self._state[dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + ROTOR_COUNT]
+        return self._state[dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + self._rotors]
 
     @property
     def rotor_angle_rad(self) -> NDArray[np.float64]:
         """Rotor angle in each rotor's own spin direction, 0..2π (phase of the vibration)."""
-        return self._state[dyn.X_ROTOR_ANGLE : dyn.X_ROTOR_ANGLE + ROTOR_COUNT]
+        return self._state[dyn.X_ROTOR_ANGLE : dyn.X_ROTOR_ANGLE + self._rotors]
 
     @property
     def rotor_thrust_n(self) -> NDArray[np.float64]:
-        return self._outputs[dyn.A_THRUST : dyn.A_THRUST + ROTOR_COUNT]
+        return self._outputs[dyn.A_THRUST : dyn.A_THRUST + self._rotors]
 
     @property
     def rotor_torque_nm(self) -> NDArray[np.float64]:
-        return self._outputs[dyn.A_TORQUE : dyn.A_TORQUE + ROTOR_COUNT]
+        return self._outputs[dyn.A_TORQUE : dyn.A_TORQUE + self._rotors]
 
     @property
     def force_frd_n(self) -> NDArray[np.float64]:
@@ -180,8 +183,11 @@ def pack_params(vehicle: Vehicle, environment: Environment) -> NDArray[np.float6
     p[dyn.P_INERTIA_INV : dyn.P_INERTIA_INV + 9] = np.linalg.inv(inertia).ravel()
     p[dyn.P_DRAG_AREA : dyn.P_DRAG_AREA + 3] = body.drag_area_m2
     p[dyn.P_ANGULAR_DRAG : dyn.P_ANGULAR_DRAG + 3] = body.angular_drag_nms2
-    p[dyn.P_ROTOR_POS : dyn.P_ROTOR_POS + 3 * ROTOR_COUNT] = np.ravel(prop.position_frd_m)
-    p[dyn.P_SPIN : dyn.P_SPIN + ROTOR_COUNT] = prop.spin_direction
+    n = prop.rotor_count
+    p[dyn.P_ROTOR_POS : dyn.P_ROTOR_POS + 3 * n] = np.ravel(prop.position_frd_m)
+    p[dyn.P_SPIN : dyn.P_SPIN + n] = prop.spin_direction
+    p[dyn.P_THRUST_FACTOR : dyn.P_THRUST_FACTOR + n] = prop.thrust_factors
+    p[dyn.P_TORQUE_FACTOR : dyn.P_TORQUE_FACTOR + n] = prop.torque_factors
     p[dyn.P_CT] = prop.thrust_coefficient_n_per_radps2
     p[dyn.P_CQ] = prop.torque_coefficient_nm_per_radps2
     p[dyn.P_RHO_REF] = prop.reference_air_density_kgpm3
@@ -200,7 +206,7 @@ def pack_params(vehicle: Vehicle, environment: Environment) -> NDArray[np.float6
     p[dyn.P_R_INTERNAL] = bat.internal_resistance_ohm
     p[dyn.P_EFFICIENCY] = bat.propulsion_efficiency
     p[dyn.P_AVIONICS_W] = bat.avionics_power_w
-    p[dyn.P_SPEED_SCALE : dyn.P_SPEED_SCALE + ROTOR_COUNT] = 1.0
+    p[dyn.P_SPEED_SCALE : dyn.P_SPEED_SCALE + n] = 1.0
     p[dyn.P_HOME_ALT] = environment.home.alt_amsl_m
     p[dyn.P_WIND_STEADY : dyn.P_WIND_STEADY + 3] = environment.wind.steady_ned_mps
     p[dyn.P_W20] = environment.wind.wind_at_6m_mps
@@ -220,10 +226,12 @@ def pack_params(vehicle: Vehicle, environment: Environment) -> NDArray[np.float6
 class QuadBatch:
     """N vehicles stepped together by one compiled call (campaigns, Monte-Carlo).
 
-    ``vehicles`` is one vehicle for all N, or one per row (parameter dispersion). All
-    start at rest on the ground at home, level, facing north, battery full. Randomness
-    (turbulence) comes only from ``rng``, drawn in vehicle order, so a seed gives the same
-    numbers on any core count.
+    ``vehicles`` is one vehicle for all N, or one per row (parameter dispersion), of any
+    rotor counts: the throttles have a column per rotor of the vehicle with the most
+    (:attr:`rotors`), and a vehicle with fewer leaves the columns past its own unused
+    (its results are the same as alone, bit for bit). All start at rest on the ground at
+    home, level, facing north, battery full. Randomness (turbulence) comes only from
+    ``rng``, drawn in vehicle order, so a seed gives the same numbers on any core count.
     """
 
     def __init__(
@@ -258,13 +266,16 @@ class QuadBatch:
         self._params = np.array([rows[id(v)] for v in self.vehicles]).T.copy()
         self._states = np.zeros((dyn.X_SIZE, count))
         self._outputs = np.zeros((dyn.A_SIZE, count))
-        self._throttles = np.zeros((ROTOR_COUNT, count))
+        #: Throttle columns: the most rotors any vehicle of the batch has.
+        self.rotors = max(v.propulsion.rotor_count for v in self.vehicles)
+        self._rotor_counts = np.array([v.propulsion.rotor_count for v in self.vehicles])
+        self._throttles = np.zeros((self.rotors, count))
         self.params = self._params.T
         self.states = self._states.T
         self.outputs = self._outputs.T
         self.throttles = self._throttles.T
         #: Thrust fraction of each motor (set_motor_health); the kernel uses its square root.
-        self.motor_health = np.ones((count, ROTOR_COUNT))
+        self.motor_health = np.ones((count, self.rotors))
         self._work = np.zeros((-(-count // dyn.LANES), dyn.W_SIZE * dyn.LANES))
         self._turbulent = bool(np.any(self.params[:, dyn.P_W20] > 0))
         self._no_noise = np.zeros((count, 0, 3))
@@ -284,7 +295,7 @@ class QuadBatch:
         velocity_ned_mps: ArrayLike = (0.0, 0.0, 0.0),
         attitude_quat: ArrayLike = (1.0, 0.0, 0.0, 0.0),
         angular_rate_frd_radps: ArrayLike = (0.0, 0.0, 0.0),
-        rotor_speed_radps: ArrayLike = (0.0, 0.0, 0.0, 0.0),
+        rotor_speed_radps: ArrayLike = 0.0,
         time_us: int = 0,
         battery_voltage_v: ArrayLike | None = None,
     ) -> None:
@@ -304,10 +315,17 @@ class QuadBatch:
             raise ModelInputError(f"attitude_quat={attitude_quat!s} is not a unit quaternion")
         s[:, dyn.X_QUAT : dyn.X_QUAT + 4] = quat / norms[:, None]
         s[:, dyn.X_RATE : dyn.X_RATE + 3] = np.broadcast_to(angular_rate_frd_radps, (n, 3))
-        speeds = np.broadcast_to(rotor_speed_radps, (n, ROTOR_COUNT))
+        try:
+            speeds = np.broadcast_to(rotor_speed_radps, (n, self.rotors))
+        except ValueError:
+            raise ModelInputError(
+                f"rotor_speed_radps={rotor_speed_radps!s} is not one speed or {self.rotors}"
+            ) from None
         if np.any(speeds < 0):
             raise ModelInputError(f"rotor_speed_radps={rotor_speed_radps!s} must be >= 0")
-        s[:, dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + ROTOR_COUNT] = speeds
+        s[:, dyn.X_ROTOR_SPEED : dyn.X_ROTOR_SPEED + self.rotors] = speeds
+        for row, count in zip(s, self._rotor_counts, strict=True):
+            row[dyn.X_ROTOR_SPEED + count : dyn.X_ROTOR_SPEED + dyn.ROTORS] = 0.0
         self._start_us, self._steps = int(time_us), 0
         s[:, dyn.X_TIME_US] = self._start_us
         if battery_voltage_v is not None:
@@ -326,7 +344,8 @@ class QuadBatch:
         self.advance(self.throttles, 0.0)
 
     def advance(self, throttles: ArrayLike, duration_s: float) -> None:
-        """Hold ESC throttles (N×4, normalized 0..1, PX4 motor order) for ``duration_s``.
+        """Hold ESC throttles (N × :attr:`rotors`, normalized 0..1, PX4 motor order) for
+        ``duration_s``.
 
         Throttles outside 0..1 are clamped, as an ESC does; a non-finite value is refused.
         ``duration_s`` must be a whole number of physics steps (1 ms = 5 steps at 5 kHz).
@@ -383,17 +402,18 @@ class QuadBatch:
         """
         if not 0.0 <= thrust_fraction <= 1.0:
             raise ModelInputError(f"thrust_fraction={thrust_fraction} must be within 0..1")
-        if not 0 <= motor < ROTOR_COUNT:
-            raise ModelInputError(f"motor={motor} must be within 0..{ROTOR_COUNT - 1}")
+        rotors = int(self._rotor_counts[vehicle_index])
+        if not 0 <= motor < rotors:
+            raise ModelInputError(f"motor={motor} must be within 0..{rotors - 1}")
         self.motor_health[vehicle_index, motor] = thrust_fraction
         self.params[vehicle_index, dyn.P_SPEED_SCALE + motor] = math.sqrt(thrust_fraction)
 
     def truth(self, index: int) -> VehicleTruth:
         """Ground truth of one vehicle (a snapshot: safe to keep)."""
-        return VehicleTruth(self.states[index], self.outputs[index])
+        return VehicleTruth(self.states[index], self.outputs[index], int(self._rotor_counts[index]))
 
     def hover_throttle(self, index: int = 0) -> float:
-        """Throttle at which four healthy rotors carry the weight here and now.
+        """Throttle at which the healthy rotors, turning alike, carry the weight here and now.
 
         Solves the propulsion chain backwards at the vehicle's air density and battery
         charge: hover speed from thrust = weight, battery voltage under the hover load,
@@ -404,8 +424,10 @@ class QuadBatch:
         density = dyn.air_density_kgpm3(block, 0, s[dyn.X_POS + 2])
         density_ratio = density / p[dyn.P_RHO_REF]
         ct, cq = p[dyn.P_CT] * density_ratio, p[dyn.P_CQ] * density_ratio
-        speed = math.sqrt(p[dyn.P_MASS] * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * ct))
-        load_w = ROTOR_COUNT * cq * speed**3 / p[dyn.P_EFFICIENCY] + p[dyn.P_AVIONICS_W]
+        thrust_factors = p[dyn.P_THRUST_FACTOR : dyn.P_THRUST_FACTOR + dyn.ROTORS].sum()
+        torque_factors = p[dyn.P_TORQUE_FACTOR : dyn.P_TORQUE_FACTOR + dyn.ROTORS].sum()
+        speed = math.sqrt(p[dyn.P_MASS] * STANDARD_GRAVITY_MPS2 / (thrust_factors * ct))
+        load_w = torque_factors * cq * speed**3 / p[dyn.P_EFFICIENCY] + p[dyn.P_AVIONICS_W]
         voltage, _ = dyn.battery_terminal(block, 0, s[dyn.X_CHARGE_USED], load_w)
         curve_speed = speed * p[dyn.P_CURVE_VOLTAGE] / voltage
         return (curve_speed - p[dyn.P_SPEED_OFFSET]) / p[dyn.P_SPEED_SLOPE]
@@ -461,11 +483,13 @@ class QuadModel:
         self._batch.reset(**state)
 
     def advance(self, command: ArrayLike, duration_s: float) -> None:
-        """Hold the four ESC throttles (0..1, PX4 order) for ``duration_s``."""
+        """Hold the ESC throttles, one per rotor (0..1, PX4 order), for ``duration_s``."""
         try:
             self._batch.throttles[0] = command
         except ValueError:
-            raise ModelInputError(f"command {command!r} is not {ROTOR_COUNT} throttles") from None
+            raise ModelInputError(
+                f"command {command!r} is not {self._batch.rotors} throttles"
+            ) from None
         self._batch._run(duration_s)
 
     def set_motor_health(self, motor: int, thrust_fraction: float) -> None:

@@ -25,7 +25,7 @@ from quad_model import _sensor_kernels as _kernels
 from quad_model.environment import Environment
 from quad_model.frames import body_to_ned, ned_to_geodetic
 from quad_model.model import VehicleTruth
-from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, RangefinderParams, Vehicle
+from quad_model.vehicle import LEVEL_TABLES, RangefinderParams, Vehicle
 
 DEFAULT_IMU_RATE_HZ = 1000.0
 DEFAULT_MAG_RATE_HZ = 100.0
@@ -181,7 +181,8 @@ class ImuModel:
         )
         amplitudes = (vib.accel_harmonic_amplitude_mps2, vib.gyro_harmonic_amplitude_radps)
         # One random phase per (harmonic, rotor, axis); accel's drawn first.
-        phases = [rng.uniform(0, 2 * np.pi, (len(a), ROTOR_COUNT, 3)) for a in amplitudes]
+        rotors = vehicle.propulsion.rotor_count
+        phases = [rng.uniform(0, 2 * np.pi, (len(a), rotors, 3)) for a in amplitudes]
         self._normals = NormalBlocks(rng)
         # The kernel's flat layout: one row per triad, in the order (ACCEL, GYRO).
         k = _kernels
@@ -202,7 +203,7 @@ class ImuModel:
         # Each tone as its (A·cos φ, A·sin φ) pair; a triad with fewer harmonics is padded
         # with silent ones.
         harmonics = max(map(len, amplitudes))
-        self._tone_quadrature = np.zeros((k.TRIADS, harmonics, ROTOR_COUNT, 3, 2))
+        self._tone_quadrature = np.zeros((k.TRIADS, harmonics, rotors, 3, 2))
         for quadrature, amplitude, phase in zip(
             self._tone_quadrature, amplitudes, phases, strict=True
         ):

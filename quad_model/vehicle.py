@@ -3,7 +3,7 @@
 A vehicle file has one table per dataclass below (``[body]``, ``[propulsion]``, ...); every
 key is required, unknown keys are refused, and each value's provenance is a comment in the
 file. Rotors are listed in PX4's order (quad X: 0 front-right CCW, 1 rear-left CCW,
-2 front-left CW, 3 rear-right CW).
+2 front-left CW, 3 rear-right CW; other frames as PX4's ``CA_ROTORn`` of their airframe).
 """
 
 import itertools
@@ -32,12 +32,20 @@ from quad_model.frames import STANDARD_GRAVITY_MPS2
 
 #: Where the bundled vehicle files live (``load_vehicle("f450_high_precision")``).
 VEHICLES_DIR = Path(__file__).parent / "vehicles"
-ROTOR_COUNT = 4
+#: The rotor counts the model flies: quads, hexas and octos (flat or coaxial: Y6, X8), each
+#: a compile-time case of the kernel (:mod:`quad_model.dynamics`).
+ROTOR_COUNTS = (4, 6, 8)
+MIN_ROTORS, MAX_ROTORS = min(ROTOR_COUNTS), max(ROTOR_COUNTS)
+#: Two rotors whose hubs lie closer than this in the body x-y plane are a coaxial pair.
+COAXIAL_HUB_TOLERANCE_M = 0.02
 #: The bundled vehicle of each PX4 airframe (``SYS_AUTOSTART``; PX4's ROMFS init.d airframes).
 AIRFRAMES = {4019: "x500_v2"}
 
 #: Magnitudes (noise levels, coefficients, drag areas) are >= 0 per axis.
 NonNegative3 = tuple[NonNegative, NonNegative, NonNegative]
+#: One entry per rotor, MIN_ROTORS to MAX_ROTORS of them.
+RotorPositions = Annotated[tuple[Vector3, ...], Field(min_length=MIN_ROTORS, max_length=MAX_ROTORS)]
+RotorSpins = Annotated[tuple[Number, ...], Field(min_length=MIN_ROTORS, max_length=MAX_ROTORS)]
 #: The vibration's per-operating-point level tables, in the IMU kernel's order
 #: (triad accel then gyro; tones then broadband).
 LEVEL_TABLES = (
@@ -94,10 +102,11 @@ class BodyParams:
 class PropulsionParams:
     """ESC → motor → propeller, identical units; thrust and torque scale with air density."""
 
-    #: Rotor hub positions relative to the centre of mass, FRD, PX4 motor order.
-    position_frd_m: tuple[Vector3, Vector3, Vector3, Vector3]
+    #: Rotor hub positions relative to the centre of mass, FRD, PX4 motor order: one per
+    #: rotor (4, 6 or 8; two hubs at the same x, y are a coaxial pair).
+    position_frd_m: RotorPositions
     #: +1 for a rotor spinning counter-clockwise seen from above, -1 clockwise.
-    spin_direction: tuple[Number, Number, Number, Number]
+    spin_direction: RotorSpins
     thrust_coefficient_n_per_radps2: Positive
     torque_coefficient_nm_per_radps2: Positive
     #: Air density at which the two coefficients were measured.
@@ -120,12 +129,49 @@ class PropulsionParams:
     #: gains it at the same speed (blade element and momentum theory: dT/dV = -k·ω); 0: not
     #: modelled.
     axial_inflow_coefficient_ns_per_m_rad: NonNegative = 0.0
+    #: The lower rotor of a coaxial pair works in the upper one's slipstream: at the same
+    #: speed it gives this fraction of an isolated rotor's thrust and takes this fraction
+    #: of its drag torque (1: not modelled). The upper rotor is unaffected.
+    coaxial_thrust_factor: Annotated[Number, Field(gt=0, le=1)] = 1.0
+    coaxial_torque_factor: Annotated[Number, Field(gt=0, le=1)] = 1.0
 
     def __post_init__(self) -> None:
         if any(s not in (-1.0, 1.0) for s in self.spin_direction):
             raise FieldError(
                 "spin_direction", list(self.spin_direction), "must hold +1 (CCW) or -1 (CW)"
             )
+        if len(self.position_frd_m) not in ROTOR_COUNTS:
+            counts = ", ".join(map(str, ROTOR_COUNTS))
+            reason = f"has {len(self.position_frd_m)} rotors; the model flies {counts}"
+            raise FieldError("position_frd_m", list(self.position_frd_m), reason)
+        if len(self.spin_direction) != len(self.position_frd_m):
+            reason = f"needs one entry per rotor of position_frd_m ({len(self.position_frd_m)})"
+            raise FieldError("spin_direction", list(self.spin_direction), reason)
+
+    @property
+    def rotor_count(self) -> int:
+        return len(self.position_frd_m)
+
+    @property
+    def coaxial_lower(self) -> tuple[bool, ...]:
+        """Per rotor: whether it is the lower one of a coaxial pair (its hub within
+        COAXIAL_HUB_TOLERANCE_M of another's in x, y and below it, FRD z larger)."""
+        hubs = np.array(self.position_frd_m)
+        lower = []
+        for x, y, z in hubs:
+            near = np.hypot(hubs[:, 0] - x, hubs[:, 1] - y) < COAXIAL_HUB_TOLERANCE_M
+            lower.append(bool(np.any(near & (hubs[:, 2] < z))))
+        return tuple(lower)
+
+    @property
+    def thrust_factors(self) -> tuple[float, ...]:
+        """Each rotor's thrust relative to an isolated rotor at the same speed."""
+        return tuple(self.coaxial_thrust_factor if low else 1.0 for low in self.coaxial_lower)
+
+    @property
+    def torque_factors(self) -> tuple[float, ...]:
+        """Each rotor's drag torque relative to an isolated rotor at the same speed."""
+        return tuple(self.coaxial_torque_factor if low else 1.0 for low in self.coaxial_lower)
 
 
 @table
@@ -295,10 +341,11 @@ class Vehicle:
 
     @property
     def hover_rotor_speed_radps(self) -> float:
-        """Rotor speed at which four rotors carry the weight in the reference air."""
+        """Rotor speed at which all rotors, turning alike, carry the weight in the
+        reference air."""
         p = self.propulsion
         weight_n = self.body.mass_kg * STANDARD_GRAVITY_MPS2
-        return math.sqrt(weight_n / (ROTOR_COUNT * p.thrust_coefficient_n_per_radps2))
+        return math.sqrt(weight_n / (sum(p.thrust_factors) * p.thrust_coefficient_n_per_radps2))
 
 
 def load_vehicle(name_or_path: str | Path) -> Vehicle:

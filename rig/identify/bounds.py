@@ -13,6 +13,10 @@ from dataclasses import dataclass, replace
 
 from rig.identify.results import Estimate
 
+#: The rotor count the identification's fits are written for (a quad's mixer, hover and
+#: thrust stand); the model flies more (quad_model.vehicle.ROTOR_COUNTS).
+QUAD_ROTORS = 4
+
 
 @dataclass(frozen=True)
 class Bound:

@@ -11,8 +11,8 @@ from numpy.typing import NDArray
 from px4_logs import FlightLog, MotorOutputs
 from px4_logs.flight_log import HOVER_MAX_RATE_RADPS, HOVER_MAX_SPEED_MPS, MIN_HOVER_S
 from quad_model.frames import STANDARD_GRAVITY_MPS2, pwm_to_throttle
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
-from rig.identify.bounds import bounded, motor_refusal
+from quad_model.vehicle import Vehicle
+from rig.identify.bounds import QUAD_ROTORS, bounded, motor_refusal
 from rig.identify.power import hover_thrust_coefficient, mean_in
 from rig.identify.results import Estimate, HoverIdentification, IdentificationError
 from rig.identify.rotor_line import identify_rotor_line
@@ -28,7 +28,7 @@ def identify_hover(log: FlightLog, vehicle: Vehicle, outputs: MotorOutputs) -> H
         )
     span = (windows[0][0], windows[-1][1])
     per_motor = []
-    for motor in range(ROTOR_COUNT):
+    for motor in range(QUAD_ROTORS):
         t, u = log.series("actuator_motors", f"control[{motor}]", "hover motor commands")
         per_motor.append(mean_in(t, u, windows))
     commands = np.array(per_motor)  # motors × samples
@@ -75,7 +75,7 @@ def identify_hover(log: FlightLog, vehicle: Vehicle, outputs: MotorOutputs) -> H
         thrust_coefficient = line.thrust_coefficient
     else:
         k_t = prop.thrust_coefficient_n_per_radps2 * density / prop.reference_air_density_kgpm3
-        speed = math.sqrt(vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (ROTOR_COUNT * k_t))
+        speed = math.sqrt(vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2 / (QUAD_ROTORS * k_t))
         speed_std = 0.0
         speed_source = f"ω_h = √(mg/4k_T) = {speed:.0f} rad/s (ρ from {density_source})"
     # quad_model.dynamics: ω = (slope·σ + offset)·V/V_curve. Keep ω(σ=1) = slope + offset

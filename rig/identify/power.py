@@ -11,7 +11,8 @@ from numpy.typing import NDArray
 
 from px4_logs import FlightLog
 from quad_model.frames import STANDARD_GRAVITY_MPS2
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from quad_model.vehicle import Vehicle
+from rig.identify.bounds import QUAD_ROTORS
 
 
 def mean_in(time_s: NDArray, values: NDArray, windows: Iterable[tuple[float, float]]) -> NDArray:
@@ -41,7 +42,7 @@ def shaft_power_w(vehicle: Vehicle, density: float, speed_radps: float) -> float
     """All rotors' shaft power at ``speed_radps``: 4·k_Q·ω³, k_Q at the air density."""
     prop = vehicle.propulsion
     k_q = prop.torque_coefficient_nm_per_radps2 * density / prop.reference_air_density_kgpm3
-    return ROTOR_COUNT * k_q * speed_radps**3
+    return QUAD_ROTORS * k_q * speed_radps**3
 
 
 def hover_thrust_coefficient(vehicle: Vehicle, speed_radps: float, density: float) -> float:
@@ -49,4 +50,4 @@ def hover_thrust_coefficient(vehicle: Vehicle, speed_radps: float, density: floa
     ``density``: the rotors together hold the weight, N·k_T·ω_h² = mg."""
     reference = vehicle.propulsion.reference_air_density_kgpm3
     weight = vehicle.body.mass_kg * STANDARD_GRAVITY_MPS2
-    return weight / (ROTOR_COUNT * speed_radps**2) * reference / density
+    return weight / (QUAD_ROTORS * speed_radps**2) * reference / density

@@ -18,10 +18,10 @@ from credibility.spectral import default_windows, estimate_response, log_grid
 from px4_logs import FlightLog
 from quad_model.frames import pwm_to_throttle
 from quad_model.model import Mount, QuadModel
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from quad_model.vehicle import Vehicle
 from rig.autopilots.reference.control import ControlAllocator
 from rig.autopilots.reference.params import Parameters
-from rig.identify.bounds import bounded, refusal
+from rig.identify.bounds import QUAD_ROTORS, bounded, refusal
 from rig.identify.results import AXES, MAX_RELATIVE_UNCERTAINTY, AxisIdentification, Estimate
 
 #: Below this log rate the rate loop's torque noise (D term) folds into the analysis band and
@@ -65,7 +65,7 @@ TORQUE_STEP = 0.05
 SETTLE_TIME_CONSTANTS = 20.0
 
 
-_GEOMETRY_PARAM = re.compile(rf"CA_ROTOR[0-{ROTOR_COUNT - 1}]_(PX|PY|KM)")
+_GEOMETRY_PARAM = re.compile(rf"CA_ROTOR[0-{QUAD_ROTORS - 1}]_(PX|PY|KM)")
 
 
 # ------------------------------------------------------------------ torque per unit

@@ -10,7 +10,8 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from px4_logs import FlightLog
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from quad_model.vehicle import Vehicle
+from rig.identify.bounds import QUAD_ROTORS
 from rig.identify.power import hover_power_into_motors, hover_thrust_coefficient, shaft_power_w
 from rig.identify.results import Estimate, RotorLine
 
@@ -127,7 +128,7 @@ def _line_against_drive(
     voltage, over FOLD_WINDOW_S windows of the airborne span, and the number of windows: a
     line below the stream's Nyquist frequency rises with the rotor speed, a folded one falls."""
     columns = [log.series("actuator_motors", f"control[{m}]", "the rotors' drive")
-               for m in range(ROTOR_COUNT)]  # fmt: skip
+               for m in range(QUAD_ROTORS)]  # fmt: skip
     t_cmd, command = columns[0][0], np.mean([values for _, values in columns], axis=0)
     if "voltage_v" in log.topics.get("battery_status", {}):
         t_volt, volts = log.series("battery_status", "voltage_v", "the rotors' drive")

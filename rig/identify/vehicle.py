@@ -9,8 +9,9 @@ from dataclasses import replace
 import numpy as np
 
 from px4_logs import FlightLog, MotorOutputs, OutputProtocol, motor_outputs
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from quad_model.vehicle import Vehicle
 from rig.identify.battery import identify_battery
+from rig.identify.bounds import QUAD_ROTORS
 from rig.identify.hover import identify_hover
 from rig.identify.rate_plant import (
     ALIASING_BIAS,
@@ -35,10 +36,10 @@ def identify_vehicle(
     gyro_cutoff_hz = float(log.parameters.get("IMU_GYRO_CUTOFF", 0.0))
     outputs = motor_outputs(log)
     # the model, its mixer and thrust stand are a quad's; a PX4 before 1.13 logs no count
-    if "CA_ROTOR_COUNT" in log.parameters and outputs.rotor_count != ROTOR_COUNT:
+    if "CA_ROTOR_COUNT" in log.parameters and outputs.rotor_count != QUAD_ROTORS:
         raise IdentificationError(
             f"{log.path}: {outputs.rotor_count} rotors ({outputs.reason}); the vehicle model "
-            f"identified has {ROTOR_COUNT}"
+            f"identified has {QUAD_ROTORS}"
         )
     pwm_range = outputs.pwm_range_us
     airborne = log.airborne_span()

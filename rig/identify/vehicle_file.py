@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from px4_logs import FlightLog, LogError, motor_outputs
-from quad_model.vehicle import ROTOR_COUNT, Vehicle, vehicle_from_dict
+from quad_model.vehicle import Vehicle, vehicle_from_dict
+from rig.identify.bounds import QUAD_ROTORS
 from rig.identify.generic import frame_class, generic_vehicle
 from rig.identify.report import format_estimate
 from rig.identify.results import Estimate, Identification, IdentificationError
@@ -104,9 +105,9 @@ def vehicle_from_log(
         raise IdentificationError(f"--mass {mass_kg:g}: a mass is a positive number of kg")
     params, path = log.parameters, log.path
     count = int(_parameter(params, path, "CA_ROTOR_COUNT", "the rotor count"))
-    if count != ROTOR_COUNT:
+    if count != QUAD_ROTORS:
         raise IdentificationError(
-            f"{path}: CA_ROTOR_COUNT = {count}: the model flies {ROTOR_COUNT} rotors"
+            f"{path}: CA_ROTOR_COUNT = {count}: the model flies {QUAD_ROTORS} rotors"
         )
     cells_name = next((n for n in ("BAT1_N_CELLS", "BAT_N_CELLS") if params.get(n, 0) >= 1), None)
     if cells_name is None:
@@ -182,9 +183,9 @@ def _rotors(params: Mapping[str, float], path: Path) -> tuple[np.ndarray, list[i
     exactly 1 is PX4's normalised square."""
     hubs = np.array([[_parameter(params, path, f"CA_ROTOR{i}_P{axis}", "rotor position")
                       for axis in "XY"] + [float(params.get(f"CA_ROTOR{i}_PZ", 0.0))]
-                     for i in range(ROTOR_COUNT)])  # fmt: skip
+                     for i in range(QUAD_ROTORS)])  # fmt: skip
     spins = []
-    for i in range(ROTOR_COUNT):
+    for i in range(QUAD_ROTORS):
         km = _parameter(params, path, f"CA_ROTOR{i}_KM", "rotor spin direction")
         if km == 0:
             raise IdentificationError(f"{path}: parameter CA_ROTOR{i}_KM = 0: no spin direction")

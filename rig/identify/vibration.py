@@ -33,7 +33,8 @@ from px4_logs import FlightLog, LogError, motor_outputs
 from quad_model.frames import pwm_to_throttle
 from quad_model.model import Mount, QuadModel
 from quad_model.sensors import ImuModel
-from quad_model.vehicle import LEVEL_TABLES, ROTOR_COUNT, ImuParams, Vehicle, VibrationParams
+from quad_model.vehicle import LEVEL_TABLES, ImuParams, Vehicle, VibrationParams
+from rig.identify.bounds import QUAD_ROTORS
 from rig.identify.results import IdentificationError
 from rig.scenarios.scenario import model_rate_for
 
@@ -159,11 +160,11 @@ def read_log_vibration(log: FlightLog) -> LogVibration:
             rate_hz = 1.0 / float(np.median(np.diff(imu_time[inside])))
             spectra.append(stream_spectrum(samples[inside], rate_hz, bands))
             in_motors = (motor_time >= start) & (motor_time < end)
-            commands.append([motors[f"control[{m}]"][in_motors].mean() for m in range(ROTOR_COUNT)])
+            commands.append([motors[f"control[{m}]"][in_motors].mean() for m in range(QUAD_ROTORS)])
             volts.append(_mean_voltage(topics, path, start, end))
         command = weights @ np.array(commands, dtype=float)
         pwm = pwm_range[0] + (pwm_range[1] - pwm_range[0]) * command
-        throttle = pwm_to_throttle(pwm) if name != "stopped" else np.zeros(ROTOR_COUNT)
+        throttle = pwm_to_throttle(pwm) if name != "stopped" else np.zeros(QUAD_ROTORS)
         points.append(
             OperatingPoint(
                 name=name,
@@ -212,7 +213,7 @@ def _windows(log: FlightLog, imu_span: tuple[float, float]) -> dict[str, list[tu
     motors = topics["actuator_motors"]
     grid = motors["timestamp"] * 1e-6
     is_armed = _held(armed["timestamp"] * 1e-6, armed["armed"], grid) > 0.5
-    command = np.max([motors[f"control[{m}]"] for m in range(ROTOR_COUNT)], axis=0)
+    command = np.max([motors[f"control[{m}]"] for m in range(QUAD_ROTORS)], axis=0)
     masks = {"stopped": ~is_armed, "idle": is_armed & (command <= IDLE_COMMAND_MAX)}
     position = topics.get("vehicle_local_position")
     try:
@@ -561,7 +562,7 @@ def raw_imu_at_rest(
             vehicle, rng, mount=Mount.THRUST_STAND, physics_rate_hz=model_rate_for(rate_hz)
         )
         imu = ImuModel(vehicle, model.environment, np.random.default_rng(seed + 1), rate_hz)
-        stopped = np.zeros(ROTOR_COUNT)
+        stopped = np.zeros(QUAD_ROTORS)
         samples = np.empty((int(inside.sum()), 3))
         for k in range(samples.shape[0]):
             model.advance(stopped, 1.0 / rate_hz)

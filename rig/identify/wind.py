@@ -26,8 +26,9 @@ from numpy.typing import NDArray
 
 from px4_logs import FlightLog, LogError
 from quad_model.frames import STANDARD_GRAVITY_MPS2, body_to_ned
-from quad_model.vehicle import ROTOR_COUNT, Vehicle
+from quad_model.vehicle import Vehicle
 from rig.errors import RigError
+from rig.identify.bounds import QUAD_ROTORS
 
 
 class WindEstimateError(RigError):
@@ -138,7 +139,7 @@ def _wind_from_tilt(
     rho_ratio = density / prop.reference_air_density_kgpm3
     hover_speed = vehicle.hover_rotor_speed_radps / math.sqrt(rho_ratio)
     quadratic = 0.5 * density * float(np.mean(vehicle.body.drag_area_m2[:2]))
-    linear = ROTOR_COUNT * prop.rotor_drag_coefficient_ns_per_m_rad * hover_speed
+    linear = QUAD_ROTORS * prop.rotor_drag_coefficient_ns_per_m_rad * hover_speed
     # ½ρ·CdA·v² + linear·v = force, the positive root (written so that CdA = 0 is linear)
     speed = 2.0 * force / (linear + math.sqrt(linear * linear + 4.0 * quadratic * force))
     # the vehicle leans into the wind: the wind blows against the thrust's horizontal part

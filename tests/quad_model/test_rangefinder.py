@@ -23,7 +23,7 @@ def truth_at(down_m: float, roll_deg: float = 0.0, pitch_deg: float = 0.0, t_us:
     state[dyn.X_QUAT : dyn.X_QUAT + 4] = quat_from_euler(
         math.radians(roll_deg), math.radians(pitch_deg), 0.3
     )
-    return VehicleTruth(state, np.zeros(dyn.A_SIZE))
+    return VehicleTruth(state, np.zeros(dyn.A_SIZE), rotors=4)
 
 
 @pytest.fixture

@@ -203,7 +203,7 @@ def _truth_at_us(time_us: int) -> VehicleTruth:
     state = np.zeros(dyn.X_SIZE)
     state[dyn.X_TIME_US] = time_us
     state[dyn.X_QUAT] = 1.0
-    return VehicleTruth(state, np.zeros(dyn.A_SIZE))
+    return VehicleTruth(state, np.zeros(dyn.A_SIZE), rotors=4)
 
 
 def _moving_truth(time_s: float) -> VehicleTruth:
@@ -213,7 +213,7 @@ def _moving_truth(time_s: float) -> VehicleTruth:
     state[dyn.X_POS : dyn.X_POS + 3] = [0.0, 5.0 * time_s, -10.0]
     state[dyn.X_VEL : dyn.X_VEL + 3] = [0.0, 5.0, 0.0]
     state[dyn.X_QUAT] = 1.0
-    return VehicleTruth(state, np.zeros(dyn.A_SIZE))
+    return VehicleTruth(state, np.zeros(dyn.A_SIZE), rotors=4)
 
 
 def test_gps_latency_fix_rate_and_position(f450, variant):

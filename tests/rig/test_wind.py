@@ -9,7 +9,8 @@ import pytest
 
 from px4_logs import FlightLog, LogError
 from quad_model.frames import STANDARD_GRAVITY_MPS2
-from quad_model.vehicle import ROTOR_COUNT, load_vehicle
+from quad_model.vehicle import load_vehicle
+from rig.identify.bounds import QUAD_ROTORS
 from rig.identify.wind import _wind_from_tilt, estimate_wind
 
 X500_LOG = (
@@ -30,7 +31,7 @@ def test_the_wind_balances_the_thrusts_horizontal_part(tilt_deg):
     np.testing.assert_allclose(wind / np.linalg.norm(wind), -lean, atol=1e-12)
     speed = float(np.linalg.norm(wind))
     linear = (
-        ROTOR_COUNT
+        QUAD_ROTORS
         * vehicle.propulsion.rotor_drag_coefficient_ns_per_m_rad
         * vehicle.hover_rotor_speed_radps
     )
