@@ -24,12 +24,10 @@ def _hovering_model(vehicle, count=None):
     rng = np.random.default_rng(0)
     if count is None:
         model = QuadModel(vehicle, rng)
-        model.reset(
-            position_ned_m=(0, 0, -20), rotor_speed_radps=[vehicle.hover_rotor_speed_radps] * 4
-        )
+        model.reset(position_ned_m=(0, 0, -20), rotor_speed_radps=vehicle.hover_rotor_speed_radps)
         return model, model.hover_throttle()
     batch = QuadBatch(vehicle, count, rng)
-    batch.reset(position_ned_m=(0, 0, -20), rotor_speed_radps=[vehicle.hover_rotor_speed_radps] * 4)
+    batch.reset(position_ned_m=(0, 0, -20), rotor_speed_radps=vehicle.hover_rotor_speed_radps)
     return batch, batch.hover_throttle()
 
 
@@ -45,7 +43,7 @@ def _best_of(repeats: int, run) -> float:
 
 def single_vehicle(vehicle) -> Iterator[Figure]:
     model, throttle = _hovering_model(vehicle)
-    command = [throttle] * 4
+    command = [throttle] * vehicle.propulsion.rotor_count
     model.advance(command, FRAME_S)  # compile or load the cache outside the timing
     sim_s = 2.0
     frames = round(sim_s / FRAME_S)
@@ -74,7 +72,7 @@ def single_vehicle(vehicle) -> Iterator[Figure]:
 def _hover_truths(vehicle, frames: int) -> list[VehicleTruth]:
     """One truth per 1 ms frame of a hover with slightly unequal rotors, as the rig sees it."""
     model, throttle = _hovering_model(vehicle)
-    command = throttle * np.array([1.0, 1.01, 0.99, 1.02])
+    command = throttle * (1.0 + 0.01 * np.sin(np.arange(vehicle.propulsion.rotor_count)))
     truths = []
     for _ in range(frames):
         model.advance(command, FRAME_S)
@@ -118,7 +116,7 @@ def batched(vehicle) -> Iterator[Figure]:
     """QuadBatch, 1 ms frames, 0.5 s simulated per vehicle."""
     for count in (1, 100, 1000):
         batch, throttle = _hovering_model(vehicle, count)
-        commands = np.full((count, 4), throttle)
+        commands = np.full((count, vehicle.propulsion.rotor_count), throttle)
         batch.advance(commands, FRAME_S)
         sim_s = 0.5
         frames = round(sim_s / FRAME_S)

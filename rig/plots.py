@@ -173,13 +173,15 @@ def _motors(
     figure: plt.Figure, rig: pyulog.ULog, autopilot: pyulog.ULog | None, events: Events
 ) -> None:
     commanded, captured = figure.subplots(2, 1, sharex=True)
+    outputs = _topic(rig, "actuator_outputs")
+    # The rig logs one PWM channel per motor, and NaN for the controls past them (as PX4).
+    count = int(outputs[1]["noutputs"].max()) if outputs is not None else 0
     motors = _topic(rig, "actuator_motors")
     if motors is not None:
-        for i in range(4):
+        for i in range(count):
             commanded.plot(motors[0], motors[1][f"control[{i}]"], lw=0.8, label=f"motor {i}")
-    outputs = _topic(rig, "actuator_outputs")
     if outputs is not None:
-        for i in range(4):
+        for i in range(count):
             captured.plot(outputs[0], outputs[1][f"output[{i}]"], lw=0.8, label=f"channel {i}")
     commanded.set_ylabel("commanded (0..1)")
     captured.set_ylabel("captured PWM [µs]")
