@@ -52,7 +52,8 @@ fuzz: $(STAMP)
 # Then the other two real logs, each scored for what it can support (issue 14 item 6): the 8S
 # quad's Stabilized hover (quad4001_8s, identified from it) replayed by PX4 from its sticks
 # with PX4_DIR, else by the reference autopilot from its attitude set-points; and, when its
-# log is found (SHARED_LOGS), the X8 octo's raw IMU at rest against the rig's 6X-RT IMU model.
+# log is found (SHARED_LOGS), the X8 octo's raw IMU at rest, at idle and in its ground run
+# against its model (auriol_x8) on the stand, driven by the log's eight motors.
 # Last, one table over all reports: per log, what was scored and what was not, and why
 # ($(REPORTS)/summary.md).
 X500_LOG    := data/flight_logs/px4_x500v2_v6xrt_flight_2026-03-20.ulg
@@ -101,13 +102,13 @@ credibility: $(STUDY_RUNS) $(QUAD_RUN)/.complete $(X8_RUN)
 	@echo "credibility study: the 8S quad's hover flown by $(STUDY_WHAT); model quad4001_8s"
 	$(BIN)/credibility report credibility/plans/quad4001_validation.toml $(QUAD_LOGS) \
 		--out $(REPORTS)/$(QUAD_REPORT) || [ $$? -eq 1 ]
-	$(if $(X8_RUN),$(BIN)/credibility report credibility/plans/x8_raw_imu_rest.toml \
-		--out $(REPORTS)/x8_raw_imu_rest || [ $$? -eq 1 ],\
+	$(if $(X8_RUN),$(BIN)/credibility report credibility/plans/x8_raw_imu.toml \
+		--out $(REPORTS)/x8_raw_imu || [ $$? -eq 1 ],\
 		@echo "credibility study: no X8 log at $(X8_LOG) (SHARED_LOGS): its part is skipped")
 	$(BIN)/credibility summary $(REPORTS)/x500_pitch_bench/x500_pitch_bench.json \
 		$(REPORTS)/$(VALIDATION)/x500_validation.json \
 		$(REPORTS)/$(QUAD_REPORT)/quad4001_validation.json \
-		$(if $(X8_RUN),$(REPORTS)/x8_raw_imu_rest/x8_raw_imu_rest.json) \
+		$(if $(X8_RUN),$(REPORTS)/x8_raw_imu/x8_raw_imu.json) \
 		--out $(REPORTS)/summary.md
 
 $(QUAD_STUDY)/px4/.complete: $(QUAD_LOG) | $(STAMP)
@@ -120,8 +121,8 @@ $(QUAD_STUDY)/attitude/.complete: $(QUAD_LOG) | $(STAMP)
 		--out $(@D) --force
 	touch $@
 
-$(X8_TABLES)/.complete: $(X8_LOG) | $(STAMP)
-	$(BIN)/rig identify $(X8_LOG) --vehicle x500_v2 --raw-imu $(@D) --rest 926.8 927.3
+$(X8_TABLES)/.complete: $(X8_LOG) quad_model/vehicles/auriol_x8.toml | $(STAMP)
+	$(BIN)/rig identify $(X8_LOG) --vehicle auriol_x8 --raw-imu $(@D) --disarm 926.34
 	touch $@
 
 $(STUDY)/bench_%/.complete: | $(STAMP)

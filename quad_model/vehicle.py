@@ -39,7 +39,7 @@ MIN_ROTORS, MAX_ROTORS = min(ROTOR_COUNTS), max(ROTOR_COUNTS)
 #: Two rotors whose hubs lie closer than this in the body x-y plane are a coaxial pair.
 COAXIAL_HUB_TOLERANCE_M = 0.02
 #: The bundled vehicle of each PX4 airframe (``SYS_AUTOSTART``; PX4's ROMFS init.d airframes).
-AIRFRAMES = {4019: "x500_v2"}
+AIRFRAMES = {4019: "x500_v2", 12001: "auriol_x8"}
 
 #: Magnitudes (noise levels, coefficients, drag areas) are >= 0 per axis.
 NonNegative3 = tuple[NonNegative, NonNegative, NonNegative]

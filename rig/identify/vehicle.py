@@ -35,11 +35,11 @@ def identify_vehicle(
     sample_rate_hz = _sample_rate_hz(log)
     gyro_cutoff_hz = float(log.parameters.get("IMU_GYRO_CUTOFF", 0.0))
     outputs = motor_outputs(log)
-    # the model, its mixer and thrust stand are a quad's; a PX4 before 1.13 logs no count
+    # the fits' mixer, hover and thrust stand are a quad's; a PX4 before 1.13 logs no count
     if "CA_ROTOR_COUNT" in log.parameters and outputs.rotor_count != QUAD_ROTORS:
         raise IdentificationError(
-            f"{log.path}: {outputs.rotor_count} rotors ({outputs.reason}); the vehicle model "
-            f"identified has {QUAD_ROTORS}"
+            f"{log.path}: {outputs.rotor_count} rotors ({outputs.reason}); the identification "
+            f"handles {QUAD_ROTORS}"
         )
     pwm_range = outputs.pwm_range_us
     airborne = log.airborne_span()

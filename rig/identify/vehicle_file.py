@@ -99,15 +99,16 @@ def vehicle_from_log(
     """The vehicle of ``log`` weighing ``mass_kg``; ``command`` is named in the file's header.
     The inertia and motor lag are taken from the rate-loop fit only over an
     ``excitation_window_s``: without one the fit's whole-flight cross-check is the same data
-    and confirms nothing. A log the model cannot fly (not 4 rotors), or without the
-    parameters, is one line."""
+    and confirms nothing. A log the identification does not handle (not 4 rotors), or
+    without the parameters, is one line."""
     if not (math.isfinite(mass_kg) and mass_kg > 0):
         raise IdentificationError(f"--mass {mass_kg:g}: a mass is a positive number of kg")
     params, path = log.parameters, log.path
     count = int(_parameter(params, path, "CA_ROTOR_COUNT", "the rotor count"))
     if count != QUAD_ROTORS:
         raise IdentificationError(
-            f"{path}: CA_ROTOR_COUNT = {count}: the model flies {QUAD_ROTORS} rotors"
+            f"{path}: CA_ROTOR_COUNT = {count}: the identification handles {QUAD_ROTORS} rotors "
+            "(a quad's hover and mixer); write another count's vehicle file by hand"
         )
     cells_name = next((n for n in ("BAT1_N_CELLS", "BAT_N_CELLS") if params.get(n, 0) >= 1), None)
     if cells_name is None:

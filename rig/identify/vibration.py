@@ -14,6 +14,11 @@ a non-negative least-squares fit per triad and axis gives the levels at each fit
 
 The noise floor at rest (motors stopped) is the IMU's white noise as the log sees it; its
 density is scaled until the model's stream at rest has the log's σ.
+
+A log with the raw IMU FIFO (SDLOG_PROFILE's raw-FIFO bits) needs no such pipeline: the chip's
+own samples show the rotor lines where they are. There the operating points are windows
+named on the command line (such a log may lack the arming, land-detector and battery topics
+that find them), and the model is the chip's samples themselves.
 """
 
 from __future__ import annotations
@@ -34,7 +39,6 @@ from quad_model.frames import pwm_to_throttle
 from quad_model.model import Mount, QuadModel
 from quad_model.sensors import ImuModel
 from quad_model.vehicle import LEVEL_TABLES, ImuParams, Vehicle, VibrationParams
-from rig.identify.bounds import QUAD_ROTORS
 from rig.identify.results import IdentificationError
 from rig.scenarios.scenario import model_rate_for
 
@@ -60,6 +64,18 @@ MODEL_SECONDS = 20.0
 #: rig's IMU samples k, k-1, k-2: measured, not PX4's documented integrator (which would be
 #: the trapezoid 1/2, 1/2); ``tests/rig/test_px4_sitl.py`` checks it against the binary.
 PX4_SITL_STREAM = (0.25, 0.5, 0.25)
+#: The raw FIFO's pipeline: each chip sample as it is.
+RAW_PIPELINE = (1.0,)
+#: The raw FIFO's two bands split here: the model's tones (1× and 2× of every rotor at the
+#: ground run's fastest, 35 Hz shaft rate on the X8) below, the frame's own modes (the X8's
+#: gyro lines at 120-150 Hz) and the rest of the chip's band above.
+RAW_TONE_BAND_HZ = 100.0
+#: Shortest raw window: 3,300 chip samples, a σ to 2.5 % and PSD bins 2.5 Hz wide, enough
+#: for bands from 5 Hz (the X8's rest after its props coasted down lasts 0.46 s).
+RAW_MIN_WINDOW_S = 0.4
+#: The stand runs this long (to a whole sample) at an operating point's throttles before its
+#: first sample: its rotors at speed.
+SPIN_UP_S = 0.5
 #: The points whose levels are fitted; the others check the interpolation.
 FITTED_POINTS = ("idle", "hover")
 #: A ``[vibration]`` level table: the (x, y, z) levels at each operating point.
@@ -99,6 +115,9 @@ class LogVibration:
     log: Path
     stream_rate_hz: float  # IMU_INTEG_RATE: sensor_combined's averaging rate
     points: tuple[OperatingPoint, ...]
+    #: What the logger made of the IMU's samples before the means (PX4_SITL_STREAM), or
+    #: (1.0,): the chip's own samples (the raw FIFO).
+    pipeline: tuple[float, ...] = PX4_SITL_STREAM
 
     def point(self, name: str) -> OperatingPoint:
         for point in self.points:
@@ -145,8 +164,10 @@ def read_log_vibration(log: FlightLog) -> LogVibration:
     samples = np.column_stack(
         [imu[f"{field}[{axis}]"] for field in _TRIAD_FIELDS for axis in range(3)]
     ).astype(float)
-    windows = _windows(log, (float(imu_time[0]), float(imu_time[-1])))
-    pwm_range = motor_outputs(log).pwm_range_us
+    outputs = motor_outputs(log)
+    rotors = outputs.rotor_count
+    windows = _windows(log, (float(imu_time[0]), float(imu_time[-1])), rotors)
+    pwm_range = outputs.pwm_range_us
     bands = bands_for(stream_rate_hz)
     motors = topics["actuator_motors"]
     motor_time = motors["timestamp"] * 1e-6
@@ -160,11 +181,11 @@ def read_log_vibration(log: FlightLog) -> LogVibration:
             rate_hz = 1.0 / float(np.median(np.diff(imu_time[inside])))
             spectra.append(stream_spectrum(samples[inside], rate_hz, bands))
             in_motors = (motor_time >= start) & (motor_time < end)
-            commands.append([motors[f"control[{m}]"][in_motors].mean() for m in range(QUAD_ROTORS)])
+            commands.append([motors[f"control[{m}]"][in_motors].mean() for m in range(rotors)])
             volts.append(_mean_voltage(topics, path, start, end))
         command = weights @ np.array(commands, dtype=float)
         pwm = pwm_range[0] + (pwm_range[1] - pwm_range[0]) * command
-        throttle = pwm_to_throttle(pwm) if name != "stopped" else np.zeros(QUAD_ROTORS)
+        throttle = pwm_to_throttle(pwm) if name != "stopped" else np.zeros(rotors)
         points.append(
             OperatingPoint(
                 name=name,
@@ -205,15 +226,17 @@ def _mean_voltage(
     return float(battery["voltage_v"][inside].mean())
 
 
-def _windows(log: FlightLog, imu_span: tuple[float, float]) -> dict[str, list[tuple[float, float]]]:
+def _windows(
+    log: FlightLog, imu_span: tuple[float, float], rotors: int
+) -> dict[str, list[tuple[float, float]]]:
     """Each operating point's spans inside the IMU stream, SETTLE_S after it began: every
-    steady hover window, the longest span of each other point."""
+    steady hover window, the longest span of each other point (the log's ``rotors`` motors)."""
     topics = log.topics
     armed = topics["actuator_armed"]
     motors = topics["actuator_motors"]
     grid = motors["timestamp"] * 1e-6
     is_armed = _held(armed["timestamp"] * 1e-6, armed["armed"], grid) > 0.5
-    command = np.max([motors[f"control[{m}]"] for m in range(QUAD_ROTORS)], axis=0)
+    command = np.max([motors[f"control[{m}]"] for m in range(rotors)], axis=0)
     masks = {"stopped": ~is_armed, "idle": is_armed & (command <= IDLE_COMMAND_MAX)}
     position = topics.get("vehicle_local_position")
     try:
@@ -287,40 +310,47 @@ def model_spectrum(
     stream_rate_hz: float,
     seed: int = 0,
     seconds: float = MODEL_SECONDS,
+    pipeline: Sequence[float] = PX4_SITL_STREAM,
 ) -> StreamSpectrum:
     """The model's stream at ``point``: the IMU on the thrust stand at the point's throttles,
     fed from a bench supply at its voltage, sampled at ``imu_rate_hz``, passed through what
-    PX4 SITL logs per lockstep sample (:data:`PX4_SITL_STREAM`) and averaged over
-    1/``stream_rate_hz``, as the credibility plans average the replay's log."""
+    the logger makes of each sample (``pipeline``: PX4 SITL's, :data:`PX4_SITL_STREAM`) and
+    averaged over 1/``stream_rate_hz``, as the credibility plans average the replay's log."""
     per_mean = imu_rate_hz / stream_rate_hz
     if abs(per_mean - round(per_mean)) > 1e-9 or per_mean < 1:
         raise IdentificationError(
             f"IMU rate {imu_rate_hz:g} Hz is not a multiple of the stream's {stream_rate_hz:g} Hz"
         )
-    battery = replace(
-        vehicle.battery,
-        cell_full_v=point.voltage_v / vehicle.battery.cell_count,
-        internal_resistance_ohm=0.0,
-    )
-    bench = replace(vehicle, battery=battery)
+    bench = on_bench(vehicle, point.voltage_v)
     rng = np.random.default_rng(seed)
     model = QuadModel(
         bench, rng, mount=Mount.THRUST_STAND, physics_rate_hz=model_rate_for(round(imu_rate_hz))
     )
     imu = ImuModel(bench, model.environment, np.random.default_rng(seed + 1), imu_rate_hz)
     throttle = np.array(point.throttle)
-    model.advance(throttle, 0.5)  # the rotors at speed
-    taps = len(PX4_SITL_STREAM)
+    model.advance(throttle, round(SPIN_UP_S * imu_rate_hz) / imu_rate_hz)
+    taps = len(pipeline)
     count = round(seconds * stream_rate_hz) * round(per_mean) + taps - 1
     samples = np.empty((count, 6))
     for k in range(count):
         model.advance(throttle, 1.0 / imu_rate_hz)
         reading = imu.sample(model.truth)
         samples[k, :3], samples[k, 3:] = reading.accel_mps2, reading.gyro_radps
-    logged = sum(w * samples[taps - 1 - i : count - i] for i, w in enumerate(PX4_SITL_STREAM))
-    assert isinstance(logged, np.ndarray)  # PX4_SITL_STREAM has taps: not the empty sum's 0
+    logged = sum(w * samples[taps - 1 - i : count - i] for i, w in enumerate(pipeline))
+    assert isinstance(logged, np.ndarray)  # a pipeline has taps: not the empty sum's 0
     means = logged.reshape(-1, round(per_mean), 6).mean(axis=1)
     return stream_spectrum(means, stream_rate_hz, point.spectrum.bands_hz)
+
+
+def on_bench(vehicle: Vehicle, voltage_v: float) -> Vehicle:
+    """``vehicle`` fed from a bench supply at ``voltage_v``: the motors' speed curve holds
+    there whatever current they draw."""
+    battery = replace(
+        vehicle.battery,
+        cell_full_v=voltage_v / vehicle.battery.cell_count,
+        internal_resistance_ohm=0.0,
+    )
+    return replace(vehicle, battery=battery)
 
 
 def fit_vibration(
@@ -334,6 +364,17 @@ def fit_vibration(
     (gyro, accel) densities. Each point's band powers are those of three stand runs (tones
     alone, broadband alone, the white noise alone) weighted by the squared levels."""
     stream_hz = measured.stream_rate_hz
+    rotors = vehicle.propulsion.rotor_count
+    for point in measured.points:
+        if len(point.throttle) != rotors:
+            raise IdentificationError(
+                f"{measured.log}: {len(point.throttle)} motors; vehicle {vehicle.name!r} has "
+                f"{rotors} rotors"
+            )
+
+    def spectrum(run: Vehicle, point: OperatingPoint) -> StreamSpectrum:
+        return model_spectrum(run, point, imu_rate_hz, stream_hz, pipeline=measured.pipeline)
+
     imu = vehicle.imu
     stopped = rest_point(vehicle, measured)
     if stopped is not None:
@@ -344,7 +385,7 @@ def fit_vibration(
         alike = (1.0, 1.0, 1.0)
         imu = replace(imu, gyro_noise_axis_gain=alike, accel_noise_axis_gain=alike)
         vehicle = replace(vehicle, imu=imu)
-        model = model_spectrum(vehicle, stopped, imu_rate_hz, stream_hz).sigma
+        model = spectrum(vehicle, stopped).sigma
         accel, gyro = (
             float(np.sqrt(np.mean(stopped.spectrum.sigma[t] ** 2) / np.mean(model[t] ** 2)))
             for t in (0, 1)
@@ -395,7 +436,7 @@ def fit_vibration(
     levels = np.zeros((2, 2, 3, len(points)))  # triad, tone|broadband, axis, point
     for index, point in enumerate(points):
         power = {
-            name: model_spectrum(run, point, imu_rate_hz, stream_hz).band_rms ** 2
+            name: spectrum(run, point).band_rms ** 2
             for name, run in runs.items()
         }
         wanted = point.spectrum.band_rms**2 - power["white"]
@@ -437,15 +478,9 @@ def _mean_speed(vehicle: Vehicle) -> Callable[[OperatingPoint], float]:
     and table position of a fitted point)."""
 
     def speed(point: OperatingPoint) -> float:
-        battery = replace(
-            vehicle.battery,
-            cell_full_v=point.voltage_v / vehicle.battery.cell_count,
-            internal_resistance_ohm=0.0,
-        )
-        model = QuadModel(
-            replace(vehicle, battery=battery), np.random.default_rng(0), mount=Mount.THRUST_STAND
-        )
-        model.advance(np.array(point.throttle), 0.5)
+        bench = on_bench(vehicle, point.voltage_v)
+        model = QuadModel(bench, np.random.default_rng(0), mount=Mount.THRUST_STAND)
+        model.advance(np.array(point.throttle), SPIN_UP_S)
         return float(np.mean(np.abs(model.truth.rotor_speed_radps)))
 
     return speed
@@ -472,9 +507,13 @@ def vibration_toml(vehicle: Vehicle, measured: LogVibration, imu_rate_hz: float)
         f"{p.name} " + ", ".join(f"{a:.1f}-{b:.1f}" for a, b in p.windows_s) + " s"
         for p in measured.points
     )
+    stream = (
+        "the chip's own samples"
+        if measured.pipeline == RAW_PIPELINE
+        else f"averaged to {measured.stream_rate_hz:g} Hz"
+    )
     lines = [
-        f"# {source} (windows: {windows}; model at IMU {imu_rate_hz:g} Hz averaged to "
-        f"{measured.stream_rate_hz:g} Hz)",
+        f"# {source} (windows: {windows}; model at IMU {imu_rate_hz:g} Hz, {stream})",
         "[imu]",
         f"gyro_noise_density_radps_per_sqrthz = {imu.gyro_noise_density_radps_per_sqrthz:.4g}",
         f"accel_noise_density_mps2_per_sqrthz = {imu.accel_noise_density_mps2_per_sqrthz:.4g}",
@@ -489,7 +528,7 @@ def vibration_toml(vehicle: Vehicle, measured: LogVibration, imu_rate_hz: float)
     return "\n".join(lines) + "\n"
 
 
-# ------------------------------------------------------------------ raw IMU at rest
+# ------------------------------------------------------------------ raw IMU
 #: PX4's raw IMU FIFO topics (a log with SDLOG_PROFILE's raw-FIFO bit): each message holds up
 #: to 32 consecutive chip samples ``dt`` µs apart, in counts times ``scale``, chip axes.
 FIFO_TOPICS = {"gyro": "sensor_gyro_fifo", "accel": "sensor_accel_fifo"}
@@ -503,6 +542,25 @@ class RawImu:
     time_us: NDArray[np.int64]
     values: NDArray[np.float64]
     rate_hz: float
+
+
+@dataclass(frozen=True)
+class MotorDrive:
+    """What the log's motors got: per ``actuator_motors`` sample, each motor's command (0..1)
+    and the ESC throttle it made (0 while disarmed), each held to the next sample."""
+
+    time_s: NDArray[np.float64]
+    command: NDArray[np.float64]  # samples × motors
+    throttle: NDArray[np.float64]  # samples × motors
+
+    def window(self, start_s: float, end_s: float) -> tuple[NDArray, NDArray]:
+        """The mean command and throttle per motor over ``start_s``-``end_s``."""
+        inside = (self.time_s >= start_s) & (self.time_s < end_s)
+        if not np.any(inside):
+            raise IdentificationError(
+                f"window {start_s:g}-{end_s:g} s holds no actuator_motors sample"
+            )
+        return self.command[inside].mean(axis=0), self.throttle[inside].mean(axis=0)
 
 
 def read_raw_imu(log: FlightLog) -> dict[str, RawImu]:
@@ -542,46 +600,135 @@ def read_raw_imu(log: FlightLog) -> dict[str, RawImu]:
     return raw
 
 
-def raw_imu_at_rest(
-    vehicle: Vehicle, raw: dict[str, RawImu], span_s: tuple[float, float], seed: int = 0
+def log_motor_drive(log: FlightLog, vehicle: Vehicle, disarm_s: float | None) -> MotorDrive:
+    """The log's ``actuator_motors`` as the ESC throttles of ``vehicle``'s rotors, through the
+    log's output range (:func:`px4_logs.motor_outputs`: DShot's armed floor is its
+    DSHOT_MIN). Disarmed (a non-finite command, the arming topic's state, or from
+    ``disarm_s`` on in a log with no arming topic) the ESCs get 0."""
+    outputs = motor_outputs(log)
+    rotors = vehicle.propulsion.rotor_count
+    if outputs.rotor_count != rotors:
+        raise IdentificationError(
+            f"{log.path}: {outputs.rotor_count} rotors ({outputs.reason}); vehicle "
+            f"{vehicle.name!r} has {rotors}"
+        )
+    fields = tuple(f"control[{m}]" for m in range(rotors))
+    motors = log.topic("actuator_motors", "the motors' commands", fields)
+    time_s = np.asarray(motors["timestamp"], dtype=float) * 1e-6
+    command = np.column_stack([motors[field] for field in fields]).astype(float)
+    armed = log.armed_samples()
+    if armed is not None:
+        on = _held(armed[0], armed[1], time_s) > 0.5
+    elif disarm_s is not None:
+        on = time_s < disarm_s
+    else:
+        raise IdentificationError(
+            f"{log.path}: no arming state (actuator_armed, vehicle_status): give --disarm "
+            "SECONDS, the log's disarm (its 'Disarmed' message)"
+        )
+    low, high = outputs.throttle_range
+    running = on[:, None] & np.isfinite(command)
+    command = np.where(running, np.clip(command, 0.0, 1.0), 0.0)
+    throttle = np.where(running, low + (high - low) * command, 0.0)
+    return MotorDrive(time_s, command, throttle)
+
+
+def raw_imu_driven(
+    vehicle: Vehicle, raw: Mapping[str, RawImu], drive: MotorDrive, voltage_v: float, seed: int = 0
 ) -> dict[str, RawImu]:
-    """The vehicle's IMU model at rest (on the stand, rotors stopped) sampled at the chip's
-    rate, one sample for each of the log's samples in ``span_s``, on the log's timestamps
-    (so a plan segment selects the same samples). Nothing but the IMU's own noise and bias
-    acts at rest, so this holds for any airframe, the quad-only model's or not."""
-    rng = np.random.default_rng(seed)
+    """The vehicle's IMU on the thrust stand, its motors driven as the log's (``drive``) from
+    a bench supply at ``voltage_v``, sampled at the chip's rate: one sample for each of the
+    log's, at its timestamp (so a plan's segment selects the same samples). The rotors start
+    at rest, as a log that starts at the arming (PX4's default) has them; through a logger
+    dropout the model runs on with the last commands."""
+    rate_hz = round(raw["gyro"].rate_hz)  # the model steps whole physics steps per sample
+    start_us = min(int(r.time_us[0]) for r in raw.values())
+    end_us = max(int(r.time_us[-1]) for r in raw.values())
+    steps = round((end_us - start_us) * rate_hz / 1e6) + 1
+    grid_s = (start_us + np.arange(steps) * 1e6 / rate_hz) * 1e-6
+    throttles = drive.throttle[np.clip(np.searchsorted(drive.time_s, grid_s, "right") - 1, 0, None)]
+    bench = on_bench(vehicle, voltage_v)
+    model = QuadModel(
+        bench,
+        np.random.default_rng(seed),
+        mount=Mount.THRUST_STAND,
+        physics_rate_hz=model_rate_for(rate_hz),
+    )
+    imu = ImuModel(bench, model.environment, np.random.default_rng(seed + 1), rate_hz)
+    samples = np.empty((steps, 6))
+    for k in range(steps):
+        model.advance(throttles[k], 1.0 / rate_hz)
+        reading = imu.sample(model.truth)
+        samples[k, :3], samples[k, 3:] = reading.accel_mps2, reading.gyro_radps
     modelled = {}
     for triad, log in raw.items():
-        inside = (log.time_us >= span_s[0] * 1e6) & (log.time_us <= span_s[1] * 1e6)
-        if inside.sum() < 2:
-            raise IdentificationError(
-                f"--rest {span_s[0]:g} {span_s[1]:g}: no {triad} FIFO samples in that span"
-            )
-        rate_hz = round(log.rate_hz)  # the model steps whole physics steps per sample
-        model = QuadModel(
-            vehicle, rng, mount=Mount.THRUST_STAND, physics_rate_hz=model_rate_for(rate_hz)
-        )
-        imu = ImuModel(vehicle, model.environment, np.random.default_rng(seed + 1), rate_hz)
-        stopped = np.zeros(QUAD_ROTORS)
-        samples = np.empty((int(inside.sum()), 3))
-        for k in range(samples.shape[0]):
-            model.advance(stopped, 1.0 / rate_hz)
-            reading = imu.sample(model.truth)
-            samples[k] = reading.gyro_radps if triad == "gyro" else reading.accel_mps2
-        modelled[triad] = RawImu(log.time_us[inside], samples, float(rate_hz))
+        nearest = np.clip(np.round((log.time_us - start_us) * rate_hz / 1e6), 0, steps - 1)
+        columns = slice(3, 6) if triad == "gyro" else slice(0, 3)
+        modelled[triad] = RawImu(log.time_us, samples[nearest.astype(int), columns], rate_hz)
     return modelled
 
 
+def supply_voltage(log: FlightLog, vehicle: Vehicle) -> float:
+    """The pack's mean voltage over the log, else (no ``battery_status``) the vehicle's speed
+    curve voltage: the speeds are then the curve's own."""
+    battery = log.topics.get("battery_status", {})
+    volts = np.asarray(battery.get("voltage_v", ()), dtype=float)
+    volts = volts[np.isfinite(volts) & (volts > 0)]
+    return float(volts.mean()) if volts.size else vehicle.propulsion.speed_curve_voltage_v
+
+
+def read_raw_vibration(
+    log: FlightLog,
+    raw: Mapping[str, RawImu],
+    drive: MotorDrive,
+    voltage_v: float,
+    windows: Mapping[str, tuple[float, float]],
+) -> LogVibration:
+    """The log's operating points from its raw FIFO: each named window (``stopped``: the
+    rotors at rest) with its motors' mean throttle, its spectrum at the chip's rate in two
+    bands split at :data:`RAW_TONE_BAND_HZ`."""
+    rate_hz = float(round(raw["gyro"].rate_hz))
+    bands = ((HIGHPASS_HZ, RAW_TONE_BAND_HZ), (RAW_TONE_BAND_HZ, rate_hz / 2.0))
+    points = []
+    for name, (start, end) in windows.items():
+        triads = []
+        for triad in ("accel", "gyro"):  # the kernel's order
+            samples = raw[triad]
+            inside = (samples.time_us >= start * 1e6) & (samples.time_us < end * 1e6)
+            triads.append(samples.values[inside])
+        count = min(len(values) for values in triads)
+        if end <= start or count < RAW_MIN_WINDOW_S * rate_hz:
+            raise IdentificationError(
+                f"{log.path}: window {name} {start:g}-{end:g} s holds {count} raw IMU samples "
+                f"(at least {RAW_MIN_WINDOW_S:g} s of them needed)"
+            )
+        command, throttle = drive.window(start, end)
+        points.append(
+            OperatingPoint(
+                name=name,
+                windows_s=((start, end),),
+                motor_command=tuple(float(c) for c in command),
+                throttle=tuple(float(t) for t in throttle),
+                voltage_v=voltage_v,
+                spectrum=stream_spectrum(
+                    np.hstack([values[:count] for values in triads]), rate_hz, bands
+                ),
+            )
+        )
+    return LogVibration(log.path, rate_hz, tuple(points), RAW_PIPELINE)
+
+
 def write_raw_imu_tables(
-    log: FlightLog, vehicle: Vehicle, rest_s: tuple[float, float], out_dir: Path
+    log: FlightLog, vehicle: Vehicle, out_dir: Path, disarm_s: float | None = None
 ) -> tuple[Path, ...]:
-    """``real_<triad>.parquet`` (the log's FIFO, all of it) and ``sim_<triad>.parquet`` (the
-    model at rest over ``rest_s``) in ``out_dir``, columns ``timestamp`` (µs) and
-    ``sensor_<triad>_fifo.x|y|z`` (SI), for a credibility plan to compare."""
+    """``real_<triad>.parquet`` (the log's FIFO) and ``sim_<triad>.parquet`` (the model on the
+    stand driven by the log's motors, :func:`raw_imu_driven`) in ``out_dir``, columns
+    ``timestamp`` (µs) and ``sensor_<triad>_fifo.x|y|z`` (SI), for a credibility plan."""
     import pandas as pd  # on demand, as credibility reads tables
 
     raw = read_raw_imu(log)
-    modelled = raw_imu_at_rest(vehicle, raw, rest_s)
+    drive = log_motor_drive(log, vehicle, disarm_s)
+    modelled = raw_imu_driven(vehicle, raw, drive, supply_voltage(log, vehicle))
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for role, triads in (("real", raw), ("sim", modelled)):

@@ -129,7 +129,7 @@ def test_missing_table_and_unreadable_files(tmp_path):
         load_vehicle(path)
     with pytest.raises(VehicleFileError, match=r"no_such.toml: no such vehicle file \(bundled: "):
         load_vehicle(tmp_path / "no_such.toml")
-    with pytest.raises(VehicleFileError, match=r"bundled: f450_high_precision, f450_low_precision"):
+    with pytest.raises(VehicleFileError, match=r"bundled: auriol_x8, f450_high_precision, f450_lo"):
         load_vehicle("f550")
 
 

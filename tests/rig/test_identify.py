@@ -462,13 +462,13 @@ def test_cli_prints_the_table_and_fails_in_one_line(capsys, tmp_path, real_ident
 
 
 def test_an_octo_is_one_line_not_a_quads_numbers(capsys, auriol_log):
-    """The X8's ground run drives 8 rotors (DShot): the quad model cannot be identified from
-    it, and `rig identify` says so in one line instead of fitting motors 1-4."""
+    """The X8's ground run drives 8 rotors (DShot): the identification's fits are a quad's,
+    and `rig identify` says so in one line instead of fitting motors 1-4."""
     assert cli.main(["identify", str(auriol_log), "--vehicle", "x500_v2"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert f"{auriol_log}: 8 rotors (dshot 299-1999 DShot: PWM_AUX_FUNCn hold" in err
-    assert err.rstrip().endswith("the vehicle model identified has 4")
+    assert err.rstrip().endswith("the identification handles 4")
 
 
 def _write_older_layout(source: Path, path: Path) -> None:

@@ -513,7 +513,7 @@ def test_the_three_real_logs_are_planned_or_refused_naming_what_is_missing(
     no_start = r"no vehicle_land_detected, and no arming state \(actuator_armed, vehicle_status\)"
     with pytest.raises(LogError, match=no_start):
         plan_replay(auriol_log, ReplayOptions(vehicle="x500_v2"))
-    eight_rotors = r": 8 rotors .* the vehicle model identified has 4$"
+    eight_rotors = r": 8 rotors .* the identification handles 4$"
     with pytest.raises(IdentificationError, match=eight_rotors):
         identify_vehicle(FlightLog.read(auriol_log), x500)
 

@@ -285,7 +285,7 @@ def test_a_log_of_another_rotor_count_is_one_line_and_no_file(auriol_log, tmp_pa
     assert cli.main(["vehicle", str(auriol_log), "--mass", "30", "--out", str(out)]) == 1
     error = capsys.readouterr().err
     assert error.count("\n") == 1
-    assert f"{auriol_log}: CA_ROTOR_COUNT = 8: the model flies 4 rotors" in error
+    assert f"{auriol_log}: CA_ROTOR_COUNT = 8: the identification handles 4 rotors" in error
     assert not out.exists()
 
 
