@@ -193,6 +193,8 @@ def generic_vehicle(mass_kg: float, cell_count: int, arm_m: float | None = None)
         "propulsion.blade_count": "two-blade props, the common multicopter prop",
         "propulsion.axial_inflow_coefficient_ns_per_m_rad": "blade element + momentum theory at "
         "the generic hover (σa = 0.55); ± 50 %",
+        "propulsion.coaxial_thrust_factor": "1: a quad X has no coaxial pair",
+        "propulsion.coaxial_torque_factor": "1: a quad X has no coaxial pair",
         "battery.capacity_ah": f"a LiPo of {PACK_MASS_FRACTION:.0%} of the mass at "
         f"{PACK_WH_PER_KG:g} Wh/kg; ± 50 %",
         "battery.cell_full_v": "LiPo charge voltage",
