@@ -66,11 +66,11 @@ MODEL_SECONDS = 20.0
 PX4_SITL_STREAM = (0.25, 0.5, 0.25)
 #: The raw FIFO's pipeline: each chip sample as it is.
 RAW_PIPELINE = (1.0,)
-#: The raw FIFO's two bands split here: the model's tones (1× and 2× of every rotor at the
-#: ground run's fastest, 35 Hz shaft rate on the X8) below, the frame's own modes (the X8's
-#: gyro lines at 120-150 Hz) and the rest of the chip's band above.
+#: The raw FIFO's two bands split here: the model's tones below (1× and 2× of the X8's rotors
+#: up to its spin-up's 42 Hz shaft rate), the frame's own modes (the X8's gyro lines at
+#: 120-150 Hz) and the rest of the chip's band above.
 RAW_TONE_BAND_HZ = 100.0
-#: Shortest raw window: 3,300 chip samples, a σ to 2.5 % and PSD bins 2.5 Hz wide, enough
+#: Shortest raw window: 3,300 chip samples, a σ to 1.2 % and PSD bins 2.5 Hz wide, enough
 #: for bands from 5 Hz (the X8's rest after its props coasted down lasts 0.46 s).
 RAW_MIN_WINDOW_S = 0.4
 #: The stand runs this long (to a whole sample) at an operating point's throttles before its
@@ -435,10 +435,7 @@ def fit_vibration(
     }
     levels = np.zeros((2, 2, 3, len(points)))  # triad, tone|broadband, axis, point
     for index, point in enumerate(points):
-        power = {
-            name: spectrum(run, point).band_rms ** 2
-            for name, run in runs.items()
-        }
+        power = {name: spectrum(run, point).band_rms ** 2 for name, run in runs.items()}
         wanted = point.spectrum.band_rms**2 - power["white"]
         for triad in range(2):
             for axis in range(3):
@@ -553,7 +550,9 @@ class MotorDrive:
     command: NDArray[np.float64]  # samples × motors
     throttle: NDArray[np.float64]  # samples × motors
 
-    def window(self, start_s: float, end_s: float) -> tuple[NDArray, NDArray]:
+    def window(
+        self, start_s: float, end_s: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The mean command and throttle per motor over ``start_s``-``end_s``."""
         inside = (self.time_s >= start_s) & (self.time_s < end_s)
         if not np.any(inside):

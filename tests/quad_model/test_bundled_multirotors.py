@@ -58,7 +58,9 @@ def test_hover_speed_is_the_closed_form(name, hover_radps):
     vehicle = load_vehicle(name)
     prop = vehicle.propulsion
     weight = vehicle.body.mass_kg * G
-    closed_form = math.sqrt(weight / (sum(prop.thrust_factors) * prop.thrust_coefficient_n_per_radps2))
+    closed_form = math.sqrt(
+        weight / (sum(prop.thrust_factors) * prop.thrust_coefficient_n_per_radps2)
+    )
     assert closed_form == pytest.approx(hover_radps, abs=0.01)
     assert vehicle.hover_rotor_speed_radps == pytest.approx(closed_form, rel=1e-12)
 
