@@ -23,6 +23,7 @@ import numpy as np
 from fpga_hdl.chips.ublox.driver import GpsFix
 from quad_model.frames import yaw_from_quat
 from quad_model.model import VehicleTruth
+from quad_model.vehicle import MAX_ROTORS
 from rig.logs.ulog_writer import ULogWriter
 
 _ATTITUDE = [("uint64_t", "timestamp_sample"), ("float[4]", "q"), ("float[4]", "delta_q_reset"),
@@ -67,10 +68,12 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
                         ("uint16_t", "reversible_flags")],
     "actuator_outputs": [("uint32_t", "noutputs"), ("float[16]", "output")],
     # The model's battery and propulsion truth, for thrust-stand and sensor-noise tests
-    # (battery fields as PX4's battery_status; the propulsion topic is the rig's own).
+    # (battery fields as PX4's battery_status; the propulsion topic is the rig's own: one
+    # entry per rotor of the largest vehicle, NaN past the vehicle's own).
     "battery_status_groundtruth": [("float", "voltage_v"), ("float", "current_a")],
-    "rig_propulsion_groundtruth": [("float[4]", "rotor_speed_radps"), ("float[4]", "thrust_n"),
-                               ("float[3]", "force_frd_n"), ("float[3]", "moment_frd_nm")],
+    "rig_propulsion_groundtruth": [(f"float[{MAX_ROTORS}]", "rotor_speed_radps"),
+                                   (f"float[{MAX_ROTORS}]", "thrust_n"),
+                                   ("float[3]", "force_frd_n"), ("float[3]", "moment_frd_nm")],
 }  # fmt: skip
 
 _ZERO_3 = np.zeros(3)
@@ -130,8 +133,10 @@ class RigLog:
                                                     *derivative.tolist())  # fmt: skip
         row("battery_status_groundtruth")(time_us, truth.battery_voltage_v,
                                           truth.battery_current_a)  # fmt: skip
+        no_rotors = (math.nan,) * (MAX_ROTORS - truth.rotor_speed_radps.size)
         row("rig_propulsion_groundtruth")(
-            time_us, *truth.rotor_speed_radps.tolist(), *truth.rotor_thrust_n.tolist(),
+            time_us, *truth.rotor_speed_radps.tolist(), *no_rotors,
+            *truth.rotor_thrust_n.tolist(), *no_rotors,
             *truth.force_frd_n.tolist(), *truth.moment_frd_nm.tolist(),
         )  # fmt: skip
 
