@@ -174,12 +174,14 @@ def _motors(
 ) -> None:
     commanded, captured = figure.subplots(2, 1, sharex=True)
     motors = _topic(rig, "actuator_motors")
-    if motors is not None:
-        for i in range(4):
-            commanded.plot(motors[0], motors[1][f"control[{i}]"], lw=0.8, label=f"motor {i}")
+    if motors is not None:  # every motor of the vehicle: the controls past them are NaN
+        for i in range(sum(1 for k in motors[1] if k.startswith("control["))):
+            control = motors[1][f"control[{i}]"]
+            if np.isfinite(control).any():
+                commanded.plot(motors[0], control, lw=0.8, label=f"motor {i}")
     outputs = _topic(rig, "actuator_outputs")
     if outputs is not None:
-        for i in range(4):
+        for i in range(int(outputs[1]["noutputs"].max())):
             captured.plot(outputs[0], outputs[1][f"output[{i}]"], lw=0.8, label=f"channel {i}")
     commanded.set_ylabel("commanded (0..1)")
     captured.set_ylabel("captured PWM [µs]")
