@@ -52,13 +52,14 @@ def fly_bare(build: Px4Build, *, instance: int, imu_hz: int, arm_s: float, simul
     with tempfile.TemporaryDirectory() as folder:
         params, _ = px4_parameters(vehicle, model.hover_throttle(), imu_hz, (), build)
         px4 = Px4Sitl(build, Path(folder), instance, params)
-        link = SimulatorLink(ports, LinkTimeouts(connect_s=60, answer_s=30),
+        motors = vehicle.propulsion.rotor_count
+        link = SimulatorLink(ports, LinkTimeouts(connect_s=60, answer_s=30), motors=motors,
                              peer_exit=px4.exit_description)  # fmt: skip
         ground = GroundLink(ports, environment.home)
         try:
             px4.start()
             link.accept("PX4 SITL (the bare simulator's anchor)")
-            throttle = np.zeros(4)
+            throttle = np.zeros(motors)
             arm_frame = round(arm_s * 1e6) // frame_us
             last_frame = arm_frame + round(simulated_s * 1e6) // frame_us
             poll_every = max(1, imu_hz // 100)

@@ -30,6 +30,8 @@ REPO = Path(__file__).resolve().parent.parent
 MODES = ("pymavlink", "bytes")
 #: Seconds either side waits for the other (start-up or one exchange) before it gives up.
 TIMEOUT_S = 30.0
+#: A quad's answer: four motor commands of PX4's 16 outputs.
+_MOTORS = 4
 
 
 def _sensor(mav: mavlink.MAVLink, frame: int) -> bytes:
@@ -42,7 +44,7 @@ def _sensor(mav: mavlink.MAVLink, frame: int) -> bytes:
 def _controls(mav: mavlink.MAVLink, time_us: int) -> bytes:
     """One HIL_ACTUATOR_CONTROLS as an autopilot answers in lockstep."""
     return mavlink.MAVLink_hil_actuator_controls_message(
-        time_us, [0.5] * 4 + [0.0] * 12, 129, LOCKSTEP_FLAG
+        time_us, [0.5] * _MOTORS + [0.0] * (16 - _MOTORS), 129, LOCKSTEP_FLAG
     ).pack(mav)
 
 
@@ -99,7 +101,7 @@ def exchange_us(frames: int, mode: str) -> float:
                     while not answered:  # the rig's decoder, pymavlink's for anything else
                         data = _receive(link)
                         answered = bool(
-                            actuator_controls_from_frame(data) or mav.parse_buffer(data)
+                            actuator_controls_from_frame(data, _MOTORS) or mav.parse_buffer(data)
                         )
                 elapsed = time.perf_counter() - started
         except BaseException:  # a timeout or Ctrl-C: the peer must not outlive the benchmark

@@ -4,7 +4,8 @@ start it in the run folder, keep its console and its ULog, stop it.
 Nothing of PX4 is vendored: the user's own ``build/px4_sitl_default``-shaped folder
 (``bin/px4`` + ``etc/``) is found through ``--px4 DIR`` or ``$PX4_DIR``. PX4 runs in a fresh
 work dir ``RUN/px4`` (its parameters, dataman and ``log/``), as airframe 10016, PX4's generic
-quad X that starts ``simulator_mavlink``, with the rig's parameters on top.
+quad X that starts ``simulator_mavlink``, with the rig's parameters on top: the vehicle's
+rotors and motor outputs replace the quad's, so a hexa or an octo flies it too.
 
 The rig's parameters reach PX4 after its airframe file, through scripts that ``rcS``
 sources from ``PATH`` (:class:`ParameterHook`, read from the build): the rig writes them
@@ -53,6 +54,7 @@ import numpy as np
 
 from quad_model.vehicle import Vehicle
 from rig.errors import RigError
+from rig.mavlink.px4_api import mavlink
 from rig.processes import die_with_parent, exit_description, stop_process_group
 
 #: The environment variable naming the user's PX4 build (or PX4-Autopilot checkout).
@@ -62,6 +64,11 @@ PX4_DIR_ENV = "PX4_DIR"
 AIRFRAME = 10016
 #: ``IMU_INTEG_RATE``'s range in PX4 v1.14 (``sensors/vehicle_imu/imu_parameters.c``).
 IMU_INTEG_RATE_RANGE_HZ = (100, 1000)
+#: PX4's output function Motor 1 (``mixer_module/output_functions.yaml``); Motor n is 100 + n.
+MOTOR_OUTPUT_FUNCTION = 101
+#: ``MAV_TYPE`` by rotor count, as PX4's quad, hexa and octo airframes set it (the X8 too).
+MAV_TYPES = {4: mavlink.MAV_TYPE_QUADROTOR, 6: mavlink.MAV_TYPE_HEXAROTOR,
+             8: mavlink.MAV_TYPE_OCTOROTOR}  # fmt: skip
 #: Seconds PX4 gets to shut down (close its ULog) after SIGINT before it is killed.
 STOP_GRACE_S = 5.0
 
@@ -244,8 +251,12 @@ NAV_PVT_TRANSFER_MS = (8 + 92) * 10 / 115_200 * 1e3
 
 def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, float]:
     """What a PX4 airframe file for ``vehicle`` sets, as PX4's Gazebo airframes do for the
-    x500: rotor geometry (``CA_ROTORi_PX/PY/KM``, PX4 motor order, KM the torque/thrust
-    ratio, + for CCW), the hover thrust and the battery cells; and, as a real vehicle's
+    x500: rotor geometry (``CA_ROTORi_PX/PY/PZ/KM``, PX4 motor order, KM the torque/thrust
+    ratio, + for CCW; a coaxial pair's lower rotor as PX4's coaxial airframes have it, the
+    same KM magnitude and thrust coefficient as the upper), motor ``i`` on output ``i``
+    (``PWM_MAIN_FUNCi+1`` = Motor ``i+1``: airframe 10016 maps the first four, and PX4
+    SITL's HIL_ACTUATOR_CONTROLS carries output ``i`` as its ``controls[i]``), the hover
+    thrust, the vehicle type (``MAV_TYPE``) and the battery cells; and, as a real vehicle's
     configuration does, the GPS's delay (``EKF2_GPS_DELAY``: the receiver's latency and
     the NAV-PVT's transfer). PX4 SITL's start-up sets that delay to 10 ms from v1.16 on
     (Gazebo's GPS has none); trusting a 119 ms old fix as 10 ms old, v1.17's estimate
@@ -258,11 +269,14 @@ def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, fl
     """
     propulsion = vehicle.propulsion
     ratio = propulsion.torque_coefficient_nm_per_radps2 / propulsion.thrust_coefficient_n_per_radps2
-    params: dict[str, float] = {"CA_AIRFRAME": 0, "CA_ROTOR_COUNT": len(propulsion.position_frd_m)}
-    for i, ((x, y, _), spin) in enumerate(
+    params: dict[str, float] = {"CA_AIRFRAME": 0, "CA_ROTOR_COUNT": propulsion.rotor_count}
+    for i, ((x, y, z), spin) in enumerate(
         zip(propulsion.position_frd_m, propulsion.spin_direction, strict=True)
     ):
-        params |= {f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_KM": spin * ratio}
+        params |= {f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_PZ": z,
+                   f"CA_ROTOR{i}_KM": spin * ratio,
+                   f"PWM_MAIN_FUNC{i + 1}": MOTOR_OUTPUT_FUNCTION + i}  # fmt: skip
+    params["MAV_TYPE"] = MAV_TYPES[propulsion.rotor_count]
     params["MPC_THR_HOVER"] = round(float(hover_throttle), 3)
     params["BAT1_N_CELLS"] = vehicle.battery.cell_count
     params["EKF2_GPS_DELAY"] = round(vehicle.gps.latency_s * 1e3 + NAV_PVT_TRANSFER_MS, 1)

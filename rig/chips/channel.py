@@ -17,6 +17,7 @@ Requests (rig → co-simulation):
   | field | type | meaning |
   |---|---|---|
   | pwm_period_us | u32 | the autopilot's PWM period (``1 / pwm_hz``), whole capture ticks |
+  | motors | u8 | the vehicle's rotors: the capture channels each readout carries |
 
 - ``FRAME`` (kind 2), one lockstep frame (:class:`rig.chips.layer.ChipFrame`):
 
@@ -75,7 +76,7 @@ from rig.errors import CosimError
 
 START, FRAME, STOP, OK, ERROR = 1, 2, 3, 128, 129
 _LENGTH = struct.Struct("<I")
-_START = struct.Struct("<I")
+_START = struct.Struct("<IB")
 _NAV_PVT = struct.Struct("<" + "".join(fmt for _, fmt, loaded in NAV_PVT_LAYOUT if loaded))
 _RANGE_SAMPLE = struct.Struct("<HBB")
 _FRAME_HEAD = struct.Struct(
@@ -91,14 +92,14 @@ _RANGE = struct.Struct("<?db")
 _NO_RANGE = LidarLiteSample(0, 0, 0)
 
 
-def encode_start(pwm_period_us: int) -> bytes:
-    return bytes([START]) + _START.pack(pwm_period_us)
+def encode_start(pwm_period_us: int, motors: int) -> bytes:
+    return bytes([START]) + _START.pack(pwm_period_us, motors)
 
 
-def decode_start(body: bytes) -> int:
-    """The PWM period (µs) of a ``START`` body."""
-    (pwm_period_us,) = _START.unpack(body)
-    return pwm_period_us
+def decode_start(body: bytes) -> tuple[int, int]:
+    """The PWM period (µs) and the motor count of a ``START`` body."""
+    pwm_period_us, motors = _START.unpack(body)
+    return pwm_period_us, motors
 
 
 def encode_frame(frame: ChipFrame) -> bytes:

@@ -57,7 +57,7 @@ from rig.chips.channel import (
     send_message,
 )
 from rig.chips.layer import ChipFrame, SensorEngine, host_port_inputs
-from rig.chips.pwm import MOTOR_CHANNELS, Pulse, PwmTimingError, replay_periods
+from rig.chips.pwm import Pulse, PwmTimingError, replay_periods
 
 
 class RtlChips:
@@ -68,13 +68,15 @@ class RtlChips:
         self.tick_us = 1e6 / pwm_tick_hz
         self.tick_ps = round(1e12 / pwm_tick_hz)
         self.period_us = 0
+        self.motors = 0  # the capture channels read: the vehicle's rotors, set at start
         self._epoch_ps = 0
         self._next_start_us = 0  # the next PWM period start not replayed yet
         self._loaded: list[int] = [0] * CHANNELS  # widths (ticks) in the preload register
         self._later: list[tuple[int, list[int]]] = []  # this frame's further periods
 
-    async def start_pwm(self, period_us: int) -> None:
-        """Fix the epoch two ticks ahead, start the generator and the capture clock.
+    async def start_pwm(self, period_us: int, motors: int) -> None:
+        """Fix the epoch two ticks ahead, start the generator and the capture clock; the
+        capture's first ``motors`` channels are read from now on.
 
         The generator runs from edge ``-1`` (one tick before rig time 0) with zero widths:
         no pulse until the first frame preloads the widths of the period at rig time 0.
@@ -84,7 +86,7 @@ class RtlChips:
                 f"the PWM period ({period_us} µs) is not a whole number of capture ticks "
                 f"({self.tick_us:g} µs)"
             )
-        self.period_us = period_us
+        self.period_us, self.motors = period_us, motors
         now_ps = get_sim_time("ps")
         self._epoch_ps = (math.ceil(now_ps / self.tick_ps) + 2) * self.tick_ps
         self.harness.pwm.write([0] * CHANNELS, period_ticks=round(period_us / self.tick_us))
@@ -172,7 +174,7 @@ class RtlChips:
                 "cannot be read then; lower the sensor rates or the frame rate"
             )
         await self._wait_until_ps(read_ps)
-        captures = (await self.harness.host.pwm_capture())[:MOTOR_CHANNELS]
+        captures = (await self.harness.host.pwm_capture())[: self.motors]
         widths_us = tuple(capture.width_ticks * self.tick_us for capture in captures)
         return widths_us, tuple(capture.timeout for capture in captures)
 
@@ -193,7 +195,7 @@ async def serve(dut: Any) -> None:  # the DUT: its ports are known at run time
         try:
             if kind == START:
                 await engine.start()
-                await chips.start_pwm(decode_start(request[1:]))
+                await chips.start_pwm(*decode_start(request[1:]))
                 answer = bytes([OK])
             elif kind == FRAME:
                 answer = encode_readout(await engine.frame(decode_frame(request[1:])))

@@ -67,7 +67,7 @@ from fpga_hdl.chips.ublox.model import UbloxM8Model
 from fpga_hdl.chips.ublox.ubx import NavPvt
 from fpga_hdl.top import UART_CLK_HZ
 from quad_model.sensors import GpsSample, SensorReadings
-from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmCapture
+from rig.chips.pwm import PWM_TICK_HZ, Pulse, PwmCapture
 
 
 class Chip(StrEnum):
@@ -204,7 +204,8 @@ class ChipHost(Protocol):
     async def capture(
         self, pulses: tuple[Pulse, ...], now_us: int
     ) -> tuple[tuple[float, ...], tuple[bool, ...]]:
-        """Feed the PWM pulses; return each motor channel's captured width and timeout."""
+        """Feed the PWM pulses; return each motor channel's captured width and timeout (one
+        channel per rotor of the vehicle)."""
         ...
 
 
@@ -380,10 +381,11 @@ class TlmChips:
     """The chips as fpga_hdl's Python register models, behind TLM buses.
 
     The GPS UART's line time is the RTL's (on SensorTop's UART clock), so fixes arrive at
-    the same frames as through the RTL.
+    the same frames as through the RTL. The PWM capture measures ``motors`` channels, one
+    per rotor of the vehicle.
     """
 
-    def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
+    def __init__(self, *, motors: int, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
         self.mpu6000 = Mpu6000Model()
         self.ms5611 = Ms5611Model()
         self.ist8310 = Ist8310Model()
@@ -392,7 +394,7 @@ class TlmChips:
         self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
         self.i2c = TlmI2cBus({chip.address: chip for chip in (self.ist8310, self.lidarlite)})
         self.uart = TlmUbloxUart(self.ublox, clk_hz=UART_CLK_HZ)
-        self.pwm = PwmCapture(MOTOR_CHANNELS, tick_hz=pwm_tick_hz)
+        self.pwm = PwmCapture(motors, tick_hz=pwm_tick_hz)
         self._faults: Mapping[str, ChipFault] | None = None  # the fault inputs set last
 
     async def load(self, frame: ChipFrame) -> None:
@@ -423,8 +425,8 @@ class TlmChips:
 class TlmSensorLayer(SensorLayer):
     """``sensor_layer = "tlm"``: the engine in this process over :class:`TlmChips`."""
 
-    def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
-        self.chips = TlmChips(pwm_tick_hz=pwm_tick_hz)
+    def __init__(self, *, motors: int, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
+        self.chips = TlmChips(motors=motors, pwm_tick_hz=pwm_tick_hz)
         self.engine = SensorEngine(self.chips.spi, self.chips.i2c, self.chips.uart, self.chips)
 
     def start(self) -> None:
@@ -452,8 +454,9 @@ class BypassSensorLayer(SensorLayer):
     (Gazebo's) feeds PX4. For measuring what
     the chips cost (``make bench``); the credible rig is ``tlm`` or ``rtl``."""
 
-    def __init__(self) -> None:
-        self._widths_us = [0.0] * MOTOR_CHANNELS
+    def __init__(self, *, motors: int) -> None:
+        self._widths_us = [0.0] * motors
+        self._healthy = (False,) * motors
         self._sensed: ChipFrame | None = None
 
     def start(self) -> None:
@@ -469,8 +472,7 @@ class BypassSensorLayer(SensorLayer):
         readings = frame.si
         assert readings.imu is not None, "the IMU is due every frame"
         for pulse in pulses:
-            if pulse.channel < MOTOR_CHANNELS:
-                self._widths_us[pulse.channel] = float(pulse.width_us)
+            self._widths_us[pulse.channel] = float(pulse.width_us)
         imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
         ranged = readings.range
         now_us = frame.now_us
@@ -481,7 +483,7 @@ class BypassSensorLayer(SensorLayer):
             mag_gauss=None if mag is None else _xyz(mag.field_gauss),
             baro_pa_degc=None if baro is None else (baro.pressure_pa, baro.temperature_degc),
             pwm_widths_us=tuple(self._widths_us),
-            pwm_timed_out=(False,) * MOTOR_CHANNELS,
+            pwm_timed_out=self._healthy,
             gps=() if gps is None else (ReceivedFix(now_us, now_us, gps_fix(gps)),),
             range=None if ranged is None or ranged.distance_m is None
             else Range(ranged.distance_m, 100),

@@ -48,7 +48,7 @@ from rig.chips.layer import (
     host_port_inputs,
     run_now,
 )
-from rig.chips.pwm import MOTOR_CHANNELS, PWM_TICK_HZ, Pulse, PwmTimingError, replay_periods
+from rig.chips.pwm import PWM_TICK_HZ, Pulse, PwmTimingError, replay_periods
 from rig.errors import CosimError
 
 if TYPE_CHECKING:  # the harness module builds a simulator: imported when a layer starts
@@ -56,12 +56,15 @@ if TYPE_CHECKING:  # the harness module builds a simulator: imported when a laye
 
 
 class NativeChips:
-    """:class:`rig.chips.layer.ChipHost` over the compiled harness: host port, PWM, capture."""
+    """:class:`rig.chips.layer.ChipHost` over the compiled harness: host port, PWM, capture
+    (the first ``motors`` of the core's channels)."""
 
     def __init__(
-        self, harness: NativeHarness, *, pwm_tick_hz: float, frame_us: int | None = None
-    ) -> None:
+        self, harness: NativeHarness, *, motors: int, pwm_tick_hz: float,
+        frame_us: int | None = None,
+    ) -> None:  # fmt: skip
         self.harness = harness
+        self.motors = motors
         self.frame_us = frame_us
         self.tick_us = 1e6 / pwm_tick_hz
         self.tick_ps = round(1e12 / pwm_tick_hz)
@@ -137,7 +140,7 @@ class NativeChips:
                 f"every {self.frame_us} µs)"
             )
         self._run_to(now_tick + 1)  # every edge up to now_tick's, then the read
-        captures = self.harness.host.pwm_capture()[:MOTOR_CHANNELS]
+        captures = self.harness.host.pwm_capture()[: self.motors]
         if self.frame_us is not None:
             # While the rig does the rest of its frame (and the autopilot computes), run the
             # capture clock on to the next frame's read, stopping before the edge that takes
@@ -162,7 +165,8 @@ class NativeChips:
 class NativeSensorLayer(SensorLayer):
     """The chips as compiled RTL in this process (see the module docstring).
 
-    ``pwm_hz`` is the autopilot's PWM rate (its timer period is replayed by the harness's
+    ``motors`` is the vehicle's rotor count: the capture channels read. ``pwm_hz`` is the
+    autopilot's PWM rate (its timer period is replayed by the harness's
     PWM generator); ``pwm_tick_hz`` the capture core's tick, a build parameter of the
     gateware. With ``frame_us`` (the rig's frames come every ``frame_us``), the capture
     clock runs on towards the next frame on a worker thread once a frame is read, while
@@ -171,8 +175,9 @@ class NativeSensorLayer(SensorLayer):
     """
 
     def __init__(
-        self, *, pwm_hz: int, pwm_tick_hz: float = PWM_TICK_HZ, frame_us: int | None = None
-    ) -> None:
+        self, *, motors: int, pwm_hz: int, pwm_tick_hz: float = PWM_TICK_HZ,
+        frame_us: int | None = None,
+    ) -> None:  # fmt: skip
         from fpga_hdl.cosim.native import NativeHarness  # builds or reuses the library
 
         self.pwm_period_us = round(1e6 / pwm_hz)
@@ -180,7 +185,8 @@ class NativeSensorLayer(SensorLayer):
             self.harness = NativeHarness(pwm_tick_hz=pwm_tick_hz)
         except Exception as error:
             raise CosimError(f"the RTL co-simulation could not start: {error}") from error
-        self.chips = NativeChips(self.harness, pwm_tick_hz=pwm_tick_hz, frame_us=frame_us)
+        self.chips = NativeChips(self.harness, motors=motors, pwm_tick_hz=pwm_tick_hz,
+                                 frame_us=frame_us)  # fmt: skip
         # The GPS UART runs on its own clock (SensorTop's ``uart`` domain), so its frames,
         # longer than a rig frame, cost none of the frame's system-clock bus time.
         self.engine = SensorEngine(

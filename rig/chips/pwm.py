@@ -9,7 +9,9 @@ disarmed. So a new command reaches the motors only at the
 next PWM period (up to 2.5 ms later at 400 Hz), as on the real rig. A dropped-out channel
 emits no pulse at all. The pulses go to the PWM capture core (RTL) or its model (TLM), and
 the captured widths, not the commands, drive the motors; a channel whose capture timed out
-means zero thrust (the ESC's failsafe).
+means zero thrust (the ESC's failsafe). Motor ``i`` is output ``i`` (PX4's
+``PWM_MAIN_FUNCi+1`` = Motor ``i+1``), so a vehicle uses the first of the core's
+:data:`~fpga_hdl.chips.pwm_capture.core.CHANNELS` channels, one per rotor.
 """
 
 from __future__ import annotations
@@ -30,8 +32,6 @@ from quad_model.frames import PWM_MAX_US, PWM_MIN_US, pwm_to_throttle
 PWM_DISARMED_US = PWM_MIN_US
 #: PX4's PWM_MAIN_MINn/MAXn defaults: the pulses for actuator command 0 and 1.
 DEFAULT_MOTOR_PWM_RANGE_US = (PWM_MIN_US, PWM_MAX_US)
-#: Quad-X: the first four outputs drive the motors (PX4 MOTOR_ORDER).
-MOTOR_CHANNELS = 4
 #: The capture core's tick: 1 µs, the unit PX4 uses for PWM (fpga_hdl.chips.pwm_capture).
 PWM_TICK_HZ = 1e6
 #: No rising edge for this long and a channel counts as lost: the capture core's default,

@@ -56,7 +56,8 @@ DEFAULT_SIMULATOR = "verilator"
 class RtlSensorLayer(SensorLayer):
     """The chips as RTL in a cocotb simulator process, behind the binary channel.
 
-    ``pwm_hz`` is the autopilot's PWM rate (its timer period is replayed by the harness's
+    ``motors`` is the vehicle's rotor count: the capture channels read. ``pwm_hz`` is the
+    autopilot's PWM rate (its timer period is replayed by the harness's
     PWM generator); ``pwm_tick_hz`` the capture core's tick.
     """
 
@@ -64,6 +65,7 @@ class RtlSensorLayer(SensorLayer):
         self,
         simulator: str = DEFAULT_SIMULATOR,
         *,
+        motors: int,
         pwm_hz: int,
         pwm_tick_hz: float = PWM_TICK_HZ,
         build_timeout_s: float = 600.0,
@@ -71,6 +73,7 @@ class RtlSensorLayer(SensorLayer):
         start_timeout_s: float = 120.0,
     ) -> None:
         self.simulator = simulator
+        self.motors = motors
         self.pwm_period_us = round(1e6 / pwm_hz)
         self.pwm_tick_hz = pwm_tick_hz
         self.frame_timeout_s = frame_timeout_s
@@ -146,7 +149,7 @@ class RtlSensorLayer(SensorLayer):
     def start(self) -> None:
         """PX4's start-up sequences; the GPS handshake alone runs about 2.4 million system
         cycles (its first steps at 9600 baud), hence its own, longer bound."""
-        self._request(encode_start(self.pwm_period_us), self.start_timeout_s)
+        self._request(encode_start(self.pwm_period_us, self.motors), self.start_timeout_s)
 
     def sense(self, frame: ChipFrame) -> None:
         """Kept for :meth:`finish`: under cocotb the capture clock runs through the bus

@@ -74,7 +74,7 @@ from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.sim_messages import distance_sensor, hil_gps, hil_sensor, hil_state_quaternion
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
-from rig.scenarios.faults import FaultInjector, describe
+from rig.scenarios.faults import FaultInjector, check_motors, describe
 from rig.scenarios.scenario import Rates, Scenario
 from rig.scenarios.script import Action, CommandScript
 
@@ -287,6 +287,9 @@ class _Loop:
         if scenario.rangefinder and vehicle.rangefinder is None:
             raise ScenarioError(f"{scenario.source}: key 'rangefinder': vehicle "
                                 f"{vehicle.name!r} has no [rangefinder] table")  # fmt: skip
+        #: One PWM output, capture channel and HIL_ACTUATOR_CONTROLS entry per rotor.
+        self.motors = motors = vehicle.propulsion.rotor_count
+        check_motors(scenario.faults, motors, scenario.source, vehicle.name)
         environment = scenario.environment
         home = environment.home
         self.log = RigLog(
@@ -328,11 +331,11 @@ class _Loop:
             vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
             self.rates.baro_hz, RANGEFINDER_RATE_HZ if scenario.rangefinder else None,
         )  # fmt: skip
-        self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event)
-        self.layer = _make_sensor_layer(self.sensor_layer_name, self.rates)
+        self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event, motors)
+        self.layer = _make_sensor_layer(self.sensor_layer_name, self.rates, motors)
         self._closers.append(self.layer.close)
-        self.pwm = PwmOutput(4, self.rates.pwm_hz, scenario.motor_pwm_range_us)
-        self.throttle = np.zeros(4)
+        self.pwm = PwmOutput(motors, self.rates.pwm_hz, scenario.motor_pwm_range_us)
+        self.throttle = np.zeros(motors)
         self._capture: tuple[tuple[float, ...], tuple[bool, ...]] | None = None
         self._delivered: ChipReadout  # the latest chip readout, for the progress report
         self.ports = Ports(options.instance)
@@ -354,7 +357,7 @@ class _Loop:
 
     def run(self) -> None:
         self.layer.start()
-        link = SimulatorLink(self.ports, self.options.timeouts,
+        link = SimulatorLink(self.ports, self.options.timeouts, motors=self.motors,
                              peer_exit=self.autopilot.exit_description)  # fmt: skip
         self._closers.append(link.close)
         self.link = link
@@ -617,17 +620,18 @@ class _Loop:
         return FrameBudget(*(part_s / frames * 1e6 for part_s in (*parts_s, other_s)))
 
 
-def _make_sensor_layer(name: str, rates: Rates) -> SensorLayer:
+def _make_sensor_layer(name: str, rates: Rates, motors: int) -> SensorLayer:
     if name == "tlm":
-        return TlmSensorLayer(pwm_tick_hz=rates.pwm_tick_hz)
+        return TlmSensorLayer(motors=motors, pwm_tick_hz=rates.pwm_tick_hz)
     if name == BYPASS:
-        return BypassSensorLayer()
+        return BypassSensorLayer(motors=motors)
     # Imported on demand: each builds its simulator once (cached under build/) and starts it.
     from rig.chips.native import NativeSensorLayer
     from rig.chips.rtl import COCOTB_LAYER, RtlSensorLayer
 
     if name == COCOTB_LAYER:  # the same RTL under cocotb (benchmarks and comparisons)
-        return RtlSensorLayer(pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
+        return RtlSensorLayer(motors=motors, pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
     return NativeSensorLayer(
-        pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz, frame_us=rates.frame_us
-    )
+        motors=motors, pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz,
+        frame_us=rates.frame_us,
+    )  # fmt: skip

@@ -68,8 +68,8 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
                         ("uint16_t", "reversible_flags")],
     "actuator_outputs": [("uint32_t", "noutputs"), ("float[16]", "output")],
     # The model's battery and propulsion truth, for thrust-stand and sensor-noise tests
-    # (battery fields as PX4's battery_status; the propulsion topic is the rig's own: a slot
-    # per rotor the model can fly, zero past the vehicle's, as PX4's esc_status pads).
+    # (battery fields as PX4's battery_status; the propulsion topic is the rig's own: one
+    # entry per rotor of the largest vehicle, NaN past the vehicle's own).
     "battery_status_groundtruth": [("float", "voltage_v"), ("float", "current_a")],
     "rig_propulsion_groundtruth": [(f"float[{MAX_ROTORS}]", "rotor_speed_radps"),
                                    (f"float[{MAX_ROTORS}]", "thrust_n"),
@@ -133,10 +133,11 @@ class RigLog:
                                                     *derivative.tolist())  # fmt: skip
         row("battery_status_groundtruth")(time_us, truth.battery_voltage_v,
                                           truth.battery_current_a)  # fmt: skip
-        absent = (0.0,) * (MAX_ROTORS - len(truth.rotor_speed_radps))
+        no_rotors = (math.nan,) * (MAX_ROTORS - truth.rotor_speed_radps.size)
         row("rig_propulsion_groundtruth")(
-            time_us, *truth.rotor_speed_radps.tolist(), *absent, *truth.rotor_thrust_n.tolist(),
-            *absent, *truth.force_frd_n.tolist(), *truth.moment_frd_nm.tolist(),
+            time_us, *truth.rotor_speed_radps.tolist(), *no_rotors,
+            *truth.rotor_thrust_n.tolist(), *no_rotors,
+            *truth.force_frd_n.tolist(), *truth.moment_frd_nm.tolist(),
         )  # fmt: skip
 
     def imu(

@@ -210,7 +210,8 @@ def distance_sensor(
 
 @dataclass(frozen=True)
 class ActuatorControls:
-    """One decoded HIL_ACTUATOR_CONTROLS: motor commands 0..1 in PX4's quad-X order."""
+    """One decoded HIL_ACTUATOR_CONTROLS: motor commands 0..1 in PX4's motor order
+    (``CA_ROTORn``), one per rotor of the vehicle."""
 
     time_us: int
     motors: tuple[float, ...]
@@ -219,9 +220,10 @@ class ActuatorControls:
 
 
 def decode_actuator_controls(
-    message: mavlink.MAVLink_hil_actuator_controls_message, motor_count: int = 4
+    message: mavlink.MAVLink_hil_actuator_controls_message, motor_count: int
 ) -> ActuatorControls:
-    """Motor commands from PX4's outputs: disarmed → all zero; armed → clamped to 0..1.
+    """The first ``motor_count`` outputs (PX4 SITL's ``PWM_MAIN_FUNCi`` = Motor i, the
+    vehicle's rotors): disarmed → all zero; armed → clamped to 0..1.
 
     PX4 may send −0.4 for an armed motor in failsafe and sends 0 for every output while
     disarmed (``actuator_controls_from_outputs``), so the clamp is part of the protocol.
@@ -231,7 +233,7 @@ def decode_actuator_controls(
                               message.flags, motor_count)  # fmt: skip
 
 
-def actuator_controls_from_frame(frame: bytes, motor_count: int = 4) -> ActuatorControls | None:
+def actuator_controls_from_frame(frame: bytes, motor_count: int) -> ActuatorControls | None:
     """:func:`decode_actuator_controls` straight from ``frame`` when it is exactly one
     unsigned MAVLink 2 HIL_ACTUATOR_CONTROLS with a good checksum; None for anything else
     (the caller then hands it to pymavlink's parser, which also reports what is bad).
@@ -267,7 +269,7 @@ _ACTUATOR_PAYLOAD: struct.Struct = _ACTUATOR.unpacker
 
 def _actuator_controls(time_usec: int, controls: Sequence[float], mode: int, flags: int,
                        motor_count: int) -> ActuatorControls:  # fmt: skip
-    motors = controls[:motor_count]  # plain floats: numpy costs more for four
+    motors = controls[:motor_count]  # plain floats: numpy costs more for a few
     if not math.isfinite(sum(motors)):  # a NaN or an infinity anywhere makes the sum one
         raise AutopilotProtocolError(
             f"HIL_ACTUATOR_CONTROLS at time_usec={time_usec} has non-finite motor "

@@ -97,6 +97,9 @@ class SimulatorLink:
         The SITL instance's port plan.
     timeouts
         Bounds for connecting and for each lockstep answer.
+    motors
+        The vehicle's rotor count: the outputs of each HIL_ACTUATOR_CONTROLS taken as
+        motor commands.
     peer_exit
         Optional callable returning a description of the autopilot's exit (``"exit code
         -9"``) once its process has ended, else ``None``; lets the watchdog tell a dead
@@ -108,10 +111,12 @@ class SimulatorLink:
         ports: Ports,
         timeouts: LinkTimeouts = LinkTimeouts(),
         *,
+        motors: int,
         peer_exit: Callable[[], str | None] | None = None,
     ) -> None:
         self.ports = ports
         self.timeouts = timeouts
+        self.motors = motors
         self.stats = LinkStats()
         self.mav = mavlink.MAVLink(None, RIG_SYSTEM_ID, RIG_COMPONENT_ID)
         self.mav.robust_parsing = True  # garbage is counted, never an exception mid-run
@@ -304,7 +309,9 @@ class SimulatorLink:
                 f"the autopilot closed the simulator link ({self.endpoint}: {reason})"
                 f"{self._exit_note()}; {PX4_NEVER_RECONNECTS}"
             )
-        controls = actuator_controls_from_frame(data) if self.mav.buf_len() == 0 else None
+        controls = None
+        if self.mav.buf_len() == 0:
+            controls = actuator_controls_from_frame(data, self.motors)
         if controls is not None:
             self._take_controls(controls)
         else:
@@ -315,7 +322,7 @@ class SimulatorLink:
     def _handle(self, message: mavlink.MAVLink_message) -> None:
         kind = message.get_type()
         if kind == "HIL_ACTUATOR_CONTROLS":
-            self._take_controls(decode_actuator_controls(message))
+            self._take_controls(decode_actuator_controls(message, self.motors))
         elif kind == "HEARTBEAT":
             self.peer_heartbeat = message
         elif kind == "COMMAND_LONG":

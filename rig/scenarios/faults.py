@@ -15,6 +15,10 @@ and is logged when it starts and when it ends:
 | ``gps_loss`` | GPS receiver | no HIL_GPS is sent |
 | ``gps_receiver`` | u-blox chip | ``loss_of_fix``/``jammed`` solution; ``bad_checksum`` on UART |
 | ``pwm_dropout`` | PWM lines | no pulses on ``channel`` (all if absent): the capture times out |
+
+A motor fault names a motor of the vehicle flown (``0`` to its rotor count less one, in PX4's
+motor order), which the scenario file cannot know (``--vehicle`` may change it): the run
+checks it (:func:`check_motors`).
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import numpy as np
 from fpga_hdl.chips.ublox.link import BAD_CHECKSUM_FLIP, GpsFault
 from quad_model.sensors import SensorReadings
 from rig.chips.layer import Chip, ChipFault
+from rig.errors import ScenarioError
 from rig.scenarios.scenario import FaultSpec
 
 #: Which sample and field each sensor name of a scenario refers to.
@@ -38,7 +43,19 @@ _SAMPLE_FIELD = {
     "mag": ("mag", "field_gauss"),
     "baro": ("baro", "pressure_pa"),
 }
-MOTOR_COUNT = 4
+#: The fault keys that name a motor (PWM channel ``i`` drives motor ``i``).
+_MOTOR_KEYS = ("motor", "channel")
+
+
+def check_motors(faults: Sequence[FaultSpec], motors: int, source: str, vehicle: str) -> None:
+    """Refuse, in one line naming the scenario key, a fault on a motor ``vehicle`` (with
+    ``motors`` rotors) does not have."""
+    for index, fault in enumerate(faults):
+        for key in _MOTOR_KEYS:
+            motor = getattr(fault, key, None)
+            if motor is not None and motor >= motors:
+                raise ScenarioError(f"{source}: key 'faults[{index}].{key}' = {motor}: vehicle "
+                                    f"{vehicle!r} has motors 0..{motors - 1}")  # fmt: skip
 
 
 class MotorHealth(Protocol):
@@ -58,6 +75,8 @@ class FaultInjector:
         Seeded generator for noise bursts (the same seed gives the same noise).
     announce
         Called ``(time_us, text)`` when a fault starts or ends, so the rig logs it.
+    motors
+        The vehicle's rotor count: a PWM dropout without a channel silences them all.
     """
 
     def __init__(
@@ -65,8 +84,10 @@ class FaultInjector:
         faults: Sequence[FaultSpec],
         rng: np.random.Generator,
         announce: Callable[[int, str], None],
+        motors: int,
     ) -> None:
         self.faults = tuple(faults)
+        self._motors = motors
         self._rng = rng
         self._announce = announce
         self._active_index: frozenset[int] = frozenset()
@@ -174,7 +195,7 @@ class FaultInjector:
         for fault in self._active:
             if fault.kind == "pwm_dropout":
                 channel = fault.channel
-                dropped |= set(range(MOTOR_COUNT)) if channel is None else {channel}
+                dropped |= set(range(self._motors)) if channel is None else {channel}
         return frozenset(dropped)
 
 

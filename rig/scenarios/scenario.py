@@ -42,6 +42,7 @@ from hil_config import (
     table,
 )
 from quad_model.environment import Environment, GeoPoint
+from quad_model.vehicle import MAX_ROTORS
 from rig.chips.layer import Chip
 from rig.chips.pwm import DEFAULT_MOTOR_PWM_RANGE_US, PWM_TICK_HZ
 from rig.errors import ScenarioError
@@ -81,7 +82,8 @@ class Sensor(StrEnum):
     BARO = "baro"
 
 
-Motor = Annotated[Integer, Field(ge=0, le=3)]
+#: A motor of any vehicle the model flies; the run checks it against the vehicle flown.
+Motor = Annotated[Integer, Field(ge=0, le=MAX_ROTORS - 1)]
 BitMask = Annotated[Integer, Field(ge=1, le=255)]
 
 
@@ -443,7 +445,7 @@ class GpsReceiverFault(_Fault):
 
 @table(kw_only=True)
 class PwmDropout(_Fault):
-    """A PWM line goes quiet; no channel: all four."""
+    """A PWM line goes quiet; no channel: every motor's."""
 
     kind: Literal["pwm_dropout"] = "pwm_dropout"
     channel: Motor | None = None

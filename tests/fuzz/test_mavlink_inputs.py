@@ -34,7 +34,7 @@ class _SimulatorPeer:
 
     def __init__(self) -> None:
         ports = Ports(free_test_instance())
-        self.link = SimulatorLink(ports, LinkTimeouts(connect_s=5, answer_s=2))
+        self.link = SimulatorLink(ports, LinkTimeouts(connect_s=5, answer_s=2), motors=4)
         self.autopilot = socket.create_connection(("127.0.0.1", ports.simulator_tcp))
         self.link.accept(answers_every_frame=True)
         self.time_us = 0

@@ -10,8 +10,8 @@ Behaviours:
   SET_MESSAGE_INTERVAL for HIL_STATE_QUATERNION (5000 µs), stay silent for the first
   ``--after`` frames (PX4 boots for 52–112 ms of simulated time), then answer every
   HIL_SENSOR with ``id = 0`` with one disarmed HIL_ACTUATOR_CONTROLS echoing ``time_usec``.
-  With ``--throttle X`` it answers armed, every motor at X, from frame ``--arm-after``
-  on (a real autopilot is disarmed while the rig freewheels, so the answered frames
+  With ``--throttle X`` it answers armed, every motor of ``--motors`` (4) at X, from frame
+  ``--arm-after`` on (a real autopilot is disarmed while the rig freewheels, so the answered frames
   before lockstep do not change the flight).
 - ``hang``: answers ``--after`` frames, then stops answering but keeps the link open.
 - ``close``: answers ``--after`` frames, then closes the link.
@@ -63,6 +63,7 @@ def main() -> None:
     parser.add_argument("--behaviour", default="px4")
     parser.add_argument("--after", type=int, default=0)
     parser.add_argument("--throttle", type=float, default=None)
+    parser.add_argument("--motors", type=int, default=4)
     parser.add_argument("--arm-after", type=int, default=0)
     parser.add_argument("--record", default=None)
     parser.add_argument("--ignore-sigint", action="store_true", help="a hung shutdown")
@@ -130,7 +131,8 @@ def answer_frames(sock: socket.socket, mav: mavlink.MAVLink, record, args) -> No
                 controls = [math.nan] * 4 + [0.0] * 12
                 mode = ARMED_MODE
             elif args.throttle is not None and frames > args.arm_after:
-                controls, mode = [args.throttle] * 4 + [0.0] * 12, ARMED_MODE
+                controls = [args.throttle] * args.motors + [0.0] * (16 - args.motors)
+                mode = ARMED_MODE
             else:
                 controls, mode = [0.0] * 16, 1
             answer = mav.hil_actuator_controls_encode(message.time_usec, controls, mode, 1)

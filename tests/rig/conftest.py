@@ -17,6 +17,8 @@ from tests.rig.px4_flights import NO_PX4, every_build
 DOUBLE = Path(__file__).with_name("autopilot_double.py")
 #: Short bounds so a broken test fails in seconds, not minutes.
 TEST_TIMEOUTS = LinkTimeouts(connect_s=10, answer_s=2)
+#: The links of these tests carry a quad's four motors.
+QUAD_MOTORS = 4
 
 
 @pytest.fixture
@@ -25,11 +27,11 @@ def listening_link() -> Iterator[Callable[..., SimulatorLink]]:
     suites use low ones)."""
     links: list[SimulatorLink] = []
 
-    def open_link(timeouts: LinkTimeouts = TEST_TIMEOUTS, **kw):
+    def open_link(timeouts: LinkTimeouts = TEST_TIMEOUTS, motors: int = QUAD_MOTORS, **kw):
         instances = worker_instances(60, 40)
         for instance in instances:
             try:
-                link = SimulatorLink(Ports(instance), timeouts, **kw)
+                link = SimulatorLink(Ports(instance), timeouts, motors=motors, **kw)
             except AutopilotNotConnected:
                 continue
             links.append(link)

@@ -91,8 +91,8 @@ def test_case_ids_are_stable_so_a_rerun_finds_its_cases(tmp_path):
         ),
         ({"scenario": "no_such"}, "no_such.toml: no such scenario file (bundled: "),
         (
-            {"faults": {"m0": {"kind": "motor_loss", "motor": 7}}, "axes": {"fault": ["m0"]}},
-            "c.toml: faults.m0: key 'motor' = 7: expected a value <= 3",
+            {"faults": {"m0": {"kind": "motor_loss", "motor": 8}}, "axes": {"fault": ["m0"]}},
+            "c.toml: faults.m0: key 'motor' = 8: expected a value <= 7",
         ),
         (
             {"faults": {"m0": {"kind": "motor_loss", "motor": 0, "duration_s": "3"}}},

@@ -4,8 +4,9 @@ In ``rtl`` mode every chip and the PWM capture core are RTL on the co-simulation
 harness, compiled into the rig's process (``rig.chips.native``); the same Verilog also
 runs under cocotb in its own process (``rig.chips.rtl``). The same frames through the
 three layers (TLM, cocotb RTL, compiled RTL) must give the same decoded values, bus
-errors and captured PWM, frame by frame, at the default 1 µs capture tick and at a
-coarser one, and the same GPS fixes at the same times (through the u-blox core's UART and
+errors and captured PWM, frame by frame, at the default 1 µs capture tick on every one of
+the capture core's eight channels (an octo's motors) and at a coarser tick on a quad's
+four, and the same GPS fixes at the same times (through the u-blox core's UART and
 PX4's decoder, with receiver and line faults). The RTL is read at the frame time,
 whatever the pulses do; nothing steers it.
 """
@@ -17,6 +18,7 @@ from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
 from fpga_hdl.chips.lidarlite.driver import Range, decode_range, sample_from_range
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
+from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix
 from fpga_hdl.chips.ublox.link import BAD_CHECKSUM_FLIP, GpsFault, receiver_solution
 from fpga_hdl.verification.scoreboard import Scoreboard
@@ -29,19 +31,22 @@ from rig.chips.channel import (
     encode_start,
 )
 from rig.chips.layer import ChipFault, ChipFrame, ChipReadout, TlmSensorLayer
-from rig.chips.pwm import MOTOR_CHANNELS, Pulse, PwmOutput
+from rig.chips.pwm import Pulse, PwmOutput
 from rig.errors import CosimError
 
 PWM_HZ = 400
-#: Motor 2's output stops for this span of frames: longer than the capture's 0.1 s
-#: timeout at 1 kHz, so the timeout flag and its clearing are compared too.
+#: An octo's motors use every channel of the capture core; a quad's the first four.
+OCTO, QUAD = CHANNELS, 4
+#: The output of motor ``motors - 2`` stops for this span of frames: longer than the
+#: capture's 0.1 s timeout at 1 kHz, so the timeout flag and its clearing are compared too.
 DROPOUT_FRAMES = range(150, 290)
 #: Frames whose PWM periods put the motors' falls 3, 2, 1 and 0 µs before a 1 ms frame
 #: time: the documented read latency (an edge is readable 3 ticks after the tick that
 #: samples it, ``fpga_hdl.top.PWM_RESULT_LATENCY_TICKS``) splits them.
 BOUNDARY_FRAMES = range(340, 400)
-#: Widths of those periods: a period starting 1.5 ms before a frame time ends 3..0 µs
-#: before it; the others in between change every width back to 1200 µs.
+#: Widths of those periods (motors 0..3, again 4..7): a period starting 1.5 ms before a
+#: frame time ends 3..0 µs before it; the others in between change every width back to
+#: 1200 µs.
 BOUNDARY_WIDTHS_US, BETWEEN_WIDTH_US = (1497, 1498, 1499, 1500), 1200
 #: A GPS measurement every this many frames (40 Hz at 1 kHz), each stamped with 4 × its
 #: frame time as time of week, so that a short test holds many of the navigation epochs
@@ -65,14 +70,15 @@ def _gps_fix(rng):
     )  # fmt: skip
 
 
-def _frames(rng, count, *, frame_us=1000, faults=None):
-    """Frames as the rig builds them: new motor commands every frame (armed after 20),
-    the autopilot's PWM pulses at 400 Hz, a dropout, mag and baro at their rates."""
+def _frames(rng, count, *, motors, frame_us=1000, faults=None):
+    """Frames as the rig builds them for ``motors`` rotors: new motor commands every frame
+    (armed after 20), the autopilot's PWM pulses at 400 Hz, a dropout, mag and baro at
+    their rates."""
     d1_d2 = raw_from_si(95_461.0, 21.5)
-    outputs = PwmOutput(MOTOR_CHANNELS, PWM_HZ)
+    outputs = PwmOutput(motors, PWM_HZ)
     for k in range(1, count + 1):
         now_us = k * frame_us
-        dropped = {2} if k in DROPOUT_FRAMES else set()
+        dropped = {motors - 2} if k in DROPOUT_FRAMES else set()
         gps_fault = GPS_FAULTS.get(k)
         frame_faults = (faults or {}).get(k, {})
         if gps_fault is GpsFault.BAD_CHECKSUM:
@@ -100,21 +106,26 @@ def _frames(rng, count, *, frame_us=1000, faults=None):
             # The periods take the last command before their start: one starting at
             # 2.5 ms mod 5 the command after frames 0, 1, 2 mod 5, one at 0 ms mod 5 the
             # command after frames 3, 4 mod 5.
-            widths_us = BOUNDARY_WIDTHS_US if k % 5 < 3 else [BETWEEN_WIDTH_US] * 4
+            widths_us = _boundary(motors) if k % 5 < 3 else (BETWEEN_WIDTH_US,) * motors
             outputs.command([(width - 1000) / 1000 for width in widths_us], armed=True)
             continue
-        # Random throttles, then a hover's: four motors within 4 µs of each other, whose
+        # Random throttles, then a hover's: the motors within 4 µs of each other, whose
         # falls straddle frame boundaries.
         spread = 1.0 if k < 300 else 0.004
-        outputs.command(0.5 + rng.uniform(-spread / 2, spread / 2, MOTOR_CHANNELS), armed=k > 20)
+        outputs.command(0.5 + rng.uniform(-spread / 2, spread / 2, motors), armed=k > 20)
+
+
+def _boundary(motors):
+    """The boundary periods' widths, :data:`BOUNDARY_WIDTHS_US` over and over."""
+    return (BOUNDARY_WIDTHS_US * motors)[:motors]
 
 
 def test_frame_codec_round_trip():
     rng = np.random.default_rng(3)
     faults = {5: {"mpu6000": ChipFault(flip=0x81), "ist8310": ChipFault(mute=True)}}
-    for frame in _frames(rng, 30, faults=faults):
+    for frame in _frames(rng, 30, motors=OCTO, faults=faults):
         assert decode_frame(encode_frame(frame)[1:]) == frame
-    assert decode_start(encode_start(2500)[1:]) == 2500
+    assert decode_start(encode_start(2500, OCTO)[1:]) == (2500, OCTO)
 
 
 def test_readout_codec_round_trip():
@@ -137,7 +148,7 @@ def _started(layer):
 def rtl_layer():
     from rig.chips.rtl import RtlSensorLayer  # builds the harness once (cached under build/)
 
-    layer = _started(RtlSensorLayer(pwm_hz=PWM_HZ))
+    layer = _started(RtlSensorLayer(motors=OCTO, pwm_hz=PWM_HZ))
     yield layer
     layer.close()
 
@@ -146,7 +157,8 @@ def rtl_layer():
 def native_layer():
     from rig.chips.native import NativeSensorLayer  # builds the library once (build/native/)
 
-    layer = _started(NativeSensorLayer(pwm_hz=PWM_HZ, frame_us=1000))  # runs ahead, as the rig's
+    # runs ahead, as the rig's
+    layer = _started(NativeSensorLayer(motors=OCTO, pwm_hz=PWM_HZ, frame_us=1000))
     yield layer
     layer.close()
 
@@ -154,14 +166,15 @@ def native_layer():
 @pytest.mark.cosim
 def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, native_layer):
     """The same samples, time, faults and pulses give the same decoded values, bus errors
-    and captured PWM on the three layers, every frame (fpga_hdl proves the chips per byte)."""
-    tlm, healthy = _started(TlmSensorLayer()), _started(TlmSensorLayer())
+    and captured PWM of an octo's eight motors on the three layers, every frame (fpga_hdl
+    proves the chips per byte)."""
+    tlm, healthy = _started(TlmSensorLayer(motors=OCTO)), _started(TlmSensorLayer(motors=OCTO))
     faults = {k: {"mpu6000": ChipFault(flip=0x40)} for k in range(50, 55)}
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
     corrupted, widths, timed_out, pwm, boundary, fixes = set(), set(), [], [], 0, []
     loaded, collected = {}, {}
     cocotb_rtl, compiled_rtl = Scoreboard("RTL vs TLM"), Scoreboard("compiled RTL vs TLM")
-    for frame in _frames(np.random.default_rng(11), 400, faults=faults):
+    for frame in _frames(np.random.default_rng(11), 400, motors=OCTO, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
         fixes += [(frame.now_us, received) for received in reference.gps]
         if frame.range is not None:
@@ -172,16 +185,20 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
         cocotb_rtl.check(f"frame at {frame.now_us} µs", reference, rtl)
         compiled_rtl.check(f"frame at {frame.now_us} µs", reference, native_layer.frame(frame))
         pwm.append(rtl.pwm_widths_us)
-        if pwm[-1] == BOUNDARY_WIDTHS_US != pwm[-2]:
-            # The falls came 3, 2, 1, 0 µs before the previous frame: there, only motor 0
-            # showed its new width, the others still the one of the frame before.
+        if pwm[-1] == _boundary(OCTO) != pwm[-2]:
+            # The falls came 3, 2, 1, 0 µs before the previous frame: there, only motors 0
+            # and 4 showed their new width, the others still the one of the frame before.
             boundary += 1
-            assert pwm[-2] == (BOUNDARY_WIDTHS_US[0], *pwm[-3][1:]), f"frame {len(pwm) - 1}"
+            first = BOUNDARY_WIDTHS_US[0]
+            shown = tuple(first if new == first else old
+                          for new, old in zip(_boundary(OCTO), pwm[-3], strict=True))  # fmt: skip
+            assert pwm[-2] == shown, f"frame {len(pwm) - 1}"
         clean = healthy.frame(ChipFrame(**{**frame.__dict__, "faults": {}}))
         if (rtl.accel_mps2, rtl.baro_pa_degc) != (clean.accel_mps2, clean.baro_pa_degc):
             corrupted.add(frame.now_us // 1000)
-        widths.add(rtl.pwm_widths_us[0])
-        timed_out.append(rtl.pwm_timed_out[2])
+        assert len(rtl.pwm_widths_us) == OCTO
+        widths.add(rtl.pwm_widths_us[7])
+        timed_out.append(rtl.pwm_timed_out[OCTO - 2])
     # The flip corrupts every IMU burst it covers; the muted MS5611 reads 0xFFFFFF, which
     # the datasheet compensation turns into a wild pressure: only at baro cycles (frames
     # 1, 11, 21, ...: PX4's 10 ms MS5611 cycle) during or just after the mute.
@@ -189,7 +206,7 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     baro_corrupted = corrupted - set(range(50, 55))
     assert baro_corrupted
     assert baro_corrupted <= set(range(101, 160, 10))
-    # The PWM compared is a live signal: new widths each period; motor 2's last pulse
+    # The PWM compared is a live signal: new widths each period; motor 6's last pulse
     # before the dropout rose at 147.5 ms, readable 3 ticks later, so it times out 0.1 s
     # on, at 247.503 ms (read at frame 248), and recovers with its first pulse after it.
     assert len(widths) > 100
@@ -224,19 +241,22 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
 @pytest.mark.cosim
 def test_a_coarser_pwm_tick_is_the_same_on_every_layer():
     """``rates.pwm_tick_hz`` = 250 kHz (4 µs) reaches SensorTop and the TLM model alike:
-    widths come in whole 4 µs ticks, identical on the three layers at 250 Hz frames."""
+    a quad's widths come in whole 4 µs ticks, identical on the three layers at 250 Hz
+    frames."""
     from rig.chips.native import NativeSensorLayer
     from rig.chips.rtl import RtlSensorLayer
 
-    rtl = _started(RtlSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
-    native = _started(NativeSensorLayer(pwm_hz=PWM_HZ, pwm_tick_hz=250e3, frame_us=4000))
-    tlm = _started(TlmSensorLayer(pwm_tick_hz=250e3))
+    rtl = _started(RtlSensorLayer(motors=QUAD, pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
+    native = _started(NativeSensorLayer(motors=QUAD, pwm_hz=PWM_HZ, pwm_tick_hz=250e3,
+                                        frame_us=4000))  # fmt: skip
+    tlm = _started(TlmSensorLayer(motors=QUAD, pwm_tick_hz=250e3))
     cocotb_rtl, compiled_rtl = Scoreboard("RTL vs TLM"), Scoreboard("compiled RTL vs TLM")
     try:
-        for frame in _frames(np.random.default_rng(12), 120, frame_us=4000):
+        for frame in _frames(np.random.default_rng(12), 120, motors=QUAD, frame_us=4000):
             readout, reference = rtl.frame(frame), tlm.frame(frame)
             cocotb_rtl.check(f"frame at {frame.now_us} µs", reference, readout)
             compiled_rtl.check(f"frame at {frame.now_us} µs", reference, native.frame(frame))
+            assert len(readout.pwm_widths_us) == QUAD
             assert all(width % 4 == 0 for width in readout.pwm_widths_us)
     finally:
         rtl.close()
@@ -262,7 +282,7 @@ def test_bus_transfers_longer_than_the_frame_are_a_one_line_error():
     in its time, as the cocotb layer does."""
     from rig.chips.native import NativeSensorLayer
 
-    native = _started(NativeSensorLayer(pwm_hz=PWM_HZ))
+    native = _started(NativeSensorLayer(motors=QUAD, pwm_hz=PWM_HZ))
     try:
         imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)
         native.frame(ChipFrame(1000, imu, mag=None, baro_d1_d2=None, read_mag=True))
@@ -279,7 +299,7 @@ def test_a_frame_before_the_announced_frame_time_is_a_one_line_error():
     while the rig works: a frame earlier than announced cannot be read any more."""
     from rig.chips.native import NativeSensorLayer
 
-    native = _started(NativeSensorLayer(pwm_hz=PWM_HZ, frame_us=1000))
+    native = _started(NativeSensorLayer(motors=QUAD, pwm_hz=PWM_HZ, frame_us=1000))
     try:
         imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)
         native.frame(ChipFrame(1000, imu, mag=None, baro_d1_d2=None, read_mag=False))
@@ -304,16 +324,17 @@ def test_bypass_layer_passes_the_si_samples_and_commanded_widths():
     imu = ImuSample(0.001, np.array([0.1, -0.2, -9.8]), np.array([0.01, 0.0, -0.02]), 30.0)
     readings = SensorReadings(imu, MagSample(0.001, np.array([0.2, 0.0, 0.4])),
                               BaroSample(0.001, 95_500.0, 20.0), None)  # fmt: skip
-    pulses = tuple(Pulse(channel, 0, 1500 + channel) for channel in range(MOTOR_CHANNELS))
+    hexa = 6
+    pulses = tuple(Pulse(channel, 0, 1500 + channel) for channel in range(hexa))
     frame = ChipFrame(now_us=1000, imu=None, mag=None, baro_d1_d2=None, read_mag=True,
                       pulses=pulses, si=readings)  # fmt: skip
-    out = BypassSensorLayer().frame(frame)
+    out = BypassSensorLayer(motors=hexa).frame(frame)
     assert out.accel_mps2 == (0.1, -0.2, -9.8)
     assert out.gyro_radps == (0.01, 0.0, -0.02)
     assert out.mag_gauss == (0.2, 0.0, 0.4)
     assert out.baro_pa_degc == (95_500.0, 20.0)
-    assert out.pwm_widths_us == (1500.0, 1501.0, 1502.0, 1503.0)
-    assert out.pwm_timed_out == (False,) * MOTOR_CHANNELS
+    assert out.pwm_widths_us == (1500.0, 1501.0, 1502.0, 1503.0, 1504.0, 1505.0)
+    assert out.pwm_timed_out == (False,) * hexa
 
 
 def test_a_finish_without_a_sensed_frame_is_a_one_line_error():
@@ -321,7 +342,7 @@ def test_a_finish_without_a_sensed_frame_is_a_one_line_error():
     readout."""
     from rig.chips.layer import SensorLayerError, TlmSensorLayer
 
-    layer = TlmSensorLayer()
+    layer = TlmSensorLayer(motors=QUAD)
     layer.start()
     with pytest.raises(SensorLayerError, match=r"^finish\(\) without a sensed frame"):
         layer.finish(())

@@ -66,6 +66,7 @@ def test_healthy_frames_pass_the_readings_through_untouched():
         [SensorBias(start_s=1.0, end_s=2.0, sensor="accel", bias=(1.0, 0.0, 0.0))],
         np.random.default_rng(0),
         lambda time_us, text: None,
+        motors=4,
     )
     readings = SensorReadings(ImuSample(0.5, np.zeros(3), np.zeros(3), 25.0), None, None, None)
 
@@ -85,6 +86,7 @@ def test_fault_inputs_change_only_when_a_fault_starts_or_ends():
          PwmDropout(start_s=1.5, channel=1)],
         np.random.default_rng(0),
         lambda time_us, text: None,
+        motors=4,
     )  # fmt: skip
     seen = []
     for time_us in range(0, 3_000_000, 250_000):
@@ -105,7 +107,7 @@ def test_actuator_controls_any_non_finite_motor_is_rejected(bad):
     armed = int(ActuatorMode.SAFETY_ARMED)
     message = mav.hil_actuator_controls_encode(7000, [0.5, 0.5, bad, 0.5] + [0.0] * 12, armed, 1)
     with pytest.raises(AutopilotProtocolError, match=r"^HIL_ACTUATOR_CONTROLS at time_usec=7000 "):
-        decode_actuator_controls(message)
+        decode_actuator_controls(message, 4)
 
 
 @pytest.mark.closed_loop

@@ -5,7 +5,8 @@ import pytest
 
 from quad_model.sensors import BaroSample, ImuSample, SensorReadings
 from rig.chips.layer import ChipFault
-from rig.scenarios.faults import FaultInjector
+from rig.errors import ScenarioError
+from rig.scenarios.faults import FaultInjector, check_motors
 from rig.scenarios.scenario import (
     BusBitFlip,
     ChipMute,
@@ -32,10 +33,10 @@ def readings(t, accel=(0.0, 0.0, -9.81), pressure=95_000.0):
     return SensorReadings(imu=imu, mag=None, baro=BaroSample(t, pressure, 20.0), gps=None)
 
 
-def make(*faults, seed=0):
+def make(*faults, seed=0, motors=4):
     events = []
     injector = FaultInjector(
-        faults, np.random.default_rng(seed), lambda t, text: events.append((t, text))
+        faults, np.random.default_rng(seed), lambda t, text: events.append((t, text)), motors
     )
     return injector, events
 
@@ -96,3 +97,28 @@ def test_bus_and_pwm_faults_map_to_chip_inputs_and_channels():
     everything, _ = make(PwmDropout(start_s=0.0))
     everything.update(0, RecordingModel())
     assert everything.pwm_dropped() == {0, 1, 2, 3}
+
+
+def test_an_octo_has_eight_motors_to_fault_and_to_drop_out():
+    injector, _ = make(MotorLoss(start_s=1.0, motor=7), PwmDropout(start_s=2.0), motors=8)
+    model = RecordingModel()
+    for time_us in (1_000_000, 2_000_000):
+        injector.update(time_us, model)
+    assert model.calls == [(7, 0.0)]
+    assert injector.pwm_dropped() == set(range(8))
+
+
+@pytest.mark.parametrize(
+    ("fault", "key"),
+    [(MotorLoss(start_s=1.0, motor=6), "motor"),
+     (MotorDegradation(start_s=1.0, motor=6, efficiency=0.5), "motor"),
+     (PwmDropout(start_s=1.0, channel=6), "channel")],
+)  # fmt: skip
+def test_a_fault_on_a_motor_the_vehicle_lacks_is_one_line_naming_the_key(fault, key):
+    faults = (PwmDropout(start_s=0.5, channel=5), fault)
+    check_motors(faults, 8, "hexa.toml", "octo")  # an octo has motor 6
+    with pytest.raises(ScenarioError) as error:
+        check_motors(faults, 6, "hexa.toml", "f550_hexa")
+    assert str(error.value) == (
+        f"hexa.toml: key 'faults[1].{key}' = 6: vehicle 'f550_hexa' has motors 0..5"
+    )

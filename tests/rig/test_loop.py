@@ -152,6 +152,37 @@ def test_a_rangefinder_on_a_vehicle_without_one_is_one_line_naming_the_key(tmp_p
     )
 
 
+def test_an_x8_gets_a_pwm_channel_per_motor_and_a_dropout_stops_motor_8(tmp_path, free_instance):
+    """Eight motors from HIL_ACTUATOR_CONTROLS through eight PWM lines and capture
+    channels to the model's eight rotors; motor 8's line goes quiet at 0.5 s, its capture
+    times out 0.1 s after its last pulse and its rotor spins down, the others run on."""
+    from tests.rig.vehicles import x8
+
+    dropout = {"kind": "pwm_dropout", "channel": 7, "start_s": 0.5}
+    _, log, _ = fly(tmp_path, free_instance, "--behaviour", "px4", "--throttle", "0.7",
+                    "--motors", "8", duration_s=1.0, vehicle=str(x8(tmp_path)),
+                    faults=[dropout])  # fmt: skip
+    outputs = data(log, "actuator_outputs")
+    t = outputs["timestamp"] / 1e6
+    assert set(outputs["noutputs"]) == {8}
+    running = (t > 0.1) & (t < 0.5)
+    for motor in range(8):
+        assert set(outputs[f"output[{motor}]"][running]) == {1700.0}  # 1000 + 0.7 × 1000 µs
+    rotors = data(log, "rig_propulsion_groundtruth")
+    thrust = np.array([rotors[f"thrust_n[{k}]"][-1] for k in range(8)])
+    assert thrust[7] < 0.1 * thrust[:7].min()
+
+
+def test_a_fault_on_a_motor_the_vehicle_lacks_is_one_line_naming_the_key(tmp_path):
+    document = {"name": "t", "vehicle": "f450_high_precision", "duration_s": 1.0, "seed": 1,
+                "faults": [{"kind": "motor_loss", "motor": 5, "start_s": 0.5}]}  # fmt: skip
+    with pytest.raises(ScenarioError) as error:
+        run_scenario(scenario_from_dict(document), RunOptions(out_dir=tmp_path / "run"))
+    assert str(error.value) == (
+        "<dict>: key 'faults[0].motor' = 5: vehicle 'F450 high precision' has motors 0..3"
+    )
+
+
 def test_pwm_carries_the_commanded_throttle_and_the_vehicle_climbs(tmp_path, free_instance):
     _, log, _ = fly(
         tmp_path, free_instance, "--behaviour", "px4", "--throttle", "0.7", duration_s=1.5

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
+from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import PwmCaptureModel
 from fpga_hdl.top import PWM_RESULT_LATENCY_TICKS as HOST_LATENCY
+from quad_model.vehicle import MAX_ROTORS
 from rig.chips.pwm import PWM_TIMEOUT_S, Pulse, PwmCapture, PwmOutput, throttle_from_capture
 
 
@@ -71,3 +73,8 @@ def test_width_measured_within_one_tick_and_timeout_after_100_ms():
     assert timed_out[0]
     assert throttle_from_capture(widths, timed_out).tolist() == [0.0, 0.0]
     assert throttle_from_capture([1500.0, 2000.0], [False, False]).tolist() == [0.5, 1.0]
+
+
+def test_the_capture_core_has_a_channel_for_every_rotor_the_model_flies():
+    """Motor i is output and capture channel i, so the largest vehicle must fit the core."""
+    assert MAX_ROTORS <= CHANNELS

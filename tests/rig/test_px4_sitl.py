@@ -207,6 +207,29 @@ def test_airframe_parameters_follow_the_vehicle_file():
     )
     assert params["MPC_THR_HOVER"] == 0.609
     assert params["BAT1_N_CELLS"] == 3
+    assert params["MAV_TYPE"] == 2  # MAV_TYPE_QUADROTOR
+
+
+def test_a_hexa_or_an_x8_gets_every_motor_on_its_own_output(tmp_path):
+    """CA_ROTORi_PX/PY/PZ/KM for every rotor (an X8's lower rotor below its upper, the same
+    arm, the other spin) and motor i on output i: PX4 SITL's airframe 10016 maps only
+    outputs 1..4 (PWM_MAIN_FUNC1..4 = Motor 1..4); motors 5..8 need 105..108."""
+    from quad_model import load_vehicle
+    from tests.rig.vehicles import hexa_x, x8
+
+    hexa = airframe_parameters(load_vehicle(hexa_x(tmp_path)), 0.45)
+    assert hexa["CA_ROTOR_COUNT"] == 6
+    assert hexa["MAV_TYPE"] == 13  # MAV_TYPE_HEXAROTOR
+    assert [hexa[f"PWM_MAIN_FUNC{n}"] for n in range(1, 7)] == [101, 102, 103, 104, 105, 106]
+    assert "PWM_MAIN_FUNC7" not in hexa
+    octo = airframe_parameters(load_vehicle(x8(tmp_path)), 0.4)
+    assert octo["MAV_TYPE"] == 14  # MAV_TYPE_OCTOROTOR
+    assert [octo[f"PWM_MAIN_FUNC{n}"] for n in range(1, 9)] == list(range(101, 109))
+    for upper, lower in ((0, 5), (1, 4), (2, 7), (3, 6)):  # PX4's 12001 octo coaxial pairs
+        assert (octo[f"CA_ROTOR{upper}_PX"], octo[f"CA_ROTOR{upper}_PY"]) == (
+            octo[f"CA_ROTOR{lower}_PX"], octo[f"CA_ROTOR{lower}_PY"])  # fmt: skip
+        assert octo[f"CA_ROTOR{upper}_PZ"] < octo[f"CA_ROTOR{lower}_PZ"]
+        assert octo[f"CA_ROTOR{upper}_KM"] == -octo[f"CA_ROTOR{lower}_KM"] != 0.0
 
 
 def test_ports_leave_mavsdk_and_the_ground_station_free(tmp_path, free_instance, px4_dir):

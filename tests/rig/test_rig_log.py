@@ -53,10 +53,10 @@ def test_every_frame_row_matches_the_by_name_write(tmp_path):
                        xyz_derivative=derivative)  # fmt: skip
         expected.write("battery_status_groundtruth", t, voltage_v=truth.battery_voltage_v,
                        current_a=truth.battery_current_a)  # fmt: skip
+        no_rotors = [math.nan] * 4  # a quad: rotors 4..7 of the topic are NaN
         expected.write("rig_propulsion_groundtruth", t,
-                       rotor_speed_radps=list(truth.rotor_speed_radps) + [0.0] * 4,
-                       thrust_n=list(truth.rotor_thrust_n) + [0.0] * 4,
-                       force_frd_n=truth.force_frd_n,
+                       rotor_speed_radps=[*truth.rotor_speed_radps, *no_rotors],
+                       thrust_n=[*truth.rotor_thrust_n, *no_rotors], force_frd_n=truth.force_frd_n,
                        moment_frd_nm=truth.moment_frd_nm)  # fmt: skip
         expected.write("sensor_combined", t, gyro_rad=gyro, gyro_integral_dt=4000,
                        accelerometer_timestamp_relative=0, accelerometer_m_s2=accel,

@@ -104,8 +104,8 @@ BAD = [
      "key 'commands[0].at_s' = 5.0: not before the end of the run (duration_s = 2.0)"),
     ({"commands": [{"at_s": 1, "action": "arm", "altitude_m": 3}]},
      "key 'commands[0].altitude_m' = 3: unknown key"),
-    ({"faults": [{"kind": "motor_loss", "motor": 4, "start_s": 1}]},
-     "key 'faults[0].motor' = 4: expected a value <= 3"),
+    ({"faults": [{"kind": "motor_loss", "motor": 8, "start_s": 1}]},
+     "key 'faults[0].motor' = 8: expected a value <= 7"),
     ({"faults": [{"kind": "chip_mute", "chip": "bmi088", "start_s": 1}]},
      "key 'faults[0].chip' = 'bmi088': expected 'mpu6000', 'ms5611', 'ist8310', 'ublox' or "
      "'lidarlite'"),

@@ -163,7 +163,7 @@ def _actuators(controls, mode, flags=1, time_us=10):
 
 def test_actuator_controls_armed_clamped_to_unit_range():
     armed = ActuatorMode.CUSTOM_MODE_ENABLED | ActuatorMode.SAFETY_ARMED
-    decoded = decode_actuator_controls(_actuators([0.5, -0.4, 1.3, 0.25], int(armed)))
+    decoded = decode_actuator_controls(_actuators([0.5, -0.4, 1.3, 0.25], int(armed)), 4)
     assert decoded.motors == (0.5, 0.0, 1.0, 0.25)
     assert decoded.armed
     assert decoded.lockstep
@@ -171,7 +171,7 @@ def test_actuator_controls_armed_clamped_to_unit_range():
 
 
 def test_actuator_controls_disarmed_means_zero_whatever_is_sent():
-    decoded = decode_actuator_controls(_actuators([0.5, 0.5, 0.5, 0.5], 1, flags=0))
+    decoded = decode_actuator_controls(_actuators([0.5, 0.5, 0.5, 0.5], 1, flags=0), 4)
     assert decoded.motors == (0.0, 0.0, 0.0, 0.0)
     assert not decoded.armed
     assert not decoded.lockstep
@@ -179,7 +179,18 @@ def test_actuator_controls_disarmed_means_zero_whatever_is_sent():
 
 def test_actuator_controls_nan_is_rejected_with_the_frame_time():
     with pytest.raises(AutopilotProtocolError, match=r"time_usec=10 has non-finite"):
-        decode_actuator_controls(_actuators([math.nan, 0, 0, 0], 129))
+        decode_actuator_controls(_actuators([math.nan, 0, 0, 0], 129), 4)
+
+
+@pytest.mark.parametrize("motors", [6, 8])
+def test_a_hexa_or_octo_gets_a_motor_per_output_from_the_first(motors):
+    """PX4 SITL sends output i (PWM_MAIN_FUNCi+1 = Motor i+1) as controls[i]: motors 5 to 8
+    arrive in controls[4..7]; the outputs past the vehicle's motors are not motors."""
+    commands = [0.1 * k for k in range(1, 9)]
+    mav = mavlink.MAVLink(None, 1, 1)
+    for mode, expected in ((129, commands[:motors]), (0, [0.0] * motors)):
+        message = _round_trip(mav.hil_actuator_controls_encode(10, commands + [0.9] * 8, mode, 1))
+        assert decode_actuator_controls(message, motors).motors == pytest.approx(expected)
 
 
 def _actuator_frame(controls, mode, flags, time_us, seq=0):
@@ -199,10 +210,12 @@ def test_actuator_controls_from_a_frame_equal_pymavlinks_decoding():
         controls = controls[:cut] + [0.0] * (16 - cut)
         cases.append((controls, int(rng.choice([0, 1, 129, 128 | 64])), int(rng.integers(0, 2)),
                       int(rng.integers(0, 2**40))))  # fmt: skip
-    for controls, mode, flags, time_us in cases:
+    for k, (controls, mode, flags, time_us) in enumerate(cases):
         frame = _actuator_frame(controls, mode, flags, time_us, seq=time_us % 256)
         (parsed,) = mavlink.MAVLink(None, 255, 0).parse_buffer(frame)
-        assert actuator_controls_from_frame(frame) == decode_actuator_controls(parsed)
+        motors = (4, 6, 8)[k % 3]
+        fast = actuator_controls_from_frame(frame, motors)
+        assert fast == decode_actuator_controls(parsed, motors)
 
 
 @pytest.mark.parametrize(
@@ -228,10 +241,10 @@ def test_anything_but_one_good_actuator_frame_is_left_to_pymavlink(damage):
         frame = bytearray(message.pack(mav, force_mavlink1=True))
     else:
         frame = bytearray()
-    assert actuator_controls_from_frame(bytes(frame)) is None
+    assert actuator_controls_from_frame(bytes(frame), 4) is None
 
 
 def test_a_non_finite_motor_in_a_good_frame_is_rejected_on_the_fast_path_too():
     frame = _actuator_frame([0.5, math.inf, 0.5, 0.5] + [0.0] * 12, 129, 1, 8000)
     with pytest.raises(AutopilotProtocolError, match=r"time_usec=8000 has non-finite"):
-        actuator_controls_from_frame(frame)
+        actuator_controls_from_frame(frame, 4)

@@ -3,9 +3,10 @@
 position P → velocity PID → acceleration → thrust vector and attitude (``mc_pos_control``
 ``PositionControl``) → quaternion attitude P (``mc_att_control`` ``AttitudeControl``) →
 body-rate PID with the D term on the filtered measurement (``mc_rate_control``
-``RateControl``) → quad-X control allocation with sequential desaturation
-(``control_allocator``). The algorithms follow PX4's (files named on each class); gains are
-PX4's parameters, read in ``configure`` so a parameter change takes effect at the next frame.
+``RateControl``) → control allocation of any multirotor geometry with sequential
+desaturation (``control_allocator``). The algorithms follow PX4's (files named on each
+class); gains are PX4's parameters, read in ``configure`` so a parameter change takes effect
+at the next frame.
 
 Conventions are PX4's: NED world, FRD body, quaternions body→NED scalar first, thrust as a
 normalized vector whose NED-z is negative for lift, torque normalized to -1..1.
@@ -492,15 +493,29 @@ class PositionController:
         return body_z * collective
 
 
-class ControlAllocator:
-    """Quad-X allocation from the rotor geometry ``CA_ROTORi_PX/PY/KM``.
+#: PX4 ``FLT_EPSILON``: below it a scale or thrust coefficient counts as zero.
+_FLT_EPSILON = float(np.finfo(np.float32).eps)
+#: PX4 ``ControlAllocationSequentialDesaturation::MINIMUM_YAW_MARGIN``: yaw may push the
+#: outputs this far above full before it gives way.
+_YAW_MARGIN = 0.15
+#: PX4 ``computeDesaturationGain``: an output weaker than this along a direction is left
+#: out of the gain (it would ask for a large one).
+_WEAK_OUTPUT = 0.2
 
-    The effectiveness of rotor ``i`` at ``r`` with axis ``-z`` is moment ``r × a − KM·a`` and
-    thrust ``a`` (PX4 ``ActuatorEffectivenessRotors``); its pseudo-inverse is normalized as
-    PX4's ``ControlAllocationPseudoInverse`` does (same scale on roll and pitch, yaw by its
-    largest entry, thrust by the mean), so the rate gains mean what they mean in PX4. Outputs
-    are desaturated in PX4's order with airmode off: thrust (down only) then roll and pitch,
-    then yaw added on top with 15 % headroom.
+
+class ControlAllocator:
+    """Multirotor allocation from the rotor geometry ``CA_ROTOR_COUNT`` and
+    ``CA_ROTORi_PX/PY/PZ/CT/KM``, as PX4's ``control_allocator`` with ``MC_AIRMODE`` 0.
+
+    The effectiveness of rotor ``i`` at ``r`` with thrust axis ``a = -z`` is moment
+    ``CT·(r × a − KM·a)`` and thrust ``CT·a`` (PX4 ``ActuatorEffectivenessRotors``; a rotor
+    without thrust coefficient is left out). Rows here are roll, pitch and yaw torque and
+    the collective thrust ``-Fz`` (PX4's x and y thrust rows are zero for upward rotors,
+    and its z row is this one's negative). The pseudo-inverse is normalized as PX4's
+    ``ControlAllocationPseudoInverse`` does (:func:`allocation_scale`), so the rate gains
+    mean what they mean in PX4 whatever the rotor count. Outputs are desaturated as PX4's
+    ``ControlAllocationSequentialDesaturation``: thrust (down only), roll, pitch, then yaw
+    added with 15 % headroom above full and thrust lowered again; then clipped to 0..1.
     """
 
     def __init__(self, params: Parameters) -> None:
@@ -512,22 +527,21 @@ class ControlAllocator:
         effectiveness = np.zeros((4, count))  # rows: roll, pitch, yaw torque; collective thrust
         axis = np.array([0.0, 0.0, -1.0])
         for i in range(count):
-            position = np.array([params[f"CA_ROTOR{i}_PX"], params[f"CA_ROTOR{i}_PY"], 0.0])
-            effectiveness[:3, i] = cross3(position, axis) - params[f"CA_ROTOR{i}_KM"] * axis
-            effectiveness[3, i] = 1.0  # collective thrust magnitude (PX4's -thrust_z)
+            ct, km = params[f"CA_ROTOR{i}_CT"], params[f"CA_ROTOR{i}_KM"]
+            if abs(ct) < _FLT_EPSILON:
+                continue
+            position = np.array([params[f"CA_ROTOR{i}_P{a}"] for a in "XYZ"])
+            effectiveness[:3, i] = ct * (cross3(position, axis) - km * axis)
+            effectiveness[3, i] = ct
         mix = np.linalg.pinv(effectiveness)
-        nonzero_roll = np.count_nonzero(np.abs(mix[:, 0]) > 1e-3)
-        nonzero_pitch = np.count_nonzero(np.abs(mix[:, 1]) > 1e-3)
-        scale_rp = max(
-            math.sqrt(mix[:, 0] @ mix[:, 0] / (nonzero_roll / 2.0)),
-            math.sqrt(mix[:, 1] @ mix[:, 1] / (nonzero_pitch / 2.0)),
-        )
-        scale = np.array([scale_rp, scale_rp, mix[:, 2].max(), np.abs(mix[:, 3]).mean()])
+        scale = allocation_scale(mix)
         mix /= scale
         mix[np.abs(mix) < 1e-3] = 0.0
+        self.motor_count = count
         self.mix = mix
         self._mix_columns = np.ascontiguousarray(mix.T)  # roll, pitch, yaw, thrust directions
-        self.effectiveness = np.linalg.pinv(mix)  # normalized: what the outputs achieve
+        #: What the outputs achieve, in the normalized units (PX4 ``getAllocatedControl``).
+        self.effectiveness = effectiveness * scale[:, None]
 
     def allocate(
         self, torque: NDArray[np.float64], collective_thrust: float
@@ -546,6 +560,23 @@ class ControlAllocator:
         return outputs
 
 
+def allocation_scale(mix: NDArray[np.floating]) -> NDArray[np.float64]:
+    """PX4 ``updateControlAllocationMatrixScale`` for a pseudo-inverse (rotors × roll,
+    pitch, yaw, thrust): roll and pitch share the larger of their RMS entry over half the
+    rotors that take part, yaw its largest entry, thrust its mean over the rotors that
+    take part. A scale PX4 would not divide by (zero) is 1."""
+
+    def roll_pitch(column: NDArray[np.floating]) -> float:
+        taking_part = np.count_nonzero(np.abs(column) > 1e-3)
+        return math.sqrt(column @ column / (taking_part / 2.0)) if taking_part else 1.0
+
+    thrust = np.abs(mix[:, 3])
+    taking_part = np.count_nonzero(thrust > _FLT_EPSILON)
+    rp = max(roll_pitch(mix[:, 0]), roll_pitch(mix[:, 1]))
+    scale = np.array([rp, rp, mix[:, 2].max(), thrust.sum() / taking_part if taking_part else 1.0])
+    return np.where(scale > _FLT_EPSILON, scale, 1.0)
+
+
 @njit(cache=True)
 def _allocate(
     mix_columns: np.ndarray, effectiveness: np.ndarray, torque: np.ndarray, collective_thrust: float
@@ -557,8 +588,7 @@ def _allocate(
     outputs = _desaturate(outputs, roll, False, 1.0)
     outputs = _desaturate(outputs, pitch, False, 1.0)
     outputs = outputs + yaw * torque[2]
-    outputs = _desaturate(outputs, yaw, False, 1.0)
-    outputs = _desaturate(outputs, thrust, False, 1.15)
+    outputs = _desaturate(outputs, yaw, False, 1.0 + _YAW_MARGIN)
     outputs = _desaturate(outputs, thrust, True, 1.0)
     outputs = np.minimum(np.maximum(outputs, 0.0), 1.0)
     wanted = np.array([torque[0], torque[1], torque[2], collective_thrust])
@@ -573,7 +603,7 @@ def _desaturation_gain(
     k_min = k_max = 0.0
     for i in range(outputs.shape[0]):
         d, value = direction[i], outputs[i]
-        if abs(d) < 1e-6:
+        if abs(d) < _WEAK_OUTPUT:
             continue
         if value < lower:
             k = (lower - value) / d
@@ -589,13 +619,11 @@ def _desaturation_gain(
 def _desaturate(
     outputs: np.ndarray, direction: np.ndarray, reduce_only: bool, upper: float
 ) -> np.ndarray:
-    """Move ``outputs`` along ``direction`` into ``0..upper`` (twice: full, then half a step,
-    as PX4 does to centre a range that cannot fit); ``reduce_only`` never increases it."""
-    if outputs.min() >= 0.0 and outputs.max() <= upper:
+    """PX4 ``desaturateActuators``: move ``outputs`` along ``direction`` into ``0..upper``,
+    a full step then half a step (to centre a range that cannot fit); ``reduce_only``
+    skips both when the full step would raise the outputs (PX4 checks only that one)."""
+    gain = _desaturation_gain(outputs, direction, 0.0, upper)
+    if reduce_only and gain > 0.0:
         return outputs
-    for fraction in (1.0, 0.5):
-        gain = fraction * _desaturation_gain(outputs, direction, 0.0, upper)
-        if reduce_only and gain > 0.0:
-            return outputs
-        outputs = outputs + gain * direction
-    return outputs
+    outputs = outputs + gain * direction
+    return outputs + 0.5 * _desaturation_gain(outputs, direction, 0.0, upper) * direction

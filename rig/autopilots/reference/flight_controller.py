@@ -66,9 +66,10 @@ _SEVERITY_LEVEL = {mavlink.MAV_SEVERITY_CRITICAL: "crit", mavlink.MAV_SEVERITY_W
 
 @dataclass(frozen=True)
 class Controls:
-    """What goes back in HIL_ACTUATOR_CONTROLS: motors 0..1 in PX4's quad-X order."""
+    """What goes back in HIL_ACTUATOR_CONTROLS: motors 0..1 in PX4's motor order, one per
+    rotor of ``CA_ROTOR_COUNT``."""
 
-    motors: tuple[float, float, float, float]
+    motors: tuple[float, ...]
     armed: bool
 
 
@@ -94,7 +95,6 @@ class BodySetpoint:
 
 
 _ACCEPTED = CommandResult(mavlink.MAV_RESULT_ACCEPTED)
-_IDLE = Controls((0.0, 0.0, 0.0, 0.0), False)
 
 
 class FlightController:
@@ -139,7 +139,7 @@ class FlightController:
         self.land_detector = LandDetector()
         self.time_us = 0
         self.home: tuple[float, float, float] | None = None  # lat, lon, alt AMSL
-        self.motors = np.zeros(4)
+        self.motors = self._stopped()
         self.torque_sp = np.zeros(3)
         self.thrust_sp_ned = np.zeros(3)
         self.collective_thrust = 0.0
@@ -185,7 +185,7 @@ class FlightController:
         if self.armed and self._imu_frames:
             self._control(dt_s, time_us)
         else:
-            self.motors = np.zeros(4)
+            self.motors = self._stopped()
             self.rate_control.reset_integral()
             self.position_control.reset_integral()
         self._write_log(time_us)
@@ -194,14 +194,15 @@ class FlightController:
             if time_us < end_us:
                 # PX4's actuator test drives the output while disarmed; the armed bit tells the
                 # rig that this output is live.
-                motors = [0.0] * 4
+                motors = self._stopped()
                 motors[motor] = throttle
-                return Controls((motors[0], motors[1], motors[2], motors[3]), True)
+                return Controls(tuple(motors.tolist()), True)
             self._motor_test = None
-        if not self.armed:
-            return _IDLE
-        m = self.motors
-        return Controls((float(m[0]), float(m[1]), float(m[2]), float(m[3])), True)
+        return Controls(tuple(self.motors.tolist()), self.armed)
+
+    def _stopped(self) -> NDArray[np.float64]:
+        """Every motor of the airframe (``CA_ROTOR_COUNT``) at zero."""
+        return np.zeros(self.allocator.motor_count)
 
     def observe_truth(self, truth: GroundTruth) -> None:
         """Ground truth from the simulator: kept only to log the estimator's errors."""
@@ -314,7 +315,8 @@ class FlightController:
         """DO_MOTOR_TEST: spin one motor while disarmed on the ground (PX4 actuator test)."""
         if self.armed or not self.landed:
             return self.refuse("Motor test denied: vehicle armed")
-        if not 0 <= motor < 4 or not 0.0 <= throttle <= 1.0 or not 0.0 < duration_s <= 60.0:
+        motors = self.allocator.motor_count
+        if not 0 <= motor < motors or not 0.0 <= throttle <= 1.0 or not 0.0 < duration_s <= 60.0:
             return self.refuse(f"Motor test denied: motor {motor + 1} at {throttle:.0%} "
                                 f"for {duration_s:g} s is out of range")  # fmt: skip
         self._motor_test = (motor, throttle, self.time_us + int(duration_s * 1e6))
@@ -595,7 +597,7 @@ class FlightController:
             self._last_position_loop_us = time_us
             self._position_loop(position_dt, time_us)
         if self._idle():
-            self.motors = np.zeros(4)
+            self.motors = self._stopped()
             self.rate_control.reset_integral()
             return
         # PX4's attitude and rate controllers take an offboard setpoint on their next cycle,
@@ -699,7 +701,7 @@ class FlightController:
     def _disarm(self, reason: str) -> None:
         self.armed = False
         self.land_detector.disarm()
-        self.motors = np.zeros(4)
+        self.motors = self._stopped()
         severity = mavlink.MAV_SEVERITY_CRITICAL if self.failsafe else mavlink.MAV_SEVERITY_INFO
         self.notify(severity, reason)
 
@@ -763,7 +765,7 @@ class FlightController:
             log.write("vehicle_thrust_setpoint", time_us, timestamp_sample=time_us,
                       xyz=thrust_body)  # fmt: skip
             control = np.full(12, np.nan)
-            control[:4] = self.motors if self.armed else np.nan
+            control[: self.motors.size] = self.motors if self.armed else np.nan
             log.write("actuator_motors", time_us, timestamp_sample=time_us, reversible_flags=0,
                       control=control)  # fmt: skip
         if time_us - self._last_slow_log_us >= POSITION_LOOP_PERIOD_US:

@@ -12,6 +12,8 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
+from quad_model.vehicle import MAX_ROTORS, MIN_ROTORS
+
 
 class ParameterError(ValueError):
     """An unknown parameter name, or a value outside the parameter's range."""
@@ -42,8 +44,10 @@ def _p(
 _INF = math.inf
 # Rotor geometry of PX4 SITL airframe 10016 (quad X, front = +x, right = +y): the motor
 # table in shared/PX4_SIM_CONTRACT.md; CA_ROTORi_KM > 0 for CCW rotors (PX4 control_allocator
-# module docs: "positive for CCW rotation"), 0.05 is PX4's default magnitude.
-_ROTORS = ((0.15, 0.245, 0.05), (-0.15, -0.19, 0.05), (0.15, -0.245, -0.05), (-0.15, 0.19, -0.05))
+# module docs: "positive for CCW rotation"), 0.05 is PX4's default magnitude. Rotors past
+# the fourth have PX4's defaults (at the centre, KM 0.05) until an airframe places them.
+_ROTORS = ((0.15, 0.245, 0.05), (-0.15, -0.19, 0.05), (0.15, -0.245, -0.05), (-0.15, 0.19, -0.05),
+           *((0.0, 0.0, 0.05),) * (MAX_ROTORS - 4))  # fmt: skip
 
 PARAMETERS: tuple[ParamSpec, ...] = (
     # src/modules/mc_rate_control/mc_rate_control_params.yaml
@@ -167,14 +171,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("LNDMC_TRIG_TIME", 1.0, 0.1, 10.0, "s", "Land detector trigger time"),
     # src/modules/mavlink/mavlink_params.yaml
     _p("MAV_SYS_ID", 1, 1, 250, "", "MAVLink system id"),
-    # src/modules/control_allocator/module.yaml: quad X geometry, rotor i at (PX, PY)
-    _p("CA_ROTOR_COUNT", 4, 4, 4, "", "Number of rotors (quad X only)"),
+    # src/modules/control_allocator/module.yaml: rotor i at (PX, PY, PZ), thrust along -z;
+    # PX4 takes up to 12 rotors, the rig's vehicles have MIN_ROTORS to MAX_ROTORS
+    _p("CA_ROTOR_COUNT", 4, MIN_ROTORS, MAX_ROTORS, "", "Number of rotors"),
     *(
         spec
         for i, (x, y, km) in enumerate(_ROTORS)
         for spec in (
             _p(f"CA_ROTOR{i}_PX", x, -100.0, 100.0, "m", f"Rotor {i} position x (forward)"),
             _p(f"CA_ROTOR{i}_PY", y, -100.0, 100.0, "m", f"Rotor {i} position y (right)"),
+            _p(f"CA_ROTOR{i}_PZ", 0.0, -100.0, 100.0, "m", f"Rotor {i} position z (down)"),
+            _p(f"CA_ROTOR{i}_CT", 6.5, 0.0, 100.0, "", f"Rotor {i} thrust coefficient"),
             _p(f"CA_ROTOR{i}_KM", km, -1.0, 1.0, "", f"Rotor {i} moment ratio (+ for CCW)"),
         )
     ),

@@ -39,6 +39,8 @@ GROUND_TRUTH_INTERVAL_US = 5000
 #: Wall-clock pause between connection attempts (PX4 retries about every 0.5 ms; a little
 #: slower here costs nothing and spares the CPU).
 CONNECT_RETRY_S = 0.01
+#: ``HIL_ACTUATOR_CONTROLS.controls``: PX4's 16 outputs, the motors first.
+_ACTUATOR_OUTPUTS = 16
 #: With the simulator quiet this long (wall time), heartbeats keep ground stations informed.
 IDLE_HEARTBEAT_S = 1.0
 #: In lockstep the autopilot's clock stands still while the simulator sends nothing, as
@@ -237,7 +239,7 @@ class Autopilot:
             mode = ActuatorMode.CUSTOM_MODE_ENABLED
             if controls.armed:
                 mode |= ActuatorMode.SAFETY_ARMED
-            outputs = [*controls.motors, *[0.0] * 12]
+            outputs = [*controls.motors, *[0.0] * (_ACTUATOR_OUTPUTS - len(controls.motors))]
             self._send_sim(mavlink.MAVLink_hil_actuator_controls_message(
                 message.time_usec, outputs, int(mode), LOCKSTEP_FLAG))  # fmt: skip
             self.ground.stream(message.time_usec)

@@ -53,6 +53,106 @@ def test_saturated_allocation_keeps_roll_and_reports_unallocated_yaw():
     assert allocator.unallocated[2] > 0.1  # yaw gave way first
 
 
+#: PX4's hexa X (airframe 6001): rotor i's bearing from the nose (deg) and KM sign.
+HEXA_X = ((90, -1), (270, 1), (330, -1), (150, 1), (30, 1), (210, -1))
+#: PX4's coaxial X8 (12001): rotor i's arm (front, right), height (FRD z) and KM sign; the
+#: lower rotor of each arm (4-7) spins against the upper one (0-3).
+X8 = (((1, 1), -0.05, 1), ((1, -1), -0.05, -1), ((-1, -1), -0.05, 1), ((-1, 1), -0.05, -1),
+      ((1, -1), 0.05, 1), ((1, 1), 0.05, -1), ((-1, 1), 0.05, 1), ((-1, -1), 0.05, -1))  # fmt: skip
+
+
+def _rotors(rotors):
+    """Parameters of a rotor table ``(px, py, pz, km sign)``, KM of PX4's 0.05."""
+    params = {"CA_ROTOR_COUNT": len(rotors)}
+    for i, (x, y, z, km) in enumerate(rotors):
+        params |= {f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": y, f"CA_ROTOR{i}_PZ": z,
+                   f"CA_ROTOR{i}_KM": 0.05 * km}  # fmt: skip
+    return ControlAllocator(Parameters(params))
+
+
+def _hexa_x(arm_m=0.5):
+    return _rotors([(arm_m * math.cos(math.radians(b)), arm_m * math.sin(math.radians(b)), 0.0, km)
+                    for b, km in HEXA_X])  # fmt: skip
+
+
+def _x8(arm_m=0.35, heights=True):
+    return _rotors([(arm_m * x, arm_m * y, z if heights else 0.0, km) for (x, y), z, km in X8])
+
+
+#: The hexa X's normalized roll and pitch columns in closed form: the effectiveness rows
+#: (−py, px) are orthogonal, so the pseudo-inverse's columns are the rows over their squared
+#: norms (3r² each); PX4's scale is the larger RMS over half the rotors taking part, the
+#: pitch column's (4 rotors): roll entries √(2/3) and √(1/6), pitch 1/√2.
+HEXA_ROLL = np.array([-1, 1, 0.5, -0.5, -0.5, 0.5]) * math.sqrt(2 / 3)
+HEXA_PITCH = np.array([0, 0, 1, -1, 1, -1]) / math.sqrt(2)
+HEXA_YAW = np.array([km for _, km in HEXA_X], dtype=float)
+
+
+@pytest.mark.parametrize("arm_m", [0.25, 0.5])
+def test_hexa_x_pure_demands_give_the_pseudo_inverses_motor_pattern(arm_m):
+    """Pure roll, pitch, yaw and thrust on PX4's hexa X: the normalized columns above,
+    whatever the arm length; yaw ±1 by the KM signs, thrust 1 on every rotor."""
+    allocator = _hexa_x(arm_m)
+    assert allocator.motor_count == 6
+    for torque, pattern in (([0.1, 0, 0], HEXA_ROLL), ([0, 0.1, 0], HEXA_PITCH),
+                            ([0, 0, 0.1], HEXA_YAW)):  # fmt: skip
+        motors = allocator.allocate(np.array(torque, dtype=float), 0.5)
+        np.testing.assert_allclose(motors, 0.5 + 0.1 * pattern, atol=1e-9)
+        assert allocator.unallocated == pytest.approx(np.zeros(4), abs=1e-9)
+    np.testing.assert_allclose(allocator.allocate(np.zeros(3), 0.3), 0.3, atol=1e-12)
+
+
+def test_x8_pairs_share_roll_and_pitch_and_split_yaw_whatever_their_heights():
+    """The coaxial X8: eight rotors on four arms, every roll and pitch entry ±1/√2 (the
+    same for a pair on one arm), yaw ±1 opposite within a pair; the rotors' heights (PZ)
+    change nothing, as for any rotor whose thrust is along z (r × a has no PZ term)."""
+    allocator, flat = _x8(), _x8(heights=False)
+    np.testing.assert_allclose(allocator.mix, flat.mix, atol=1e-12)
+    arms = np.array([arm for arm, _, _ in X8], dtype=float)
+    km = np.array([k for *_, k in X8], dtype=float)
+    roll, pitch = -arms[:, 1] / math.sqrt(2), arms[:, 0] / math.sqrt(2)
+    for torque, pattern in (([0.1, 0, 0], roll), ([0, 0.1, 0], pitch), ([0, 0, 0.1], km)):
+        motors = allocator.allocate(np.array(torque, dtype=float), 0.5)
+        np.testing.assert_allclose(motors, 0.5 + 0.1 * pattern, atol=1e-9)
+    for upper, lower in ((0, 5), (1, 4), (2, 7), (3, 6)):
+        assert allocator.mix[upper, :2] == pytest.approx(allocator.mix[lower, :2], abs=1e-12)
+        assert allocator.mix[upper, 2] == pytest.approx(-allocator.mix[lower, 2], abs=1e-12)
+
+
+def test_saturation_at_high_thrust_lowers_the_thrust_and_keeps_roll():
+    """Hexa X, thrust 0.9 and roll 0.3: motor 1 would need 0.9 + 0.3·√(2/3) = 1.145. PX4
+    (airmode off) lowers the thrust until it fits: roll whole, thrust 1 − 0.3·√(2/3)."""
+    allocator = _hexa_x()
+    motors = allocator.allocate(np.array([0.3, 0.0, 0.0]), 0.9)
+    thrust = 1.0 - 0.3 * math.sqrt(2 / 3)
+    np.testing.assert_allclose(motors, thrust + 0.3 * HEXA_ROLL, atol=1e-9)
+    assert allocator.unallocated == pytest.approx([0, 0, 0, 0.9 - thrust], abs=1e-9)
+
+
+def test_saturation_at_low_thrust_keeps_the_thrust_and_cuts_roll():
+    """Hexa X, thrust 0.1 and roll 0.3: motor 0 would need 0.1 − 0.3·√(2/3) < 0. The
+    thrust may not rise (airmode off), so roll gives way to what the thrust leaves: the
+    most loaded rotor at 0, roll 0.1/√(2/3)."""
+    allocator = _hexa_x()
+    motors = allocator.allocate(np.array([0.3, 0.0, 0.0]), 0.1)
+    roll = 0.1 / math.sqrt(2 / 3)
+    np.testing.assert_allclose(motors, 0.1 + roll * HEXA_ROLL, atol=1e-9)
+    assert motors[0] == pytest.approx(0.0, abs=1e-12)
+    assert allocator.unallocated == pytest.approx([0.3 - roll, 0, 0, 0], abs=1e-9)
+
+
+@pytest.mark.parametrize(("yaw", "kept"), [(0.2, 0.2), (0.3, 0.2)])
+def test_yaw_may_reach_15_percent_above_full_before_the_thrust_gives_way(yaw, kept):
+    """X8, thrust 0.95 and yaw on top: PX4 lets yaw fill the outputs up to 1.15 (giving
+    way beyond, here to 1.15 − 0.95 = 0.2), then lowers the thrust until they fit in 1."""
+    allocator = _x8()
+    km = np.array([k for *_, k in X8], dtype=float)
+    motors = allocator.allocate(np.array([0.0, 0.0, yaw]), 0.95)
+    thrust = 1.0 - kept
+    np.testing.assert_allclose(motors, thrust + kept * km, atol=1e-9)
+    assert allocator.unallocated == pytest.approx([0, 0, yaw - kept, 0.95 - thrust], abs=1e-9)
+
+
 def test_butterworth_filter_matches_scipy():
     rng = np.random.default_rng(0)
     x = rng.standard_normal((500, 3))
