@@ -173,17 +173,7 @@ def _motors(
     figure: plt.Figure, rig: pyulog.ULog, autopilot: pyulog.ULog | None, events: Events
 ) -> None:
     commanded, captured = figure.subplots(2, 1, sharex=True)
-    outputs = _topic(rig, "actuator_outputs")
-    # The rig logs one PWM channel per motor, and NaN for the controls past them (as PX4).
-    count = int(outputs[1]["noutputs"].max()) if outputs is not None else 0
     motors = _topic(rig, "actuator_motors")
-<<<<<<< HEAD
-    if motors is not None:
-        for i in range(count):
-            commanded.plot(motors[0], motors[1][f"control[{i}]"], lw=0.8, label=f"motor {i}")
-    if outputs is not None:
-        for i in range(count):
-=======
     if motors is not None:  # every motor of the vehicle: the controls past them are NaN
         for i in range(sum(1 for k in motors[1] if k.startswith("control["))):
             control = motors[1][f"control[{i}]"]
@@ -192,7 +182,6 @@ def _motors(
     outputs = _topic(rig, "actuator_outputs")
     if outputs is not None:
         for i in range(int(outputs[1]["noutputs"].max())):
->>>>>>> octo-loop
             captured.plot(outputs[0], outputs[1][f"output[{i}]"], lw=0.8, label=f"channel {i}")
     commanded.set_ylabel("commanded (0..1)")
     captured.set_ylabel("captured PWM [µs]")
