@@ -160,10 +160,21 @@ def rotorpy_hover() -> float | None:
     return steps * dt / _best_of(1, run)
 
 
+def rotor_counts() -> Iterator[Figure]:
+    """One vehicle as the rig steps it, per rotor count: each count is its own compiled
+    case of the kernel, so a rotor costs the same in each."""
+    for name in ("f450_high_precision", "f550_hexa", "auriol_x8"):
+        vehicle = load_vehicle(name)
+        *_, with_truth = single_vehicle(vehicle)
+        yield Figure(f"{vehicle.propulsion.rotor_count} rotors ({name}), 1 ms frames + truth",
+                     with_truth.value, "× real time")  # fmt: skip
+
+
 def figures() -> Iterator[Figure]:
     vehicle = load_vehicle("f450_high_precision")
     single = list(single_vehicle(vehicle))
     yield from single
+    yield from rotor_counts()
     yield from sensors(vehicle)
     yield from batched(vehicle)
     peer = rotorpy_hover()

@@ -30,13 +30,15 @@ def every_build() -> list:
     ]
 
 
-def fly_px4(tmp_path, free_instance, px4_dir, name, duration_s, commands=(), **scenario):
+def fly_px4(tmp_path, free_instance, px4_dir, name, duration_s, commands=(), params=(),
+            **scenario):  # fmt: skip
+    """Fly a scenario of ``scenario``'s keys with PX4, ``params`` its ``--param`` texts."""
     document = {"name": name, "vehicle": "f450_high_precision", "duration_s": duration_s,
                 "seed": scenario.pop("seed", 1), "sensor_layer": "tlm",
                 "commands": list(commands), **scenario}  # fmt: skip
     options = RunOptions(
         autopilot="px4", px4_dir=px4_dir, instance=free_instance(), out_dir=tmp_path / name,
-        timeouts=LinkTimeouts(connect_s=60, answer_s=30),
+        timeouts=LinkTimeouts(connect_s=60, answer_s=30), autopilot_params=tuple(params),
     )  # fmt: skip
     return run_scenario(scenario_from_dict(document), options)
 
