@@ -276,7 +276,7 @@ def test_airframe_errors_name_the_parameter_and_the_override(tmp_path):
     unknown = _synthetic_log(tmp_path / "b.ulg", {"SYS_AUTOSTART": 4001})
     assert _error(unknown) == (
         f"{unknown}: parameter SYS_AUTOSTART = 4001 is an airframe without a bundled vehicle "
-        "(known: 4019 x500_v2); --vehicle NAME|PATH overrides it"
+        "(known: 4019 x500_v2, 12001 auriol_x8); --vehicle NAME|PATH overrides it"
     )
     assert plan_replay(unknown, ReplayOptions(vehicle="x500_v2")).vehicle == "x500_v2"
     assert _error(unknown, vehicle="no_such_frame").startswith("--vehicle: ")
