@@ -1,7 +1,8 @@
 """PX4 flies the bundled hexa and the coaxial X8 through the RTL chips at IMU 1 kHz, on every
 release: take-off, hover, a square in offboard position set-points, landing. The rig hands
 PX4 the geometry (CA_ROTOR_COUNT, CA_ROTORn_PX/PY/PZ/KM) and the outputs of motors 5-8, and
-the PWM capture carries every motor back to the model."""
+the PWM capture carries every motor back to the model. A hexa that loses a motor reacts as
+PX4's control allocation says it will."""
 
 import numpy as np
 import pytest
@@ -80,3 +81,37 @@ def test_px4_flies_a_hexa_and_an_x8_through_the_rtl_chips(
     _, armed = topic(px4_log, "actuator_armed")
     assert not armed["armed"][-1]
     assert abs(truth["z"][-1]) < 0.05
+
+
+def test_a_hexa_that_loses_a_motor_keeps_flying_without_yaw(tmp_path, free_instance, px4_dir):
+    """Motor 0 of the hexa lost in the hover: PX4 (CA_FAILURE_MODE 0, no ESC telemetry to
+    detect it) keeps the dead motor in its allocation, and its sequential desaturation gives
+    up yaw first. The hexa drops and drifts, then holds its position on five motors while it
+    turns about its yaw axis without end; PX4 raises no failsafe and stays in its mode."""
+    loss_s = 25.0
+    result = fly_px4(tmp_path, free_instance, px4_dir, "hexa_motor_loss", 40.0,
+                     takeoff_hover_land(10.0, 999.0, ALTITUDE_M)[:2], vehicle="f550_hexa",
+                     sensor_layer="rtl", rates={"imu_hz": 1000},
+                     faults=[{"kind": "motor_loss", "motor": 0, "start_s": loss_s}])  # fmt: skip
+    rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
+    truth_t, truth = topic(rig_log, "vehicle_local_position_groundtruth")
+    before = inside(truth_t, (loss_s - 3.0, loss_s))
+    after, held = truth_t > loss_s, truth_t > loss_s + 8.0
+    assert -truth["z"][after].min() > 1.5  # it dropped, but not to the ground
+    home = np.array([truth["x"][before].mean(), truth["y"][before].mean()])
+    drift = np.hypot(truth["x"][held] - home[0], truth["y"][held] - home[1])
+    assert drift.max() < 1.0, f"drifted {drift.max():.2f} m from its hover on five motors"
+    attitude_t, attitude = topic(rig_log, "vehicle_attitude_groundtruth")
+    q = np.array([attitude[f"q[{k}]"] for k in range(4)])
+    tilt_deg = np.degrees(np.arccos(np.clip(1 - 2 * (q[1] ** 2 + q[2] ** 2), -1, 1)))
+    assert tilt_deg[attitude_t > loss_s + 8.0].max() < 10.0
+    yaw = np.unwrap(np.arctan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2)))
+    turning = np.diff(yaw[attitude_t > loss_s + 5.0])
+    assert abs(turning.sum()) > np.radians(45)  # about 5°/s on v1.17
+    assert (np.sign(turning) == np.sign(turning.sum())).mean() > 0.9  # one way, without end
+    status_t, status = topic(px4_log, "vehicle_status")
+    flying = status_t > loss_s
+    assert not status["failsafe"][flying].any()
+    assert set(status["nav_state"][flying]) == set(
+        status["nav_state"][inside(status_t, (20.0, loss_s))]
+    )
