@@ -313,7 +313,7 @@ def derivative(w: np.ndarray, mount: int, rotors: int, lanes: int) -> None:
     parameters and the held inputs.
 
     Every vehicle has at least four rotors; the slots past them are written out behind
-    tests of ``rotors``, which :func:`_advance_chunk` passes as a compile-time constant,
+    tests of ``rotors``, which :func:`_substeps_of` passes as a compile-time constant,
     so the tests vanish from the machine code.
     """
     for v in range(lanes):
