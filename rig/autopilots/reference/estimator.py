@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from quad_model import frames
 from quad_model.frames import STANDARD_GRAVITY_MPS2, cross3, quat_from_dcm, quat_multiply, yaw_quat
 from rig.autopilots.reference.params import Parameters
+from rig.autopilots.reference.sensors import FlowReading
 
 #: PX4 holds the gyro bias while rotating faster than this (attitude_estimator_q: 0.175 rad/s).
 _BIAS_LEARN_MAX_RATE_RADPS = 0.175
@@ -242,6 +243,8 @@ class GyroRestCalibration:
         return mean if still else None
 
 
+#: EKF2's longest flow window (s): beyond it, it restarts its gyro accumulation.
+FLOW_MAX_WINDOW_S = 0.2
 #: EKF2's process noise of the barometer's bias (m/s/√Hz, ``baro_bias_nsd``).
 _BARO_BIAS_NSD = 0.13
 
@@ -283,6 +286,7 @@ class PositionEstimator:
         self.tilt_noise_mps2 = STANDARD_GRAVITY_MPS2 * 0.015
         self.predict_period_s = 0.01
         self.gps_delay_s = 0.11
+        self.flow_delay_s = 0.02
         self.gps_height_reference = True
         self.gps_pos_noise_m = 0.5
         self.gps_vel_noise_mps = 0.3
@@ -290,6 +294,7 @@ class PositionEstimator:
         self.range_noise_m = 0.1
         self.rejected = 0
         self._dt_cached = -1.0
+        self._kept_s = self._delay_span_s()
         self.reset()
 
     def configure(self, params: Parameters) -> None:
@@ -297,12 +302,19 @@ class PositionEstimator:
         self.tilt_noise_mps2 = STANDARD_GRAVITY_MPS2 * params["EKF2_GYR_NOISE"]
         self.predict_period_s = params["EKF2_PREDICT_US"] * 1e-6
         self.gps_delay_s = params["EKF2_GPS_DELAY"] * 1e-3
+        self.flow_delay_s = params["EKF2_OF_DELAY"] * 1e-3
         self.gps_height_reference = params["EKF2_HGT_REF"] == 1
         self.gps_pos_noise_m = params["EKF2_GPS_P_NOISE"]
         self.gps_vel_noise_mps = params["EKF2_GPS_V_NOISE"]
         self.baro_noise_m = params["EKF2_BARO_NOISE"]
         self.range_noise_m = params["EKF2_RNG_NOISE"]
         self._dt_cached = -1.0
+        self._kept_s = self._delay_span_s()
+
+    def _delay_span_s(self) -> float:
+        """How far back delayed fusion looks: the GPS delay, or a flow window's middle."""
+        flow_age_s = self.flow_delay_s + 0.5 * (self.predict_period_s + FLOW_MAX_WINDOW_S)
+        return max(self.gps_delay_s, flow_age_s)
 
     def reset(self) -> None:
         self.x = np.zeros((3, 3))  # [axis N/E/D, (pos, vel, bias)]
@@ -317,8 +329,8 @@ class PositionEstimator:
         self._baro_clock_s = 0.0
         #: NED down of the (flat) ground under a rangefinder; None before a reading.
         self.ground_down_m: float | None = None
-        #: (clock s, position, velocity) of the estimates over the last GPS delay, for GPS
-        #: fusion; the clock counts predicted time.
+        #: (clock s, position, velocity) of the estimates over the longest measurement delay
+        #: (GPS, or a flow window's middle), for delayed fusion; the clock counts predicted time.
         self._recent: deque[tuple[float, NDArray[np.float64], NDArray[np.float64]]] = deque()
         self._clock_s = 0.0
 
@@ -361,26 +373,73 @@ class PositionEstimator:
         self._clock_s += dt_s
         recent = self._recent
         recent.append((self._clock_s, self.x[:, 0].copy(), self.x[:, 1].copy()))
-        while len(recent) > 1 and recent[1][0] <= self._clock_s - self.gps_delay_s:
+        while len(recent) > 1 and recent[1][0] <= self._clock_s - self._kept_s:
             recent.popleft()
+
+    def _estimate_ago(self, age_s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """Position and velocity estimated ``age_s`` ago (the oldest kept if none is that
+        old); None before the first prediction."""
+        then = self._clock_s - age_s
+        for clock_s, position, velocity in reversed(self._recent):
+            if clock_s <= then:
+                return position, velocity
+        return (self._recent[0][1], self._recent[0][2]) if self._recent else None
 
     def fuse_gps(
         self,
         position_ned_m: NDArray[np.float64],
         velocity_ned_mps: NDArray[np.float64],
         use_height: bool,
+        use_position: bool = True,
+        use_velocity: bool = True,
     ) -> None:
-        """GPS position (horizontal, plus height with ``use_height``: GPS is the height
-        reference, or the barometer is out) and velocity, measured ``gps_delay_s`` ago."""
+        """GPS position (horizontal with ``use_position``, height with ``use_height``: GPS is
+        the height reference, or the barometer is out) and velocity (``use_velocity``),
+        measured ``gps_delay_s`` ago; the flags are ``EKF2_GPS_CTRL``'s bits."""
         # The change of the estimate since the fix was measured, added to the fix.
-        if self._recent:
-            _, position_then, velocity_then = self._recent[0]
-            position_ned_m = position_ned_m + (self.x[:, 0] - position_then)
-            velocity_ned_mps = velocity_ned_mps + (self.x[:, 1] - velocity_then)
-        self._fuse(slice(0, 2), 0, position_ned_m[:2], self.gps_pos_noise_m**2)
+        then = self._estimate_ago(self.gps_delay_s)
+        if then is not None:
+            position_ned_m = position_ned_m + (self.x[:, 0] - then[0])
+            velocity_ned_mps = velocity_ned_mps + (self.x[:, 1] - then[1])
+        if use_position:
+            self._fuse(slice(0, 2), 0, position_ned_m[:2], self.gps_pos_noise_m**2)
         if use_height:  # EKF2: 1.5 times the horizontal noise, a typical vacc/hacc
             self._fuse(slice(2, 3), 0, position_ned_m[2:], (1.5 * self.gps_pos_noise_m) ** 2)
-        self._fuse(slice(0, 3), 1, velocity_ned_mps, self.gps_vel_noise_mps**2)
+        if use_velocity:
+            self._fuse(slice(0, 3), 1, velocity_ned_mps, self.gps_vel_noise_mps**2)
+
+    def fuse_flow(self, los_rate_radps: NDArray[np.float64], range_m: float,
+                  r_body_to_ned: NDArray[np.float64], variance: float, age_s: float,
+                  gate_sigma: float) -> bool:  # fmt: skip
+        """Optical flow's line-of-sight rates (rad/s about body x, y, EKF2's sign: positive
+        for a right-handed rotation of the scene, gyro already removed) seen over a window
+        whose middle was ``age_s`` ago, along a camera axis ``range_m`` from the ground.
+
+        EKF2's model: the rates are the body velocity over the range, (v_y, -v_x)/r. The
+        innovations and their variances (``variance`` (rad/s)² plus the velocity's) are
+        taken in those rates and gated as EKF2 gates them, both axes rejected if either
+        fails. With the attitude given, the model is linear in the NED velocity; the
+        rates become a horizontal velocity (the vertical from the estimate), fused per axis
+        with the noise carried through: exact in level flight, where the axes stay
+        uncorrelated as this filter keeps them. Returns whether it was fused.
+        """
+        then = self._estimate_ago(age_s)
+        velocity_then = self.x[:, 1] if then is None else then[1]
+        to_body = r_body_to_ned.T
+        h = np.array([to_body[1], -to_body[0]]) / range_m  # d(rates)/d(NED velocity)
+        innovation = h @ velocity_then - los_rate_radps
+        innovation_var = (h * h) @ self.p[:, 1, 1] + variance
+        if bool((innovation**2 > gate_sigma**2 * innovation_var).any()):
+            self.rejected += 2
+            return False
+        body_xy = np.array([-los_rate_radps[1], los_rate_radps[0]]) * range_m
+        horizontal = to_body[:2, :2]
+        measured_ne = np.linalg.solve(horizontal, body_xy - to_body[:2, 2] * velocity_then[2])
+        inverse = np.linalg.inv(horizontal)
+        variance_ne = range_m**2 * variance * (inverse * inverse).sum(axis=1)
+        measured_now = self.x[:2, 1] + (measured_ne - velocity_then[:2])
+        self._fuse(slice(0, 2), 1, measured_now, variance_ne, gate_sigma=math.inf)
+        return True
 
     def fuse_baro(self, altitude_m: float, learn_bias: bool = False) -> None:
         """A barometric altitude; ``learn_bias`` while another height (GPS) is fused."""
@@ -414,24 +473,44 @@ class PositionEstimator:
         """Start the horizontal frame here; height keeps its baro reference."""
         self.origin = (lat_deg, lon_deg, alt_amsl_m + float(self.x[2, 0]))
         self.origin_time_us = time_us
+        self._reset(slice(0, 2), 0, np.zeros(2), self.gps_pos_noise_m**2)
+        self._reset(slice(0, 3), 1, velocity_ned_mps, self.gps_vel_noise_mps**2)
+
+    def reset_horizontal(
+        self,
+        position_ne_m: NDArray[np.float64],
+        velocity_ne_mps: NDArray[np.float64],
+        position_var: float,
+        velocity_var: float,
+    ) -> None:
+        """Put the horizontal position and velocity here, as EKF2 does when an aid starts
+        with no other horizontal aid."""
+        self._reset(slice(0, 2), 0, position_ne_m, position_var)
+        self._reset(slice(0, 2), 1, velocity_ne_mps, velocity_var)
+
+    def _reset(self, axes: slice, state: int, value: NDArray[np.float64], variance: float) -> None:
+        """Set one state on some axes, with its variance and no correlations: keeping the
+        height's correlation with a replaced vertical velocity left P indefinite once a
+        rangefinder had tightened it."""
         self._recent.clear()  # estimates of the old frame
-        self.x[:2, 0] = 0.0
-        self.x[:, 1] = velocity_ned_mps
-        # A reset state loses its correlations: keeping the height's correlation with a
-        # replaced vertical velocity left P indefinite once a rangefinder had tightened it.
-        self.p[:, 1, :] = self.p[:, :, 1] = 0.0
-        self.p[:, 1, 1] = self.gps_vel_noise_mps**2
-        self.p[:2, 0, :] = self.p[:2, :, 0] = 0.0
-        self.p[:2, 0, 0] = self.gps_pos_noise_m**2
+        self.x[axes, state] = value
+        self.p[axes, state, :] = self.p[axes, :, state] = 0.0
+        self.p[axes, state, state] = variance
 
     def _fuse(
-        self, axes: slice, state: int, measured: NDArray[np.float64], variance: float
+        self,
+        axes: slice,
+        state: int,
+        measured: NDArray[np.float64],
+        variance: float | NDArray[np.float64],
+        gate_sigma: float = _GATE_SIGMA,
     ) -> None:
-        """Scalar Kalman update of one state on several axes at once, with a 5σ gate."""
+        """Scalar Kalman update of one state on several axes at once (``variance`` one for
+        all or one per axis), with a ``gate_sigma`` gate."""
         p, x = self.p[axes], self.x[axes]
         innovation_var = p[:, state, state] + variance
         innovation = measured - x[:, state]
-        accept = innovation**2 <= _GATE_SIGMA**2 * innovation_var
+        accept = innovation**2 <= gate_sigma**2 * innovation_var
         self.rejected += int(np.count_nonzero(~accept))
         gain = p[:, :, state] / innovation_var[:, None] * accept[:, None]
         x += gain * innovation[:, None]
@@ -484,3 +563,169 @@ class DistanceToGround:
     def height(self, time_us: int) -> float | None:
         """The height above the ground while valid, else None."""
         return self.height_m if self.valid(time_us) else None
+
+
+class OpticalFlowFusion:
+    """Optical-flow aiding of the :class:`PositionEstimator`, as PX4 runs it for a flow chip
+    without a gyro (a PMW3901): ``VehicleOpticalFlow`` integrates the autopilot's own gyro over
+    each flow window, and EKF2 (``optical_flow_control.cpp``, ``optflow_fusion.cpp``) checks,
+    compensates and fuses the sample.
+
+    A sample counts when its quality reaches ``EKF2_OF_QMIN`` (``EKF2_OF_QMIN_GND`` on the
+    ground), its motion is within ``SENS_FLOW_MAXR`` (the HIL message gives no limit of its
+    own), the camera is within 45° of vertical and the gyro covers its window; on the ground
+    a sample that fails is taken as no motion (EKF2: zero velocity, on the ground), in the
+    air it is dropped. The line-of-sight rate is the flow less the body rotation, fused
+    ``EKF2_OF_DELAY`` plus half a window (and half a prediction step) in the past, with
+    EKF2's noise between ``EKF2_OF_N_MIN`` and ``EKF2_OF_N_MAX`` by quality and its
+    ``EKF2_OF_GATE``. The range along the camera axis is the rangefinder's height over the
+    cosine of the tilt, at least ``EKF2_MIN_RNG``.
+
+    Aiding starts with the first good sample; with no other horizontal aid (GPS) the
+    horizontal velocity is reset to the flow's and the position to zero on the ground (the
+    last known in the air), as EKF2 does. It aids while a sample was fused within
+    ``EKF2_NOAID_TOUT``.
+    """
+
+    #: EKF2's ``range_cos_max_tilt``: flow from a camera tilted further is not used.
+    COS_MAX_TILT = math.cos(math.radians(45.0))
+    #: EKF2's position variance after a reset (0.01 m)².
+    RESET_POSITION_VAR_M2 = 1e-4
+
+    def __init__(self) -> None:
+        self.enabled = True
+        self.delay_s = 0.02
+        self.predict_period_s = 0.01
+        self.quality_min = 1
+        self.quality_min_ground = 0
+        self.noise_min_radps = 0.15
+        self.noise_max_radps = 0.5
+        self.gate_sigma = 3.0
+        self.max_rate_radps = 8.0
+        self.min_range_m = 0.1
+        self.no_aid_timeout_us = 5_000_000
+        self.reset()
+
+    def configure(self, params: Parameters) -> None:
+        self.enabled = bool(params["EKF2_OF_CTRL"])
+        self.delay_s = params["EKF2_OF_DELAY"] * 1e-3
+        self.predict_period_s = params["EKF2_PREDICT_US"] * 1e-6
+        self.quality_min = int(params["EKF2_OF_QMIN"])
+        self.quality_min_ground = int(params["EKF2_OF_QMIN_GND"])
+        self.noise_min_radps = max(params["EKF2_OF_N_MIN"], 0.05)
+        self.noise_max_radps = max(params["EKF2_OF_N_MAX"], 0.05)
+        self.gate_sigma = max(params["EKF2_OF_GATE"], 1.0)
+        self.max_rate_radps = params["SENS_FLOW_MAXR"]
+        self.min_range_m = params["EKF2_MIN_RNG"]
+        self.no_aid_timeout_us = int(params["EKF2_NOAID_TOUT"])
+
+    def reset(self) -> None:
+        self.active = False
+        self.last_fuse_us: int | None = None
+        #: The last line-of-sight rates (rad/s, EKF2's sign) and the velocity they give.
+        self.los_rate_radps = np.zeros(2)
+        self.velocity_body_mps = np.zeros(2)
+        #: (time µs, bias-corrected body rates, interval s) of the recent IMU frames.
+        self._gyro: deque[tuple[int, NDArray[np.float64], float]] = deque()
+        self._last_known_ne = np.zeros(2)
+
+    def add_gyro(self, time_us: int, rates_radps: NDArray[np.float64], dt_s: float) -> None:
+        """One IMU frame's bias-corrected body rates over the ``dt_s`` that ended now."""
+        gyro = self._gyro
+        gyro.append((time_us, rates_radps.copy(), dt_s))
+        while gyro and gyro[0][0] <= time_us - FLOW_MAX_WINDOW_S * 1e6:
+            gyro.popleft()
+
+    def aiding(self, time_us: int) -> bool:
+        """Whether flow constrains the horizontal position: fused within EKF2_NOAID_TOUT."""
+        last = self.last_fuse_us
+        return self.active and last is not None and time_us - last <= self.no_aid_timeout_us
+
+    def noise_radps(self, quality: int) -> float:
+        """EKF2's ``calcOptFlowMeasVar`` (its square root): linear in the quality from
+        ``EKF2_OF_N_MAX`` at ``EKF2_OF_QMIN`` to ``EKF2_OF_N_MIN`` at 255."""
+        span = 255.0 - self.quality_min
+        weight = min(max((quality - self.quality_min) / span, 0.0), 1.0) if span >= 1.0 else 0.0
+        return self.noise_min_radps * weight + self.noise_max_radps * (1.0 - weight)
+
+    def update(
+        self,
+        reading: FlowReading,
+        position: PositionEstimator,
+        q: NDArray[np.float64],
+        height_m: float | None,
+        in_air: bool,
+        other_aid: bool,
+        time_us: int,
+    ) -> bool:
+        """Take one flow sample (``height_m`` the rangefinder's height above the ground, None
+        when not valid; ``other_aid`` another horizontal aid, GPS, is fused); returns whether
+        it was fused. ``time_us`` is now; the sample may be older."""
+        dt_s = reading.integration_timespan_us * 1e-6
+        flow = np.array(reading.pixel_flow_rad, dtype=float)
+        if not self.enabled or not np.isfinite(flow).all() or not 0.0 < dt_s < 1.0:
+            return False  # EKF2 takes finite samples shorter than a second
+        r = _quat_to_dcm(q)
+        delta_angle, gyro_dt_s = self._integrate_gyro(
+            reading.time_us, reading.integration_timespan_us
+        )
+        good = (
+            reading.quality >= (self.quality_min if in_air else self.quality_min_ground)
+            and math.hypot(flow[0], flow[1]) <= dt_s * self.max_rate_radps
+            and r[2, 2] > self.COS_MAX_TILT
+            and 0.7 * gyro_dt_s <= dt_s <= 1.3 * gyro_dt_s
+        )
+        if good:  # EKF2's sign is the sensor's reversed; its gyro term is -Δangle
+            los = (-flow + delta_angle[:2]) / dt_s
+        elif not in_air:
+            los = np.zeros(2)
+        else:
+            return False
+        if height_m is None and in_air:
+            return False
+        range_m = max(height_m if height_m is not None else 0.0, self.min_range_m) / r[2, 2]
+        self.los_rate_radps = los
+        self.velocity_body_mps = np.array([-los[1], los[0]]) * range_m
+        noise = self.noise_radps(reading.quality)
+        if not self.active:
+            self._start(position, r, range_m, noise, in_air, other_aid, time_us)
+            return False
+        age_s = (time_us - reading.time_us) * 1e-6 + self.delay_s
+        age_s += 0.5 * (self.predict_period_s + dt_s)
+        if not position.fuse_flow(los, range_m, r, noise**2, age_s, self.gate_sigma):
+            return False
+        self.last_fuse_us = time_us
+        self._last_known_ne = position.position_ned_m[:2].copy()
+        return True
+
+    def _start(
+        self,
+        position: PositionEstimator,
+        r: NDArray[np.float64],
+        range_m: float,
+        noise_radps: float,
+        in_air: bool,
+        other_aid: bool,
+        time_us: int,
+    ) -> None:
+        """EKF2's start of flow fusion: with no other aid, velocity to the flow's, position to
+        zero on the ground or the last known in the air."""
+        if not other_aid:
+            body = np.array([*self.velocity_body_mps, 0.0])
+            velocity_ne = (r @ body)[:2]
+            start_ne = self._last_known_ne if in_air else np.zeros(2)
+            position.reset_horizontal(start_ne, velocity_ne, self.RESET_POSITION_VAR_M2,
+                                      (noise_radps * range_m) ** 2)  # fmt: skip
+        self.active = True
+        self.last_fuse_us = time_us
+
+    def _integrate_gyro(self, end_us: int, span_us: int) -> tuple[NDArray[np.float64], float]:
+        """The body rotation (rad) and the time (s) the IMU frames of ``(end - span, end]``
+        cover, as ``VehicleOpticalFlow`` integrates the gyro for a chip without one."""
+        delta_angle = np.zeros(3)
+        covered_s = 0.0
+        for time_us, rates, dt_s in self._gyro:
+            if end_us - span_us < time_us <= end_us:
+                delta_angle += rates * dt_s
+                covered_s += dt_s
+        return delta_angle, covered_s

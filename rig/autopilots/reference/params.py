@@ -150,6 +150,26 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("EKF2_RNG_A_HMAX", 5.0, 1.0, 10.0, "m", "Range aid: below this height above ground"),
     _p("EKF2_RNG_A_VMAX", 1.0, 0.1, 2.0, "m/s", "Range aid: below this horizontal speed"),
     _p("EKF2_RNG_NOISE", 0.1, 0.01, 1.0, "m", "Rangefinder height noise"),
+    _p("EKF2_MIN_RNG", 0.1, 0.01, _INF, "m", "Expected rangefinder reading on the ground"),
+    _p("EKF2_GPS_CTRL", 7, 0, 15, "", "GNSS aiding: bit 0 lat/lon, 1 altitude, 2 velocity"),
+    _p(
+        "EKF2_NOAID_TOUT",
+        5000000,
+        500000,
+        10000000,
+        "us",
+        "Time without horizontal aiding before the position is invalid",
+    ),
+    # src/modules/ekf2/params_optical_flow.yaml (main: aiding on by default; v1.14-v1.15: off)
+    _p("EKF2_OF_CTRL", 1, 0, 1, "", "Optical flow aiding"),
+    _p("EKF2_OF_DELAY", 20.0, 0.0, 300.0, "ms", "Optical flow measurement delay"),
+    _p("EKF2_OF_QMIN", 1, 0, 255, "", "In-air optical flow minimum quality"),
+    _p("EKF2_OF_QMIN_GND", 0, 0, 255, "", "On-ground optical flow minimum quality"),
+    _p("EKF2_OF_N_MIN", 0.15, 0.05, _INF, "rad/s", "Optical flow noise at the best quality"),
+    _p("EKF2_OF_N_MAX", 0.5, 0.05, _INF, "rad/s", "Optical flow noise at the worst quality"),
+    _p("EKF2_OF_GATE", 3.0, 1.0, _INF, "SD", "Gate size for optical flow fusion"),
+    # src/modules/sensors/sensor_params_flow.c: HIL_OPTICAL_FLOW reports no limit of its own
+    _p("SENS_FLOW_MAXR", 8.0, 1.0, _INF, "rad/s", "Maximum flow rate the sensor measures"),
     # src/modules/commander/commander_params.yaml
     _p("COM_SPOOLUP_TIME", 1.0, 0.0, 5.0, "s", "Motor spool-up time before takeoff"),
     _p("COM_DISARM_LAND", 2.0, -1.0, 20.0, "s", "Auto-disarm after landing (-1: never)"),

@@ -22,7 +22,13 @@ from rig.autopilots.reference.flight_controller import FlightController
 from rig.autopilots.reference.flight_log import open_flight_log
 from rig.autopilots.reference.gcs import GroundStation, MavlinkLink
 from rig.autopilots.reference.params import Parameters
-from rig.autopilots.reference.sensors import GpsFix, GroundTruth, RangeReading, SensorFrame
+from rig.autopilots.reference.sensors import (
+    FlowReading,
+    GpsFix,
+    GroundTruth,
+    RangeReading,
+    SensorFrame,
+)
 from rig.mavlink.px4_api import (
     DEFAULT_HOME_ALT_AMSL_M,
     DEFAULT_HOME_LAT_DEG,
@@ -50,7 +56,10 @@ SIM_SILENCE_NOTE_S = 5.0
 
 
 def sensor_frame(
-    message: mavlink.MAVLink_message, gps: GpsFix | None, ranged: RangeReading | None = None
+    message: mavlink.MAVLink_message,
+    gps: GpsFix | None,
+    ranged: RangeReading | None = None,
+    flow: FlowReading | None = None,
 ) -> SensorFrame:
     """HIL_SENSOR (SI units after PX4's conversions: hPa → Pa) → :class:`SensorFrame`."""
     fields = message.fields_updated
@@ -70,6 +79,7 @@ def sensor_frame(
         baro_temperature_degc=message.temperature if pressure is not None else None,
         gps=gps,
         range=ranged,
+        flow=flow,
     )  # fmt: skip
 
 
@@ -82,6 +92,22 @@ def range_reading(message: mavlink.MAVLink_message) -> RangeReading:
         signal_quality=quality,
         min_m=message.min_distance * 0.01,
         max_m=message.max_distance * 0.01,
+    )
+
+
+def flow_reading(message: mavlink.MAVLink_message, time_us: int) -> FlowReading:
+    """HIL_OPTICAL_FLOW as PX4's ``simulator_mavlink`` turns it into ``sensor_optical_flow``:
+    integrated x/y as ``pixel_flow`` (rad), the window and the quality as they are, stamped
+    ``time_us``, the autopilot's clock at arrival (in lockstep the last HIL_SENSOR's time).
+
+    Its integrated gyro and distance are left out: the rig's chip has neither (NaN, -1), so
+    PX4 integrates its own gyro over the window and takes the height from DISTANCE_SENSOR.
+    """
+    return FlowReading(
+        time_us=time_us,
+        pixel_flow_rad=(message.integrated_x, message.integrated_y),
+        integration_timespan_us=message.integration_time_us,
+        quality=message.quality,
     )
 
 
@@ -156,6 +182,7 @@ class Autopilot:
         self.sim_malformed = 0
         self._gps: GpsFix | None = None
         self._range: RangeReading | None = None
+        self._flow: FlowReading | None = None
         self._last_frame_wall_s = time.monotonic()
         self._silence_noted = False
 
@@ -233,8 +260,8 @@ class Autopilot:
                 return  # only IMU 0 drives the lockstep clock, as in PX4
             self._last_frame_wall_s = time.monotonic()
             self._silence_noted = False
-            frame = sensor_frame(message, self._gps, self._range)
-            self._gps = self._range = None
+            frame = sensor_frame(message, self._gps, self._range, self._flow)
+            self._gps = self._range = self._flow = None
             controls = self.fc.update(frame, message.time_usec)
             mode = ActuatorMode.CUSTOM_MODE_ENABLED
             if controls.armed:
@@ -247,6 +274,8 @@ class Autopilot:
             self._gps = gps_fix(message)
         elif kind == "DISTANCE_SENSOR":
             self._range = range_reading(message)
+        elif kind == "HIL_OPTICAL_FLOW":
+            self._flow = flow_reading(message, self.fc.time_us)
         elif kind == "HIL_STATE_QUATERNION":
             self.fc.observe_truth(ground_truth(message))
         elif kind == "BAD_DATA":

@@ -1,8 +1,8 @@
 """What the autopilot receives from the simulator, in SI units, and how it judges freshness.
 
 The process wrapper turns PX4's simulator messages (HIL_SENSOR, HIL_GPS, DISTANCE_SENSOR,
-HIL_STATE_QUATERNION) into these objects; the flight controller core sees nothing else, so
-it can be driven in-process by tests without sockets.
+HIL_OPTICAL_FLOW, HIL_STATE_QUATERNION) into these objects; the flight controller core sees
+nothing else, so it can be driven in-process by tests without sockets.
 """
 
 from __future__ import annotations
@@ -43,6 +43,22 @@ class RangeReading:
 
 
 @dataclass(frozen=True)
+class FlowReading:
+    """One HIL_OPTICAL_FLOW as PX4's ``simulator_mavlink`` publishes ``sensor_optical_flow``.
+
+    ``pixel_flow_rad`` is the image's motion over the window about body x and y in the
+    sensor's sign convention (a right-handed rotation of the vehicle reads positive, a motion
+    along +y negative about x); EKF2 flips it. The window ends at ``time_us``, the arrival on
+    the autopilot's clock, which PX4 stamps as the sample time.
+    """
+
+    time_us: int
+    pixel_flow_rad: tuple[float, float]
+    integration_timespan_us: int
+    quality: int
+
+
+@dataclass(frozen=True)
 class SensorFrame:
     """One IMU frame (HIL_SENSOR id 0) plus whatever else arrived since the last one.
 
@@ -56,6 +72,7 @@ class SensorFrame:
     baro_temperature_degc: float | None = None
     gps: GpsFix | None = None
     range: RangeReading | None = None
+    flow: FlowReading | None = None
 
 
 @dataclass(frozen=True)
