@@ -36,6 +36,7 @@ from rig.autopilots.reference.estimator import (
     AttitudeEstimator,
     DistanceToGround,
     GyroRestCalibration,
+    OpticalFlowFusion,
     PositionEstimator,
     pressure_altitude_m,
 )
@@ -114,6 +115,7 @@ class FlightController:
         self.attitude = AttitudeEstimator()
         self.position = PositionEstimator()
         self.ground = DistanceToGround()
+        self.flow = OpticalFlowFusion()
         self.gyro_calibration = GyroRestCalibration()
         self.rate_control = RateController(self.params)
         self.attitude_control = AttitudeController(self.params)
@@ -247,6 +249,8 @@ class FlightController:
             return self.refuse(f"Switching to {nav_state.name} denied: no position estimate")
         if nav_state == NavState.AUTO_MISSION and not self.navigator.mission:
             return self.refuse("Switching to mission denied: no valid mission")
+        if nav_state == NavState.AUTO_MISSION and self.position.origin is None:
+            return self.refuse("Switching to mission denied: no global position (GPS)")
         if nav_state == NavState.OFFBOARD and not self._offboard_fresh():
             return self.refuse("Switching to offboard denied: no offboard setpoint")
         self.user_nav_state = nav_state
@@ -261,6 +265,8 @@ class FlightController:
 
     def takeoff(self, altitude_amsl_m: float) -> CommandResult:
         """NAV_TAKEOFF: climb to ``altitude_amsl_m`` (NaN: MIS_TAKEOFF_ALT above home)."""
+        if math.isfinite(altitude_amsl_m) and self.position.origin is None:
+            return self.refuse("Takeoff denied: an altitude AMSL needs a global position")
         result = self.set_mode(NavState.AUTO_TAKEOFF)
         if result.result != mavlink.MAV_RESULT_ACCEPTED:
             return result
@@ -335,7 +341,10 @@ class FlightController:
         return self.land_detector.landed
 
     def position_valid(self) -> bool:
-        return self.position.origin is not None and self._gps_good
+        """PX4's local position ``xy_valid``: a horizontal aid (GPS, optical flow) is fused."""
+        return (self.position.origin is not None and self._gps_good) or self.flow.aiding(
+            self.time_us
+        )
 
     def attitude_valid(self) -> bool:
         return self.attitude.initialized and self.monitors["gyro"].healthy(self.time_us)
@@ -352,13 +361,14 @@ class FlightController:
             fault = self.monitors[key].fault(t)
             if fault:
                 return f"Preflight Fail: {self.monitors[key].name} Sensor 0 {fault}"
-        if self.monitors["gps"].fault(t):
+        flow = self.flow.aiding(t)  # then GPS is not needed, nor a global position
+        if not flow and self.monitors["gps"].fault(t):
             return f"Preflight Fail: GPS {self.monitors['gps'].fault(t)}"
-        if not self._gps_good:
+        if not flow and not self._gps_good:
             return "Preflight Fail: GPS fix too low"
         if not self.attitude.initialized:
             return "Preflight Fail: attitude estimate not valid"
-        if self.position.origin is None:
+        if not flow and self.position.origin is None:
             return "Preflight Fail: no valid global position"
         return None
 
@@ -385,6 +395,7 @@ class FlightController:
         self.attitude.configure(p)
         self.position.configure(p)
         self.ground.configure(p)
+        self.flow.configure(p)
         self.rate_control.configure(p)
         self.attitude_control.configure(p)
         self.position_control.configure(p)
@@ -437,6 +448,7 @@ class FlightController:
             if offsets is not None:
                 self.attitude.gyro_bias_radps = offsets
         self.attitude.update(gyro, accel, mag, dt_s, compensation)
+        self.flow.add_gyro(time_us, self.attitude.rates_radps, dt_s)
         self._rates_filter.update(self.attitude.rates_radps, time_us)
         if sensors.range is not None:
             self._fuse_range(sensors.range, time_us)
@@ -446,7 +458,16 @@ class FlightController:
             learn_bias = self.position.gps_height_reference and self._gps_good
             self.position.fuse_baro(pressure_altitude_m(sensors.baro_pressure_pa), learn_bias)
         self._use_gps_height = not baro_ok or self.position.gps_height_reference
+        if sensors.flow is not None:
+            gps_aid = self.position.origin is not None and self._gps_good
+            height = self.ground.height(time_us)
+            self.flow.update(sensors.flow, self.position, self.attitude.q, height,
+                             not self.landed, gps_aid, time_us)  # fmt: skip
         gps = sensors.gps
+        gps_ctrl = int(self.params["EKF2_GPS_CTRL"])
+        if not gps_ctrl & 0b101:  # neither its position nor its velocity is used
+            self._gps_good = False
+            return
         if gps is None:
             self._gps_good = self._gps_good and self.monitors["gps"].healthy(time_us)
             return
@@ -466,7 +487,10 @@ class FlightController:
                 self.attitude.set_declination(_wmm_declination_rad(gps.lat_deg, gps.lon_deg))
             return
         local = self._to_local(gps.lat_deg, gps.lon_deg, gps.alt_amsl_m)
-        self.position.fuse_gps(local, velocity, use_height=self._use_gps_height)
+        self.position.fuse_gps(
+            local, velocity, use_height=self._use_gps_height and bool(gps_ctrl & 0b010),
+            use_position=bool(gps_ctrl & 0b001), use_velocity=bool(gps_ctrl & 0b100),
+        )  # fmt: skip
 
     def _fuse_range(self, reading: RangeReading, time_us: int) -> None:
         """The rangefinder: height above the ground, and the height aid near it (PX4
@@ -517,9 +541,14 @@ class FlightController:
             self._disarm(f"Failsafe: IMU {imu_fault}, motors off")
             return
         if self.nav_state in _POSITION_MODES and not self.position_valid():
+            # PX4: no local position, so neither Hold nor Land can run; Descend needs only
+            # the height
             self.failsafe = True
             self._enter(NavState.DESCEND)
-            self.notify(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: no position (GPS lost), Descend")
+            lost = "optical flow" if self.flow.active else "GPS"
+            self.notify(
+                mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: no position ({lost} lost), Descend"
+            )
         if self.nav_state == NavState.OFFBOARD and not self._offboard_fresh():
             self.failsafe = True
             self._enter(NavState.AUTO_LOITER)
@@ -689,10 +718,10 @@ class FlightController:
         """Climb from here to the requested altitude, at least MIS_TAKEOFF_ALT above home
         when none was given (PX4 takeoff)."""
         altitude = self._takeoff_altitude_amsl_m
-        if not math.isfinite(altitude):
-            assert self.home is not None, "set when the vehicle arms"
-            altitude = self.home[2] + self.params["MIS_TAKEOFF_ALT"]
-        self.navigator.set_takeoff_target(self.position.position_ned_m, altitude)
+        nav = self.navigator
+        above_home_m = (altitude - nav.home_alt_amsl_m if math.isfinite(altitude)
+                        else self.params["MIS_TAKEOFF_ALT"])  # fmt: skip
+        nav.set_takeoff_target(self.position.position_ned_m, above_home_m)
 
     def _offboard_fresh(self) -> bool:
         last = self._offboard_sp_time_us
@@ -786,7 +815,7 @@ class FlightController:
             z_global=est.origin is not None, ref_lat=origin[0], ref_lon=origin[1],
             ref_alt=origin[2], eph=math.hypot(pos_std[0], pos_std[1]), epv=pos_std[2],
             evh=math.hypot(vel_std[0], vel_std[1]), evv=vel_std[2],
-            dead_reckoning=not self._gps_good, dist_bottom=self.ground.height_m,
+            dead_reckoning=not valid, dist_bottom=self.ground.height_m,
             dist_bottom_valid=self.ground.valid(time_us),
         )  # fmt: skip
         thrust_body = np.array([0.0, 0.0, -self.collective_thrust])

@@ -716,12 +716,14 @@ class GroundStation:
             return mavlink.MAVLink_mission_current_message(
                 min(nav.mission_seq, max(len(nav.mission) - 1, 0)), len(nav.mission)
             )
-        if fc.position.origin is None:
+        if fc.position.origin is None and not fc.position_valid():
             return None
         x, y, z = fc.position.position_ned_m
         vx, vy, vz = fc.position.velocity_ned_mps
         if name == "LOCAL_POSITION_NED":
             return mavlink.MAVLink_local_position_ned_message(boot_ms, x, y, z, vx, vy, vz)
+        if fc.position.origin is None:  # flying on optical flow: no global position
+            return None
         lat, lon, alt = fc.global_position()
         if name == "GLOBAL_POSITION_INT":
             home_alt = fc.home[2] if fc.home else fc.position.origin[2]

@@ -209,9 +209,11 @@ class Navigator:
         self._hold_until_us = None
         self._land_down_m = None
 
-    def set_takeoff_target(self, position_ned: NDArray[np.float64], altitude_amsl_m: float) -> None:
+    def set_takeoff_target(self, position_ned: NDArray[np.float64], above_home_m: float) -> None:
+        """Climb from ``position_ned`` to ``above_home_m`` over home (the local frame: it needs
+        no global position)."""
         target = np.array(position_ned, dtype=float)
-        target[2] = self.home_ned[2] - (altitude_amsl_m - self.home_alt_amsl_m)
+        target[2] = self.home_ned[2] - above_home_m
         self.takeoff_target_ned = target
 
     def set_mission(self, items: list[MissionItem]) -> None:
