@@ -16,9 +16,11 @@ from quad_model.frames import STANDARD_GRAVITY_MPS2, quat_from_euler
 from quad_model.model import VehicleTruth
 from quad_model.sensors import OpticalFlowModel
 from rig.autopilots.reference.estimator import OpticalFlowFusion, PositionEstimator
+from rig.autopilots.reference.flight_controller import FlightController
+from rig.autopilots.reference.navigator import MissionItem, NavState
 from rig.autopilots.reference.params import Parameters
 from rig.autopilots.reference.process import flow_reading
-from rig.autopilots.reference.sensors import FlowReading
+from rig.autopilots.reference.sensors import FlowReading, RangeReading, SensorFrame
 from rig.mavlink.px4_api import mavlink
 from rig.mavlink.sim_messages import hil_optical_flow
 
@@ -144,7 +146,8 @@ def test_constant_velocity_at_constant_height_converges_to_the_truth(yaw_deg):
 def test_pure_rotation_is_compensated_by_the_gyro_to_zero_velocity():
     """Hovering still at 2 m and rolling ±10° at 1 Hz: the image swings at up to 1.1 rad/s
     (2.2 m/s if read as motion), the gyro integrated over each window takes it out, and the
-    velocity estimate stays within 5 cm/s of zero."""
+    velocity estimate stays within 8 cm/s of zero (the camera's frames straddle the
+    windows: measured 5.2 cm/s at most)."""
     omega = 2.0 * math.pi
     amplitude = math.radians(10.0)
 
@@ -156,12 +159,14 @@ def test_pure_rotation_is_compensated_by_the_gyro_to_zero_velocity():
 
     flight = _Flight()
     driver = _Driver(_camera())
-    raw = []
-    flight.fly(driver, 4.0, rates=rates, euler=euler,
-               seen=raw)  # fmt: skip
+    raw: list[FlowReading] = []
+    worst = 0.0
+    for start in np.arange(0.0, 4.0, 0.1):
+        flight.fly(driver, 0.1, rates=rates, euler=euler, start_s=start, seen=raw)
+        worst = max(worst, np.abs(flight.position.velocity_ned_mps[:2]).max())
     assert max(abs(r.pixel_flow_rad[0]) / (r.integration_timespan_us * 1e-6) for r in raw) > 1.0
-    assert np.abs(flight.position.velocity_ned_mps[:2]).max() < 0.05
-    assert flight.fused > 150
+    assert worst < 0.08
+    assert flight.fused >= 195  # of 200 windows
 
 
 def test_signs_against_the_camera_model():
@@ -276,3 +281,73 @@ def test_tilt_lengthens_the_range_along_the_camera_axis():
     reading = FlowReading(20_000, (-1.0 / r_range * 0.02, 0.0), 20_000, 200)
     flow.update(reading, position, q, 2.0, True, False, 20_000)
     assert flow.velocity_body_mps == pytest.approx((0.0, 1.0), abs=1e-9)
+
+
+def _frame(k, flow_quality, rng):
+    """A vehicle at rest, level, facing north at 0.2 m over the ground, without GPS: IMU
+    at 250 Hz, the magnetometer and the barometer, the LIDAR-Lite every 5th frame (20 ms,
+    close to its 50 ms cycle is enough here), a flow window every 5th frame; a little noise,
+    or PX4's checks would call the sensors stale."""
+    t_us = k * 4000
+    window = k % 5 == 0
+    noise = rng.standard_normal(9) * 1e-3
+    return t_us, SensorFrame(
+        accel_mps2=np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2]) + noise[:3],
+        gyro_radps=noise[3:6], mag_gauss=np.array([0.215, 0.0, 0.433]) + noise[6:],
+        baro_pressure_pa=101_000.0 + 10.0 * noise[0],
+        baro_temperature_degc=15.0,
+        range=RangeReading(0.2, 100, 0.05, 25.0) if k % 5 == 0 else None,
+        flow=FlowReading(t_us - 4000, (0.0, 0.0), 20_000, flow_quality) if window else None,
+    )  # fmt: skip
+
+
+def _fly_still(fc, first, seconds, flow_quality):
+    rng = np.random.default_rng(first)
+    for k in range(first, first + round(seconds / 0.004)):
+        fc.update(*reversed(_frame(k, flow_quality, rng)))
+    return first + round(seconds / 0.004)
+
+
+def test_without_gps_flow_gives_a_local_position_to_arm_and_take_off_but_no_mission():
+    """No HIL_GPS at all: the flow (and the rangefinder's height) make the local position
+    valid, so it arms and takes off in the local frame; what needs latitude and longitude
+    refuses in one line."""
+    fc = FlightController(Parameters({"ATT_MAG_DECL_A": 0}))
+    k = _fly_still(fc, 1, 3.0, 150)
+    assert fc.flow.active
+    assert fc.position_valid()
+    assert fc.position.origin is None
+    assert fc.preflight_failure() is None
+    assert fc.arm().result == mavlink.MAV_RESULT_ACCEPTED
+    assert fc.home is not None
+    refused = fc.takeoff(500.0)
+    assert refused.reason == "Takeoff denied: an altitude AMSL needs a global position"
+    assert fc.takeoff(math.nan).result == mavlink.MAV_RESULT_ACCEPTED
+    assert fc.navigator.takeoff_target_ned[2] == pytest.approx(
+        fc.navigator.home_ned[2] - Parameters()["MIS_TAKEOFF_ALT"]
+    )
+    fc.set_mission([MissionItem(0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                mavlink.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0, math.nan,
+                                473_977_000, 85_456_000, 5.0)])  # fmt: skip
+    refused = fc.set_mode(NavState.AUTO_MISSION)
+    assert refused.reason == "Switching to mission denied: no global position (GPS)"
+    _fly_still(fc, k, 0.1, 150)
+    assert fc.nav_state == NavState.AUTO_TAKEOFF
+
+
+def test_flow_lost_in_the_air_for_noaid_tout_triggers_the_descend_failsafe():
+    """Hovering on flow (held in the air here: the land detector told so), SQUAL 0 from
+    t = 3 s: EKF2_NOAID_TOUT (5 s) after the last fusion the local position is invalid and,
+    as PX4's failsafe falls back when neither Hold nor Land can run, it descends, saying
+    why."""
+    fc = FlightController(Parameters({"ATT_MAG_DECL_A": 0, "COM_DISARM_PRFLT": -1}))
+    k = _fly_still(fc, 1, 3.0, 150)
+    assert fc.arm().result == mavlink.MAV_RESULT_ACCEPTED
+    fc.land_detector.landed = False
+    k = _fly_still(fc, k, 4.9, 0)
+    assert fc.nav_state == NavState.AUTO_LOITER
+    assert fc.position_valid()
+    _fly_still(fc, k, 0.3, 0)
+    assert fc.nav_state == NavState.DESCEND
+    texts = [text for _, text in fc.status_messages]
+    assert "Failsafe: no position (optical flow lost), Descend" in texts
