@@ -13,6 +13,8 @@ estimator's errors.
   (PX4's conditional range aid). With the attitude given, the model is linear
   and the three axes decouple, so it runs as three 3-state filters (position, velocity,
   accelerometer bias) updated together in numpy.
+- :class:`OpticalFlowFusion`: EKF2's optical-flow aiding of that filter, for a flight
+  without GPS on flow and a rangefinder.
 """
 
 from __future__ import annotations
