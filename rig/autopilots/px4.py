@@ -283,21 +283,20 @@ def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, fl
     return params
 
 
-def sensor_parameters(vehicle: Vehicle, *, gps: bool, optical_flow: bool,
-                      rangefinder: bool) -> dict[str, float]:  # fmt: skip
+def sensor_parameters(vehicle: Vehicle, *, gps: bool, optical_flow: bool) -> dict[str, float]:
     """What a vehicle's configuration says of the sensors it flies with, beyond PX4's
     defaults (a receiver, no flow): without GPS, none expected (``SYS_HAS_GPS``) nor fused
     (``EKF2_GPS_CTRL``); with an optical-flow camera, flow fused (``EKF2_OF_CTRL``), its
     mount (``EKF2_OF_POS_X/Y/Z``, body FRD from the model's reference point, where the
     IMU is) and no rotation (``SENS_FLOW_ROT``: the rig's chip is mounted as PX4's default
-    expects); with neither GPS nor a fix to take height from, the height reference is the
-    rangefinder when one is flown (``EKF2_HGT_REF`` 2, as an indoor flow vehicle is set up),
-    else the barometer (0).
+    expects); without GPS the height reference is the barometer (``EKF2_HGT_REF`` 0), and a
+    rangefinder aids it near the ground (PX4's default ``EKF2_RNG_CTRL``). Not the
+    rangefinder as reference: EKF2 then estimates no terrain, and from v1.17 on it starts
+    flow fusion only with a terrain estimate or another horizontal aid, so flow never starts.
     """
     params: dict[str, float] = {}
     if not gps:
-        params |= {"SYS_HAS_GPS": 0, "EKF2_GPS_CTRL": 0,
-                   "EKF2_HGT_REF": 2 if rangefinder else 0}  # fmt: skip
+        params |= {"SYS_HAS_GPS": 0, "EKF2_GPS_CTRL": 0, "EKF2_HGT_REF": 0}
     if optical_flow:
         assert vehicle.optical_flow is not None, "the scenario's check: the vehicle has a camera"
         x, y, z = vehicle.optical_flow.position_frd_m

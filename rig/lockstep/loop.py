@@ -353,7 +353,6 @@ class _Loop:
                 vehicle,
                 gps=scenario.gps,
                 optical_flow=scenario.optical_flow,
-                rangefinder=scenario.rangefinder,
             ),
             px4_dir=options.px4_dir,
             run_dir=run_dir,
