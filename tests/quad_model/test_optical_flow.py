@@ -57,7 +57,7 @@ def test_translation_reads_velocity_over_range_in_px4s_sign_convention(camera):
     frames = fly(model, 1.0, down_m=-2.0, vel_ned=(1.0, 0.5, 0.0))
     assert len(frames) == 122  # a frame at t = 0, then 121 frames a second
     assert total_motion(frames) == pytest.approx((-0.25, 0.5), abs=1e-12)
-    assert all(f.squal == 120 for f in frames)
+    assert all(f.squal == 230 for f in frames)
 
 
 def test_body_rates_turn_the_whole_image(camera):
@@ -118,15 +118,15 @@ def test_quality_falls_with_texture_light_and_blur(camera):
         frames = fly(OpticalFlowModel(camera, surface, np.random.default_rng(1)), 0.1, **state)
         return frames[-1].squal
 
-    assert squal(Surface(texture=0.5, illuminance_lux=10_000)) == 60
-    assert squal(Surface(texture=1.0, illuminance_lux=30)) == 60  # half the full-exposure light
+    assert squal(Surface(texture=0.5, illuminance_lux=10_000)) == 115
+    assert squal(Surface(texture=1.0, illuminance_lux=30)) == 115  # half the full-exposure light
     assert squal(Surface(texture=0.0, illuminance_lux=10_000)) == 0
     # In dim light the exposure is a whole frame: 2 rad/s smears 2/121/pixel_rad pixels.
     blur = 2.0 / 121.0 / camera.pixel_rad
     dim = Surface(texture=1.0, illuminance_lux=60)
-    assert squal(dim, rates=(2.0, 0.0, 0.0)) == round(120 / (1 + blur**2))
+    assert squal(dim, rates=(2.0, 0.0, 0.0)) == round(230 / (1 + blur**2))
     # In daylight the exposure is 60/10,000 of a frame: the same rate barely blurs.
-    assert squal(BRIGHT, rates=(2.0, 0.0, 0.0)) == 120
+    assert squal(BRIGHT, rates=(2.0, 0.0, 0.0)) == 230
 
 
 def test_noise_level_and_determinism(f450):
