@@ -569,7 +569,7 @@ class SensorSuite:
     samples only when a ``rangefinder_rate_hz`` is given (the vehicle must carry one); its
     generator is the fifth spawned, so the other four draw the same numbers either way. The
     optical-flow camera, when ``optical_flow`` (the vehicle must carry one), integrates every
-    frame and is the sixth.
+    frame and is the sixth. Without ``gps`` the vehicle has no receiver.
     """
 
     def __init__(
@@ -582,12 +582,14 @@ class SensorSuite:
         baro_rate_hz: float = DEFAULT_BARO_RATE_HZ,
         rangefinder_rate_hz: float | None = None,
         optical_flow: bool = False,
+        gps: bool = True,
     ) -> None:
         imu_rng, mag_rng, baro_rng, gps_rng, range_rng, flow_rng = rng.spawn(6)
         self.imu = ImuModel(vehicle, environment, imu_rng, imu_rate_hz)
         self.mag = MagModel(vehicle, environment, mag_rng)
         self.baro = BaroModel(vehicle, environment, baro_rng)
-        self.gps = GpsModel(vehicle, environment, gps_rng)
+        #: None: the vehicle flies without a receiver (its generator is spawned all the same).
+        self.gps = GpsModel(vehicle, environment, gps_rng) if gps else None
         self._imu_due = _Due(self.imu.rate_hz)
         self._mag_due = _Due(_check_rate(mag_rate_hz, "mag_rate_hz"))
         self._baro_due = _Due(_check_rate(baro_rate_hz, "baro_rate_hz"))
@@ -611,7 +613,7 @@ class SensorSuite:
             self.imu.sample(truth) if self._imu_due(t) else None,
             self.mag.sample(truth) if self._mag_due(t) else None,
             self.baro.sample(truth) if self._baro_due(t) else None,
-            self.gps.sample(truth),
+            None if self.gps is None else self.gps.sample(truth),
             None
             if self.rangefinder is None or not self._range_due(t)
             else self.rangefinder.sample(truth),
