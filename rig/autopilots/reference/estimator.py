@@ -412,12 +412,14 @@ class PositionEstimator:
 
     def fuse_flow(self, los_rate_radps: NDArray[np.float64], range_m: float,
                   r_body_to_ned: NDArray[np.float64], variance: float, age_s: float,
-                  gate_sigma: float) -> bool:  # fmt: skip
+                  gate_sigma: float, lever_velocity_body: NDArray[np.float64]) -> bool:  # fmt: skip
         """Optical flow's line-of-sight rates (rad/s about body x, y, EKF2's sign: positive
         for a right-handed rotation of the scene, gyro already removed) seen over a window
         whose middle was ``age_s`` ago, along a camera axis ``range_m`` from the ground.
 
-        EKF2's model: the rates are the body velocity over the range, (v_y, -v_x)/r. The
+        EKF2's model: the rates are the camera's body velocity over the range, (v_y,
+        -v_x)/r, the camera's being the vehicle's plus ``lever_velocity_body`` (ω × its
+        mount's offset). The
         innovations and their variances (``variance`` (rad/s)² plus the velocity's) are
         taken in those rates and gated as EKF2 gates them, both axes rejected if either
         fails. With the attitude given, the model is linear in the NED velocity; the
@@ -429,12 +431,14 @@ class PositionEstimator:
         velocity_then = self.x[:, 1] if then is None else then[1]
         to_body = r_body_to_ned.T
         h = np.array([to_body[1], -to_body[0]]) / range_m  # d(rates)/d(NED velocity)
-        innovation = h @ velocity_then - los_rate_radps
+        lever_los = np.array([lever_velocity_body[1], -lever_velocity_body[0]]) / range_m
+        innovation = h @ velocity_then + lever_los - los_rate_radps
         innovation_var = (h * h) @ self.p[:, 1, 1] + variance
         if bool((innovation**2 > gate_sigma**2 * innovation_var).any()):
             self.rejected += 2
             return False
         body_xy = np.array([-los_rate_radps[1], los_rate_radps[0]]) * range_m
+        body_xy -= lever_velocity_body[:2]
         horizontal = to_body[:2, :2]
         measured_ne = np.linalg.solve(horizontal, body_xy - to_body[:2, 2] * velocity_then[2])
         inverse = np.linalg.inv(horizontal)
@@ -580,8 +584,9 @@ class OpticalFlowFusion:
     air it is dropped. The line-of-sight rate is the flow less the body rotation, fused
     ``EKF2_OF_DELAY`` plus half a window (and half a prediction step) in the past, with
     EKF2's noise between ``EKF2_OF_N_MIN`` and ``EKF2_OF_N_MAX`` by quality and its
-    ``EKF2_OF_GATE``. The range along the camera axis is the rangefinder's height over the
-    cosine of the tilt, at least ``EKF2_MIN_RNG``.
+    ``EKF2_OF_GATE``; the mount's offset (``EKF2_OF_POS_X/Y/Z``) adds the rotation's
+    velocity at the camera. The range along the camera axis is the rangefinder's height over
+    the cosine of the tilt, at least ``EKF2_MIN_RNG``.
 
     Aiding starts with the first good sample; with no other horizontal aid (GPS) the
     horizontal velocity is reset to the flow's and the position to zero on the ground (the
@@ -606,6 +611,7 @@ class OpticalFlowFusion:
         self.max_rate_radps = 8.0
         self.min_range_m = 0.1
         self.no_aid_timeout_us = 5_000_000
+        self.position_body_m = np.zeros(3)
         self.reset()
 
     def configure(self, params: Parameters) -> None:
@@ -620,6 +626,7 @@ class OpticalFlowFusion:
         self.max_rate_radps = params["SENS_FLOW_MAXR"]
         self.min_range_m = params["EKF2_MIN_RNG"]
         self.no_aid_timeout_us = int(params["EKF2_NOAID_TOUT"])
+        self.position_body_m = np.array([params[f"EKF2_OF_POS_{a}"] for a in "XYZ"], dtype=float)
 
     def reset(self) -> None:
         self.active = False
@@ -694,7 +701,8 @@ class OpticalFlowFusion:
             return False
         age_s = (time_us - reading.time_us) * 1e-6 + self.delay_s
         age_s += 0.5 * (self.predict_period_s + dt_s)
-        if not position.fuse_flow(los, range_m, r, noise**2, age_s, self.gate_sigma):
+        lever = np.cross(delta_angle / dt_s, self.position_body_m)  # the mount's own motion
+        if not position.fuse_flow(los, range_m, r, noise**2, age_s, self.gate_sigma, lever):
             return False
         self.last_fuse_us = time_us
         self._last_known_ne = position.position_ned_m[:2].copy()

@@ -168,6 +168,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("EKF2_OF_N_MIN", 0.15, 0.05, _INF, "rad/s", "Optical flow noise at the best quality"),
     _p("EKF2_OF_N_MAX", 0.5, 0.05, _INF, "rad/s", "Optical flow noise at the worst quality"),
     _p("EKF2_OF_GATE", 3.0, 1.0, _INF, "SD", "Gate size for optical flow fusion"),
+    _p("EKF2_OF_POS_X", 0.0, -_INF, _INF, "m", "Optical flow focal point, body x (forward)"),
+    _p("EKF2_OF_POS_Y", 0.0, -_INF, _INF, "m", "Optical flow focal point, body y (right)"),
+    _p("EKF2_OF_POS_Z", 0.0, -_INF, _INF, "m", "Optical flow focal point, body z (down)"),
     # src/modules/sensors/sensor_params_flow.c: HIL_OPTICAL_FLOW reports no limit of its own
     _p("SENS_FLOW_MAXR", 8.0, 1.0, _INF, "rad/s", "Maximum flow rate the sensor measures"),
     # src/modules/commander/commander_params.yaml
