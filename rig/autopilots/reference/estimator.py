@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -571,6 +572,21 @@ class DistanceToGround:
         return self.height_m if self.valid(time_us) else None
 
 
+@dataclass(frozen=True)
+class FlowVelocity:
+    """One flow sample as EKF2 reports it (``estimator_optical_flow_vel``): the velocity it
+    gives and its parts over the window, in EKF2's sign (positive for a right-handed rotation
+    of the scene; the gyro's the negative of the body's rotation)."""
+
+    time_us: int
+    velocity_body_mps: NDArray[np.float64]
+    velocity_ne_mps: NDArray[np.float64]
+    flow_rad: NDArray[np.float64]
+    compensated_rad: NDArray[np.float64]
+    gyro_rad: NDArray[np.float64]
+    dt_s: float
+
+
 class OpticalFlowFusion:
     """Optical-flow aiding of the :class:`PositionEstimator`, as PX4 runs it for a flow chip
     without a gyro (a PMW3901): ``VehicleOpticalFlow`` integrates the autopilot's own gyro over
@@ -631,9 +647,8 @@ class OpticalFlowFusion:
     def reset(self) -> None:
         self.active = False
         self.last_fuse_us: int | None = None
-        #: The last line-of-sight rates (rad/s, EKF2's sign) and the velocity they give.
-        self.los_rate_radps = np.zeros(2)
-        self.velocity_body_mps = np.zeros(2)
+        #: The last sample used, as EKF2 reports it; None before one.
+        self.sample: FlowVelocity | None = None
         #: (time µs, bias-corrected body rates, interval s) of the recent IMU frames.
         self._gyro: deque[tuple[int, NDArray[np.float64], float]] = deque()
         self._last_known_ne = np.zeros(2)
@@ -693,15 +708,19 @@ class OpticalFlowFusion:
         if height_m is None and in_air:
             return False
         range_m = max(height_m if height_m is not None else 0.0, self.min_range_m) / r[2, 2]
-        self.los_rate_radps = los
-        self.velocity_body_mps = np.array([-los[1], los[0]]) * range_m
+        lever = np.cross(delta_angle / dt_s, self.position_body_m)  # the mount's own motion
+        velocity_body = np.array([-los[1], los[0]]) * range_m - lever[:2]
+        self.sample = FlowVelocity(
+            reading.time_us, velocity_body, (r @ np.array([*velocity_body, 0.0]))[:2],
+            -flow, los * dt_s, -delta_angle, dt_s,
+        )  # fmt: skip
         noise = self.noise_radps(reading.quality)
         if not self.active:
-            self._start(position, r, range_m, noise, in_air, other_aid, time_us)
+            self._start(position, self.sample.velocity_ne_mps, range_m, noise, in_air,
+                        other_aid, time_us)  # fmt: skip
             return False
         age_s = (time_us - reading.time_us) * 1e-6 + self.delay_s
         age_s += 0.5 * (self.predict_period_s + dt_s)
-        lever = np.cross(delta_angle / dt_s, self.position_body_m)  # the mount's own motion
         if not position.fuse_flow(los, range_m, r, noise**2, age_s, self.gate_sigma, lever):
             return False
         self.last_fuse_us = time_us
@@ -711,7 +730,7 @@ class OpticalFlowFusion:
     def _start(
         self,
         position: PositionEstimator,
-        r: NDArray[np.float64],
+        velocity_ne: NDArray[np.float64],
         range_m: float,
         noise_radps: float,
         in_air: bool,
@@ -721,8 +740,6 @@ class OpticalFlowFusion:
         """EKF2's start of flow fusion: with no other aid, velocity to the flow's, position to
         zero on the ground or the last known in the air."""
         if not other_aid:
-            body = np.array([*self.velocity_body_mps, 0.0])
-            velocity_ne = (r @ body)[:2]
             start_ne = self._last_known_ne if in_air else np.zeros(2)
             position.reset_horizontal(start_ne, velocity_ne, self.RESET_POSITION_VAR_M2,
                                       (noise_radps * range_m) ** 2)  # fmt: skip

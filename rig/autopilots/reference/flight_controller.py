@@ -35,6 +35,7 @@ from rig.autopilots.reference.control import (
 from rig.autopilots.reference.estimator import (
     AttitudeEstimator,
     DistanceToGround,
+    FlowVelocity,
     GyroRestCalibration,
     OpticalFlowFusion,
     PositionEstimator,
@@ -461,8 +462,11 @@ class FlightController:
         if sensors.flow is not None:
             gps_aid = self.position.origin is not None and self._gps_good
             height = self.ground.height(time_us)
+            previous = self.flow.sample
             self.flow.update(sensors.flow, self.position, self.attitude.q, height,
                              not self.landed, gps_aid, time_us)  # fmt: skip
+            if self.flow.sample is not previous and self.log is not None:
+                self._log_flow(self.log, self.flow.sample, time_us)
         gps = sensors.gps
         gps_ctrl = int(self.params["EKF2_GPS_CTRL"])
         if not gps_ctrl & 0b101:  # neither its position nor its velocity is used
@@ -772,6 +776,18 @@ class FlightController:
             accelerometer_m_s2=interval.accel_mps2,
             accelerometer_integral_dt=interval.integral_dt_us, accelerometer_clipping=0,
             gyro_clipping=0,
+        )  # fmt: skip
+
+    @staticmethod
+    def _log_flow(log: ULogWriter, sample: FlowVelocity | None, time_us: int) -> None:
+        """``estimator_optical_flow_vel`` for a flow sample used, as EKF2 publishes it."""
+        assert sample is not None, "a new sample replaced the last"
+        log.write(
+            "estimator_optical_flow_vel", time_us, timestamp_sample=sample.time_us,
+            vel_body=sample.velocity_body_mps, vel_ne=sample.velocity_ne_mps,
+            flow_uncompensated_integral=sample.flow_rad,
+            flow_compensated_integral=sample.compensated_rad,
+            gyro_rate=sample.gyro_rad / sample.dt_s, gyro_rate_integral=sample.gyro_rad,
         )  # fmt: skip
 
     def _write_log(self, time_us: int) -> None:

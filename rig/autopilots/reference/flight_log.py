@@ -55,6 +55,12 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
         ("uint8_t", "nav_state_user_intention"), ("bool", "failsafe"),
         ("bool", "pre_flight_checks_pass"),
     ],
+    # PX4 msg/VehicleOpticalFlowVel.msg, as EKF2 publishes estimator_optical_flow_vel
+    "estimator_optical_flow_vel": [
+        *_SAMPLED, ("float[2]", "vel_body"), ("float[2]", "vel_ne"),
+        ("float[2]", "flow_uncompensated_integral"), ("float[2]", "flow_compensated_integral"),
+        ("float[3]", "gyro_rate"), ("float[3]", "gyro_rate_integral"),
+    ],
     "vehicle_land_detected": [("bool", "landed"), ("bool", "maybe_landed"),
                               ("bool", "ground_contact")],
     "estimator_groundtruth_error": [

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+import pyulog
 
 from quad_model import dynamics as dyn
 from quad_model import load_vehicle
@@ -17,6 +18,7 @@ from quad_model.model import VehicleTruth
 from quad_model.sensors import OpticalFlowModel
 from rig.autopilots.reference.estimator import OpticalFlowFusion, PositionEstimator
 from rig.autopilots.reference.flight_controller import FlightController
+from rig.autopilots.reference.flight_log import open_flight_log
 from rig.autopilots.reference.navigator import MissionItem, NavState
 from rig.autopilots.reference.params import Parameters
 from rig.autopilots.reference.process import flow_reading
@@ -192,7 +194,8 @@ def test_signs_against_the_camera_model():
         reading = readings[1]  # the first window's first frame has no motion yet
         rate = np.array(reading.pixel_flow_rad) / 0.02
         assert rate == pytest.approx((-vel[1] / 2.0, vel[0] / 2.0), abs=1e-9)
-        assert flight.flow.velocity_body_mps == pytest.approx(vel[:2], abs=1e-9)
+        assert flight.flow.sample is not None
+        assert flight.flow.sample.velocity_body_mps == pytest.approx(vel[:2], abs=1e-9)
 
 
 def test_quality_zero_in_the_air_is_not_used_and_the_aiding_times_out():
@@ -237,7 +240,8 @@ def test_on_the_ground_a_blind_sample_means_standing_still():
             position.predict(np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2]), 1e-3)
         assert flow.update(dataclasses.replace(blind, time_us=t), position, q, None, False,
                            False, t)  # fmt: skip
-        assert flow.los_rate_radps == pytest.approx((0.0, 0.0))
+        assert flow.sample is not None
+        assert flow.sample.compensated_rad == pytest.approx((0.0, 0.0))
     assert np.abs(position.velocity_ned_mps[:2]).max() < 0.005
 
 
@@ -291,7 +295,8 @@ def test_tilt_lengthens_the_range_along_the_camera_axis():
         position.predict(np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2]), 1e-3)
     reading = FlowReading(20_000, (-1.0 / r_range * 0.02, 0.0), 20_000, 200)
     flow.update(reading, position, q, 2.0, True, False, 20_000)
-    assert flow.velocity_body_mps == pytest.approx((0.0, 1.0), abs=1e-9)
+    assert flow.sample is not None
+    assert flow.sample.velocity_body_mps == pytest.approx((0.0, 1.0), abs=1e-9)
 
 
 def _frame(k, flow_quality, rng):
@@ -319,11 +324,13 @@ def _fly_still(fc, first, seconds, flow_quality):
     return first + round(seconds / 0.004)
 
 
-def test_without_gps_flow_gives_a_local_position_to_arm_and_take_off_but_no_mission():
+def test_without_gps_flow_gives_a_local_position_to_arm_and_take_off_but_no_mission(tmp_path):
     """No HIL_GPS at all: the flow (and the rangefinder's height) make the local position
     valid, so it arms and takes off in the local frame; what needs latitude and longitude
-    refuses in one line."""
-    fc = FlightController(Parameters({"ATT_MAG_DECL_A": 0}))
+    refuses in one line. Each flow sample used is logged as EKF2 logs it."""
+    params = Parameters({"ATT_MAG_DECL_A": 0})
+    log = open_flight_log(tmp_path / "autopilot.ulg", params.as_dict())
+    fc = FlightController(params, log)
     k = _fly_still(fc, 1, 3.0, 150)
     assert fc.flow.active
     assert fc.position_valid()
@@ -344,6 +351,10 @@ def test_without_gps_flow_gives_a_local_position_to_arm_and_take_off_but_no_miss
     assert refused.reason == "Switching to mission denied: no global position (GPS)"
     _fly_still(fc, k, 0.1, 150)
     assert fc.nav_state == NavState.AUTO_TAKEOFF
+    log.close()
+    flow = pyulog.ULog(str(tmp_path / "autopilot.ulg")).get_dataset("estimator_optical_flow_vel")
+    assert len(flow.data["timestamp"]) == round(3.1 / 0.02)  # every window
+    assert np.abs(flow.data["vel_body[0]"]).max() < 0.01  # at rest
 
 
 def test_flow_lost_in_the_air_for_noaid_tout_triggers_the_descend_failsafe():
