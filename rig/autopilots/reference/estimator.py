@@ -418,15 +418,14 @@ class PositionEstimator:
         for a right-handed rotation of the scene, gyro already removed) seen over a window
         whose middle was ``age_s`` ago, along a camera axis ``range_m`` from the ground.
 
-        EKF2's model: the rates are the camera's body velocity over the range, (v_y,
-        -v_x)/r, the camera's being the vehicle's plus ``lever_velocity_body`` (ω × its
-        mount's offset). The
-        innovations and their variances (``variance`` (rad/s)² plus the velocity's) are
-        taken in those rates and gated as EKF2 gates them, both axes rejected if either
-        fails. With the attitude given, the model is linear in the NED velocity; the
-        rates become a horizontal velocity (the vertical from the estimate), fused per axis
-        with the noise carried through: exact in level flight, where the axes stay
-        uncorrelated as this filter keeps them. Returns whether it was fused.
+        EKF2's model: the rates are the camera's body velocity over the range, (v_y, -v_x)/r,
+        the camera's velocity being the vehicle's plus ``lever_velocity_body`` (ω × its
+        mount's offset). The innovations and their variances (``variance`` (rad/s)² plus the
+        velocity's) are taken in those rates and gated as EKF2 gates them, both axes
+        rejected if either fails. With the attitude given, the model is linear in the NED
+        velocity; the rates become a horizontal velocity (the vertical from the estimate),
+        fused per axis with the noise carried through: exact in level flight, where the axes
+        stay uncorrelated as this filter keeps them. Returns whether it was fused.
         """
         then = self._estimate_ago(age_s)
         velocity_then = self.x[:, 1] if then is None else then[1]
