@@ -465,8 +465,9 @@ class FlightController:
             previous = self.flow.sample
             self.flow.update(sensors.flow, self.position, self.attitude.q, height,
                              not self.landed, gps_aid, time_us)  # fmt: skip
-            if self.flow.sample is not previous and self.log is not None:
-                self._log_flow(self.log, self.flow.sample, time_us)
+            sample = self.flow.sample
+            if sample is not None and sample is not previous and self.log is not None:
+                self._log_flow(self.log, sample, time_us)
         gps = sensors.gps
         gps_ctrl = int(self.params["EKF2_GPS_CTRL"])
         if not gps_ctrl & 0b101:  # neither its position nor its velocity is used
@@ -779,9 +780,8 @@ class FlightController:
         )  # fmt: skip
 
     @staticmethod
-    def _log_flow(log: ULogWriter, sample: FlowVelocity | None, time_us: int) -> None:
+    def _log_flow(log: ULogWriter, sample: FlowVelocity, time_us: int) -> None:
         """``estimator_optical_flow_vel`` for a flow sample used, as EKF2 publishes it."""
-        assert sample is not None, "a new sample replaced the last"
         log.write(
             "estimator_optical_flow_vel", time_us, timestamp_sample=sample.time_us,
             vel_body=sample.velocity_body_mps, vel_ne=sample.velocity_ne_mps,
