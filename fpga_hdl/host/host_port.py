@@ -35,6 +35,10 @@ FAULT_MUTE_BIT = 8
 FAULT_OWN_SHIFT = FAULT_MUTE_BIT + 1
 
 
+#: A chip's fault inputs as the rig gives them: ``(mute, flip)`` or ``(mute, flip, own)``.
+FaultInputs = tuple[bool, int] | tuple[bool, int, int]
+
+
 def fault_word(mute: bool, flip: int, own: int = 0) -> int:
     """A chip's fault word: ``own`` is the mask of its own faults, bit 0 the first named."""
     return own << FAULT_OWN_SHIFT | int(mute) << FAULT_MUTE_BIT | flip
@@ -152,7 +156,7 @@ class HostPortMap:
         samples: Mapping[str, Mapping[str, int]],
         *,
         now_us: int | None = None,
-        faults: Mapping[str, tuple[bool, int] | tuple[bool, int, int]] | None = None,
+        faults: Mapping[str, FaultInputs] | None = None,
     ) -> list[tuple[int, int]]:
         """The (address, data) writes that stage one frame: sample fields, the time
         (wrapped to 32 bits) and each chip's fault word from ``(mute, flip)`` or
