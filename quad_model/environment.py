@@ -12,7 +12,7 @@ from numba import njit
 from numpy.typing import NDArray
 from pydantic import Field
 
-from hil_config import FieldError, Number, Vector3, table
+from hil_config import FieldError, NonNegative, Number, UnitInterval, Vector3, table
 from quad_model.frames import GAUSS_PER_NANOTESLA, STANDARD_GRAVITY_MPS2
 
 # ISA troposphere (ISO 2533:1975 / ICAO Doc 7488): sea-level values and lapse rate.
@@ -146,16 +146,33 @@ class Wind:
 
 
 @table
+class Surface:
+    """What a downward camera sees of the ground: how textured it is and how lit.
+
+    An optical-flow camera tracks features of the ground's image; a featureless floor, snow
+    or still water gives it none, and in dim light its exposure runs out
+    (:class:`~quad_model.vehicle.OpticalFlowParams`).
+    """
+
+    #: Visible texture, 0 (featureless) to 1 (gravel, a printed mat, grass).
+    texture: UnitInterval = 0.8
+    #: Light on the ground: about 50 lux in a dim room, 500 in an office, 10,000 and more
+    #: outdoors by day.
+    illuminance_lux: NonNegative = 10_000.0
+
+
+@table
 class Environment:
     """Flying site: home (the NED origin, on the ground), magnetic field, wind, weather.
 
-    The ground is the plane through home (NED z = 0). ``temperature_offset_k`` shifts the ISA
-    temperature (a hot or cold day) for the sensors.
+    The ground is the plane through home (NED z = 0), its look the ``surface``.
+    ``temperature_offset_k`` shifts the ISA temperature (a hot or cold day) for the sensors.
     """
 
     home: GeoPoint = PX4_DEFAULT_HOME
     magnetic_field: MagneticField = DEFAULT_MAGNETIC_FIELD
     wind: Wind = Wind()
+    surface: Surface = Surface()
     temperature_offset_k: Number = 0.0
 
     def __post_init__(self) -> None:

@@ -22,10 +22,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quad_model import _sensor_kernels as _kernels
-from quad_model.environment import Environment
-from quad_model.frames import body_to_ned, ned_to_geodetic
+from quad_model.environment import Environment, Surface
+from quad_model.frames import body_to_ned, ned_to_body, ned_to_geodetic
 from quad_model.model import VehicleTruth
-from quad_model.vehicle import LEVEL_TABLES, RangefinderParams, Vehicle
+from quad_model.vehicle import LEVEL_TABLES, OpticalFlowParams, RangefinderParams, Vehicle
 
 DEFAULT_IMU_RATE_HZ = 1000.0
 DEFAULT_MAG_RATE_HZ = 100.0
@@ -81,6 +81,21 @@ class RangeSample:
     time_us: int
     #: Measured distance along the beam; None when nothing returns (out of range, tilted).
     distance_m: float | None
+
+
+@dataclass(frozen=True)
+class FlowSample:
+    """One optical-flow camera frame: how far the ground's image moved, how well it was seen."""
+
+    time_us: int
+    #: The image's motion over the frame about body x and y (rad), in PX4's sign convention:
+    #: a right-handed rotation of the vehicle about an axis reads positive, a motion along
+    #: +y reads negative about x, along +x positive about y.
+    flow_xy_rad: tuple[float, float]
+    #: Ground features tracked, 0..255; with none (0) the motion reads zero.
+    squal: int
+    #: How long the frame was exposed (s).
+    exposure_s: float
 
 
 def _check_rate(rate_hz: float, name: str) -> float:
@@ -336,6 +351,92 @@ class RangefinderModel:
         return RangeSample(truth.time_us, distance)
 
 
+class OpticalFlowModel:
+    """A downward optical-flow camera over the flat ground (NED down = 0).
+
+    Called every rig frame, it integrates the ground's image motion as seen along the
+    camera axis: the vehicle's body rate (the whole image turns with it) less the camera's
+    velocity over the range r to the ground along that axis (about x: rate_x - v_y/r, about
+    y: rate_y + v_x/r, body axes, the mount's lever arm included), the model
+    PX4's EKF2 predicts flow with. Each camera frame (``frame_rate_hz``) it returns the
+    frame's motion with white noise; beyond ``max_rate_radps`` the motion saturates there.
+
+    Quality (SQUAL) is ``squal_max`` scaled by the surface's texture, by the light below
+    ``full_exposure_lux`` and by motion blur (pixels smeared over the exposure, which
+    lengthens as the light falls, up to one frame); the noise grows as texture and light
+    fall. Out of focus (nearer than ``min_range_m``) or tilted past ``max_tilt_deg`` the
+    camera sees no features: SQUAL 0 and no motion. Nothing is quantized here: the chip
+    counts whole counts (the rig converts). Two normal draws per frame, whatever is seen.
+    """
+
+    def __init__(
+        self, params: OpticalFlowParams, surface: Surface, rng: np.random.Generator
+    ) -> None:
+        self._params = params
+        self._position_frd = np.array(params.position_frd_m)
+        self._min_cos_tilt = math.cos(math.radians(params.max_tilt_deg))
+        frame_s = 1.0 / params.frame_rate_hz
+        light = min(surface.illuminance_lux / params.full_exposure_lux, 1.0)
+        #: Auto-exposure: inversely with the light, never longer than a frame.
+        self.exposure_s = frame_s if light < 1.0 else frame_s * params.full_exposure_lux / max(
+            surface.illuminance_lux, 1e-9)  # fmt: skip
+        self._squal_scale = params.squal_max * surface.texture * light
+        seen = max(surface.texture * light, 1e-4)
+        self._noise_std_rad = params.noise_std_rad / math.sqrt(seen)
+        self._due = _Due(params.frame_rate_hz)
+        self._normals = NormalBlocks(rng, block_size=256)
+        self._motion_rad = np.zeros(2)
+        self._peak_rate_radps = 0.0
+        self._blind = False
+        self._last_us: int | None = None
+        self._frame_start_us = 0
+
+    def image_rate(self, truth: VehicleTruth) -> NDArray[np.float64] | None:
+        """The ground image's angular rate about body x, y (rad/s); None when unseen."""
+        q = truth.attitude_quat
+        cos_tilt = float(body_to_ned(q, np.array((0.0, 0.0, 1.0)))[2])
+        if cos_tilt < self._min_cos_tilt:
+            return None
+        mount_ned = body_to_ned(q, self._position_frd)
+        range_m = -float(truth.position_ned_m[2] + mount_ned[2]) / cos_tilt
+        if range_m < self._params.min_range_m:
+            return None
+        rate = truth.angular_rate_frd_radps
+        velocity_ned = truth.velocity_ned_mps + body_to_ned(q, np.cross(rate, self._position_frd))
+        v = ned_to_body(q, velocity_ned)
+        return np.array((rate[0] - v[1] / range_m, rate[1] + v[0] / range_m))
+
+    def sample(self, truth: VehicleTruth) -> FlowSample | None:
+        """Integrate up to ``truth``'s time; at a frame's end, the frame."""
+        now = truth.time_us
+        dt = 0.0 if self._last_us is None else (now - self._last_us) / 1e6
+        self._last_us = now
+        image_rate = self.image_rate(truth)
+        if image_rate is None:
+            self._blind = True
+        else:
+            self._motion_rad += image_rate * dt
+            self._peak_rate_radps = max(self._peak_rate_radps, float(np.hypot(*image_rate)))
+        if not self._due(now):
+            return None
+        noise = self._normals.take(2)
+        motion, peak, blind = self._motion_rad, self._peak_rate_radps, self._blind
+        frame_start_us, self._frame_start_us = self._frame_start_us, now
+        self._motion_rad, self._peak_rate_radps, self._blind = np.zeros(2), 0.0, False
+        params = self._params
+        blur_px = peak * self.exposure_s / params.pixel_rad
+        squal = 0 if blind else round(self._squal_scale / (1.0 + blur_px**2))
+        if squal <= 0:
+            return FlowSample(now, (0.0, 0.0), 0, self.exposure_s)
+        limit = params.max_rate_radps * (now - frame_start_us) / 1e6
+        size = float(np.hypot(*motion))
+        if size > limit:  # the chip's search window: faster motion reads as its limit
+            motion = motion * (limit / size)
+        measured = motion + self._noise_std_rad * noise
+        return FlowSample(now, (float(measured[0]), float(measured[1])), min(squal, 255),
+                          self.exposure_s)  # fmt: skip
+
+
 class GpsModel:
     """GNSS receiver: Gauss-Markov position error, velocity noise, latency, fix rate.
 
@@ -457,6 +558,7 @@ class SensorReadings:
     baro: BaroSample | None
     gps: GpsSample | None
     range: RangeSample | None = None
+    flow: FlowSample | None = None
 
 
 class SensorSuite:
@@ -465,7 +567,9 @@ class SensorSuite:
     A sensor is due when the frame time reaches its next slot on a fixed grid k/rate, so
     rates that do not divide the frame rate keep their long-run average. The rangefinder
     samples only when a ``rangefinder_rate_hz`` is given (the vehicle must carry one); its
-    generator is the fifth spawned, so the other four draw the same numbers either way.
+    generator is the fifth spawned, so the other four draw the same numbers either way. The
+    optical-flow camera, when ``optical_flow`` (the vehicle must carry one), integrates every
+    frame and is the sixth. Without ``gps`` the vehicle has no receiver.
     """
 
     def __init__(
@@ -477,12 +581,15 @@ class SensorSuite:
         mag_rate_hz: float = DEFAULT_MAG_RATE_HZ,
         baro_rate_hz: float = DEFAULT_BARO_RATE_HZ,
         rangefinder_rate_hz: float | None = None,
+        optical_flow: bool = False,
+        gps: bool = True,
     ) -> None:
-        imu_rng, mag_rng, baro_rng, gps_rng, range_rng = rng.spawn(5)
+        imu_rng, mag_rng, baro_rng, gps_rng, range_rng, flow_rng = rng.spawn(6)
         self.imu = ImuModel(vehicle, environment, imu_rng, imu_rate_hz)
         self.mag = MagModel(vehicle, environment, mag_rng)
         self.baro = BaroModel(vehicle, environment, baro_rng)
-        self.gps = GpsModel(vehicle, environment, gps_rng)
+        #: None: the vehicle flies without a receiver (its generator is spawned all the same).
+        self.gps = GpsModel(vehicle, environment, gps_rng) if gps else None
         self._imu_due = _Due(self.imu.rate_hz)
         self._mag_due = _Due(_check_rate(mag_rate_hz, "mag_rate_hz"))
         self._baro_due = _Due(_check_rate(baro_rate_hz, "baro_rate_hz"))
@@ -492,6 +599,13 @@ class SensorSuite:
                 raise SensorConfigError(f"vehicle {vehicle.name!r} has no [rangefinder] table")
             self.rangefinder = RangefinderModel(vehicle.rangefinder, range_rng)
             self._range_due = _Due(_check_rate(rangefinder_rate_hz, "rangefinder_rate_hz"))
+        self.optical_flow: OpticalFlowModel | None = None
+        if optical_flow:
+            if vehicle.optical_flow is None:
+                raise SensorConfigError(f"vehicle {vehicle.name!r} has no [optical_flow] table")
+            self.optical_flow = OpticalFlowModel(
+                vehicle.optical_flow, environment.surface, flow_rng
+            )
 
     def sample(self, truth: VehicleTruth) -> SensorReadings:
         t = truth.time_us
@@ -499,16 +613,18 @@ class SensorSuite:
             self.imu.sample(truth) if self._imu_due(t) else None,
             self.mag.sample(truth) if self._mag_due(t) else None,
             self.baro.sample(truth) if self._baro_due(t) else None,
-            self.gps.sample(truth),
+            None if self.gps is None else self.gps.sample(truth),
             None
             if self.rangefinder is None or not self._range_due(t)
             else self.rangefinder.sample(truth),
+            None if self.optical_flow is None else self.optical_flow.sample(truth),
         )
 
 
 __all__ = [
     "BaroModel",
     "BaroSample",
+    "FlowSample",
     "GpsModel",
     "GpsSample",
     "ImuModel",
@@ -516,6 +632,7 @@ __all__ = [
     "MagModel",
     "MagSample",
     "NormalBlocks",
+    "OpticalFlowModel",
     "RangeSample",
     "RangefinderModel",
     "SensorConfigError",

@@ -324,6 +324,42 @@ class RangefinderParams:
 
 
 @table
+class OpticalFlowParams:
+    """A downward optical-flow camera (a PixArt PMW3901 class chip): its optics and the
+    image quality it gets from the ground.
+
+    It looks straight down the body z axis from ``position_frd_m``. Each camera frame
+    measures how far the ground's image moved (an angle about body x and y); beyond
+    ``max_rate_radps`` it loses the ground and reports no quality, closer than
+    ``min_range_m`` the image is out of focus. The quality (SQUAL, 0..255 features) is
+    ``squal_max`` on an ideal surface in good light, and falls with the surface's texture,
+    with light below ``full_exposure_lux`` (the shutter is already at its longest) and with
+    motion blur over the exposure.
+    """
+
+    position_frd_m: Vector3
+    field_of_view_deg: Annotated[Number, Field(gt=0, lt=180)]
+    #: Pixels across the field of view (square array): an image pixel's angle sets the blur.
+    pixels: PositiveInteger
+    frame_rate_hz: Positive
+    max_rate_radps: Positive
+    min_range_m: Positive
+    #: Ground features counted on an ideal surface (texture 1) in good light.
+    squal_max: Annotated[Number, Field(gt=0, le=255)]
+    #: Below this illuminance the exposure is at its longest (one frame) and quality falls.
+    full_exposure_lux: Positive
+    #: One-sigma error of one frame's measured image motion, on a fully textured surface.
+    noise_std_rad: NonNegative
+    #: Tilted more than this from straight down, the camera no longer sees the ground.
+    max_tilt_deg: Annotated[Number, Field(gt=0, lt=90)]
+
+    @property
+    def pixel_rad(self) -> float:
+        """The angle one pixel spans."""
+        return math.radians(self.field_of_view_deg) / self.pixels
+
+
+@table
 class Vehicle:
     """Everything the model needs to know about one vehicle."""
 
@@ -338,6 +374,8 @@ class Vehicle:
     gps: GpsParams
     #: None: the vehicle carries no rangefinder.
     rangefinder: RangefinderParams | None = None
+    #: None: the vehicle carries no optical-flow camera.
+    optical_flow: OpticalFlowParams | None = None
 
     @property
     def hover_rotor_speed_radps(self) -> float:

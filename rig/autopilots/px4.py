@@ -283,6 +283,28 @@ def airframe_parameters(vehicle: Vehicle, hover_throttle: float) -> dict[str, fl
     return params
 
 
+def sensor_parameters(vehicle: Vehicle, *, gps: bool, optical_flow: bool) -> dict[str, float]:
+    """What a vehicle's configuration says of the sensors it flies with, beyond PX4's
+    defaults (a receiver, no flow): without GPS, none expected (``SYS_HAS_GPS``) nor fused
+    (``EKF2_GPS_CTRL``); with an optical-flow camera, flow fused (``EKF2_OF_CTRL``), its
+    mount (``EKF2_OF_POS_X/Y/Z``, body FRD from the model's reference point, where the
+    IMU is) and no rotation (``SENS_FLOW_ROT``: the rig's chip is mounted as PX4's default
+    expects); without GPS the height reference is the barometer (``EKF2_HGT_REF`` 0), and a
+    rangefinder aids it near the ground (PX4's default ``EKF2_RNG_CTRL``). Not the
+    rangefinder as reference: EKF2 then estimates no terrain, and from v1.17 on it starts
+    flow fusion only with a terrain estimate or another horizontal aid, so flow never starts.
+    """
+    params: dict[str, float] = {}
+    if not gps:
+        params |= {"SYS_HAS_GPS": 0, "EKF2_GPS_CTRL": 0, "EKF2_HGT_REF": 0}
+    if optical_flow:
+        assert vehicle.optical_flow is not None, "the scenario's check: the vehicle has a camera"
+        x, y, z = vehicle.optical_flow.position_frd_m
+        params |= {"EKF2_OF_CTRL": 1, "SENS_FLOW_ROT": 0, "EKF2_OF_POS_X": x,
+                   "EKF2_OF_POS_Y": y, "EKF2_OF_POS_Z": z}  # fmt: skip
+    return params
+
+
 #: Always set: no HITL (lockstep SITL), PX4's own simulated sensors off (the rig's chips
 #: are the sensors), and PX4's ULog from boot to shutdown so it covers the whole run.
 RIG_PARAMETERS: dict[str, float] = {
@@ -295,17 +317,19 @@ RIG_PARAMETERS: dict[str, float] = {
 
 
 def px4_parameters(vehicle: Vehicle, hover_throttle: float, imu_hz: int,
-                   explicit: tuple[str, ...],
-                   build: Px4Build | None) -> tuple[dict[str, float], tuple[str, ...]]:  # fmt: skip
-    """Everything the rig sets in PX4: its own needs, lockstep, the vehicle's airframe, and
-    then the user's ``--param NAME=VALUE`` texts, which win name by name.
+                   explicit: tuple[str, ...], build: Px4Build | None,
+                   sensors: Mapping[str, float] | None = None,
+                   ) -> tuple[dict[str, float], tuple[str, ...]]:  # fmt: skip
+    """Everything the rig sets in PX4: its own needs, lockstep, the vehicle's airframe, the
+    sensors it flies with (:func:`sensor_parameters`), and then the user's
+    ``--param NAME=VALUE`` texts, which win name by name.
 
     With the build known, the rig's own names the build lacks are left out and returned,
     so PX4 never prints a "not found" for them; a ``--param`` the build lacks fails in one
     line.
     """
     airframe = airframe_parameters(vehicle, hover_throttle)
-    own = RIG_PARAMETERS | lockstep_parameters(imu_hz) | airframe
+    own = RIG_PARAMETERS | lockstep_parameters(imu_hz) | airframe | dict(sensors or {})
     users = parse_assignments(explicit)
     if build is None:
         return own | users, ()

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Protocol
 
@@ -147,6 +147,7 @@ def autopilot_run(
     hover_throttle: float,
     imu_hz: int,
     user_parameters: tuple[str, ...],
+    sensor_parameters: Mapping[str, float],
     px4_dir: Path | None,
     run_dir: Path,
     ports: Ports,
@@ -158,18 +159,19 @@ def autopilot_run(
     if kind is Autopilot.PX4:
         build = find_px4(px4_dir)
         params, lacking = px4_parameters(vehicle, hover_throttle, imu_hz, user_parameters,
-                                         build)  # fmt: skip
+                                         build, sensor_parameters)  # fmt: skip
         if lacking:
             assert build is not None
             event(f"not set in PX4 {build.tag}, which has no such parameter: "
                   f"{', '.join(lacking)}", "warn")  # fmt: skip
         return Px4Run(Px4Sitl(build, run_dir, ports.instance, params), ports, imu_hz, event,
                       on_waiting)  # fmt: skip
-    # The airframe's parameters PX4 gets that the reference autopilot has too (rotor
-    # geometry, hover thrust), then the user's, which win name by name.
-    airframe = airframe_parameters(vehicle, hover_throttle)
+    # The airframe's and sensors' parameters PX4 gets that the reference autopilot has too
+    # (rotor geometry, hover thrust, the aiding sources), then the user's, which win name
+    # by name.
+    own = airframe_parameters(vehicle, hover_throttle) | dict(sensor_parameters)
     parameters = (
-        *(f"{name}={value!r}" for name, value in airframe.items() if is_parameter(name)),
+        *(f"{name}={value!r}" for name, value in own.items() if is_parameter(name)),
         *user_parameters,
     )
     return ReferenceAutopilotRun(run_dir, ports, parameters, argv, event)

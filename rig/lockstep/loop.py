@@ -56,7 +56,7 @@ from quad_model.model import Mount, VehicleTruth
 from quad_model.sensors import SensorReadings
 from quad_model.vehicle import VehicleFileError
 from rig.autopilots import Autopilot
-from rig.autopilots.px4 import check_imu_rate, find_px4
+from rig.autopilots.px4 import check_imu_rate, find_px4, sensor_parameters
 from rig.chips.layer import (
     BypassSensorLayer,
     ChipFrame,
@@ -287,6 +287,9 @@ class _Loop:
         if scenario.rangefinder and vehicle.rangefinder is None:
             raise ScenarioError(f"{scenario.source}: key 'rangefinder': vehicle "
                                 f"{vehicle.name!r} has no [rangefinder] table")  # fmt: skip
+        if scenario.optical_flow and vehicle.optical_flow is None:
+            raise ScenarioError(f"{scenario.source}: key 'optical_flow': vehicle "
+                                f"{vehicle.name!r} has no [optical_flow] table")  # fmt: skip
         #: One PWM output, capture channel and HIL_ACTUATOR_CONTROLS entry per rotor.
         self.motors = motors = vehicle.propulsion.rotor_count
         check_motors(scenario.faults, motors, scenario.source, vehicle.name)
@@ -330,6 +333,7 @@ class _Loop:
         self.sensors = SensorSuite(
             vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
             self.rates.baro_hz, RANGEFINDER_RATE_HZ if scenario.rangefinder else None,
+            optical_flow=scenario.optical_flow, gps=scenario.gps,
         )  # fmt: skip
         self.faults = FaultInjector(scenario.faults, fault_rng, self._fault_event, motors)
         self.layer = _make_sensor_layer(self.sensor_layer_name, self.rates, motors)
@@ -345,6 +349,11 @@ class _Loop:
             hover_throttle=self.model.hover_throttle(),
             imu_hz=self.rates.imu_hz,
             user_parameters=options.autopilot_params,
+            sensor_parameters=sensor_parameters(
+                vehicle,
+                gps=scenario.gps,
+                optical_flow=scenario.optical_flow,
+            ),
             px4_dir=options.px4_dir,
             run_dir=run_dir,
             ports=self.ports,

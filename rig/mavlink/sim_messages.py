@@ -208,6 +208,33 @@ def distance_sensor(
     )  # fmt: skip
 
 
+def hil_optical_flow(
+    mav: mavlink.MAVLink,
+    time_us: int,
+    *,
+    pixel_flow_rad: tuple[float, float],
+    integration_timespan_us: int,
+    quality: int,
+) -> mavlink.MAVLink_hil_optical_flow_message:
+    """HIL_OPTICAL_FLOW of a flow sensor without a gyro or a range (a PMW3901), as PX4's
+    driver publishes ``sensor_optical_flow``.
+
+    PX4's ``simulator_mavlink`` (v1.14 to v1.17 alike) copies ``integrated_x/y`` into
+    ``pixel_flow``, ``integration_time_us`` and ``quality`` as they are, stamps the
+    arrival as the sample time, takes the integrated gyro only when all three are finite
+    (NaN here: PX4 then integrates its own gyro over the window, as it does for the real
+    chip) and the distance only when it is not negative (-1 here: the height comes from
+    the rangefinder's DISTANCE_SENSOR).
+    """
+    if not 0 <= quality <= 255:
+        raise ValueError(f"quality must be 0..255, not {quality}")
+    nan = math.nan
+    return mav.hil_optical_flow_encode(
+        time_us, 0, integration_timespan_us, float(pixel_flow_rad[0]), float(pixel_flow_rad[1]),
+        nan, nan, nan, 0, quality, 0, -1.0,
+    )  # fmt: skip
+
+
 @dataclass(frozen=True)
 class ActuatorControls:
     """One decoded HIL_ACTUATOR_CONTROLS: motor commands 0..1 in PX4's motor order

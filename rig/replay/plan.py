@@ -39,7 +39,7 @@ from rig.autopilots.px4 import (
 from rig.chips.pwm import PwmOutput
 from rig.errors import RigError
 from rig.identify.wind import WindEstimate, WindEstimateError, estimate_wind
-from rig.mavlink.ground_link import MissionItem
+from rig.mavlink.ground_link import PX4_MODES, MissionItem
 from rig.replay.options import Drive, ReplayError, ReplayOptions
 from rig.replay.parameters import (
     LEARNED,
@@ -257,10 +257,10 @@ class Replay:
                 at_s -= ARM_MODE_LEAD_S if armed_in_it else 0.0
                 hold_s = holds.get(event.time_s) if event.nav_state == NAV_STATE_MISSION else None
                 if hold_s is not None and not armed_in_it:  # a hold is in the air
-                    commands.append(SetMode(at_s=at_s, nav_state=NAV_STATE_LOITER))
+                    commands.append(SetMode(at_s=at_s, name=PX4_MODES[NAV_STATE_LOITER][2]))
                     at_s += hold_s
                 assert event.nav_state is not None  # only an arm or a disarm has no mode
-                commands.append(SetMode(at_s=at_s, nav_state=event.nav_state))
+                commands.append(SetMode(at_s=at_s, name=PX4_MODES[event.nav_state][2]))
         commands += [
             SetParam(at_s=time_s - origin, name="MPC_YAWRAUTO_MAX", value=limit)
             for time_s, limit in pilot.yaw_rate_limits

@@ -259,9 +259,50 @@ class SetParam(_Timed):
     value: Number
 
 
+@table(kw_only=True)
+class SetMode(_Timed):
+    """Switch PX4 to the flight mode of this QGroundControl ``name`` (``"Position"``,
+    ``"Altitude"``, ``"Hold"``, ...: :data:`~rig.mavlink.ground_link.PX4_MODES`), as a ground
+    station's mode menu does. A refusal is logged and the run goes on (a PX4 replay flies
+    the log's mode switches, and the pilot's flight went on)."""
+
+    name: Text
+    action: Literal["mode"] = "mode"
+
+    def __post_init__(self) -> None:
+        if self.name.lower() not in _NAV_STATES:
+            names = ", ".join(name for _, _, name in PX4_MODES.values())
+            raise FieldError("name", self.name, f"not a PX4 mode to select ({names})")
+
+    @property
+    def nav_state(self) -> int:
+        """PX4's ``vehicle_status.nav_state`` of the mode."""
+        return _NAV_STATES[self.name.lower()]
+
+
+_NAV_STATES = {name.lower(): nav_state for nav_state, (_, _, name) in PX4_MODES.items()}
+#: A stick's deflection, -1..1.
+Stick = Annotated[Number, Field(ge=-1, le=1)]
+
+
+@table(kw_only=True)
+class Sticks(_Timed):
+    """A pilot's sticks from now on, held until the next ``sticks``: MANUAL_CONTROL every
+    20 ms as a joystick through QGroundControl sends it, PX4's convention (-1..1; the
+    throttle -1 at idle, 0 centred, which in Position and Altitude modes holds the height;
+    pitch -1 forward)."""
+
+    action: Literal["sticks"] = "sticks"
+    roll: Stick = 0.0
+    pitch: Stick = 0.0
+    yaw: Stick = 0.0
+    throttle: Stick = 0.0
+
+
 _FileCommand = (
-    Arm | Disarm | Takeoff | Land | Hold | Goto | Mission | PitchSweep | MotorTest | SetParam
-)
+    Arm | Disarm | Takeoff | Land | Hold | SetMode | Sticks | Goto | Mission | PitchSweep
+    | MotorTest | SetParam
+)  # fmt: skip
 #: A command of a scenario file: its ``action`` picks the table.
 Command = Annotated[_FileCommand, Field(discriminator="action")]
 
@@ -304,21 +345,6 @@ class Track(_Timed):
 
 
 @table(kw_only=True)
-class SetMode(_Timed):
-    """Switch PX4 to the flight mode ``nav_state`` (``vehicle_status.nav_state``), as a ground
-    station's mode menu does: set by code (a PX4 replay flies the log's mode switches). A
-    refusal is logged and the run goes on, as the pilot's flight went on."""
-
-    nav_state: int
-    action: Literal["mode"] = "mode"
-
-    def __post_init__(self) -> None:
-        if self.nav_state not in PX4_MODES:
-            modes = sorted(PX4_MODES)
-            raise FieldError("nav_state", self.nav_state, f"not a PX4 mode to select ({modes})")
-
-
-@table(kw_only=True)
 class UploadMission(_Timed):
     """Upload a mission as flown (a replay's, from the log), without starting it: set by
     code; a mode switch to Mission starts it."""
@@ -338,7 +364,7 @@ class SetHome(_Timed):
 
 #: A command that only code sets (a replay): recorded streams, mode switches, a flown
 #: mission, a home moved in flight.
-CodeCommand = Track | SetMode | UploadMission | SetHome
+CodeCommand = Track | UploadMission | SetHome
 #: What a command script walks: the file's commands and the code's.
 ScriptCommand = _FileCommand | CodeCommand
 
@@ -474,6 +500,12 @@ class Scenario:
     #: Fly the vehicle's ``[rangefinder]`` (a LIDAR-Lite v3 on I2C, read at PX4's 20 Hz
     #: driver rate) and send its readings as DISTANCE_SENSOR.
     rangefinder: Annotated[bool, Field(strict=True)] = False
+    #: Fly the vehicle's ``[optical_flow]`` (a PixArt PMW3901 on SPI, read as PX4's pmw3901
+    #: driver does) and send its reports as HIL_OPTICAL_FLOW.
+    optical_flow: Annotated[bool, Field(strict=True)] = False
+    #: False: the vehicle flies without a GNSS receiver: no HIL_GPS is sent, and PX4 is told
+    #: (``SYS_HAS_GPS`` 0, ``EKF2_GPS_CTRL`` 0).
+    gps: Annotated[bool, Field(strict=True)] = True
     #: Pulse widths (µs) for motor command 0 and 1 (PX4's PWM_*_MIN/MAXn).
     motor_pwm_range_us: tuple[Positive, Positive] = DEFAULT_MOTOR_PWM_RANGE_US
     commands: tuple[Command, ...] = ()

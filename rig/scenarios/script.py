@@ -10,11 +10,11 @@ their times and holds the last one (re-sent every 0.1 s) between them. A mode co
 disarm, set_param, a mission upload and a home do not change the mode, so the stream goes on as
 MAVSDK's does (a replay arms and disarms mid-stream).
 
-A ``manual`` track is a pilot's sticks, played as QGroundControl plays a joystick: MANUAL_CONTROL
-every 20 ms (PX4 takes the sticks as lost after COM_RC_LOSS_T, 0.5 s), the track
-interpolated linearly between its samples (a real log holds them at 5 Hz), and the ground
-station's HEARTBEAT every second. It runs beside the setpoint streams, and no mode command
-ends it: the pilot holds the sticks in every mode.
+A ``manual`` track (or a file's ``sticks``, held) is a pilot's sticks, played as
+QGroundControl plays a joystick: MANUAL_CONTROL every 20 ms (PX4 takes the sticks as lost
+after COM_RC_LOSS_T, 0.5 s), the track interpolated linearly between its samples (a real
+log holds them at 5 Hz), and the ground station's HEARTBEAT every second. It runs beside
+the setpoint streams, and no mode command ends it: the pilot holds the sticks in every mode.
 
 With ``barrier=True`` (the reference autopilot) every setpoint travels inside an
 acknowledged conversation, so it acts at a known frame; with PX4 the stream is sent
@@ -44,6 +44,7 @@ from rig.scenarios.scenario import (
     SetMode,
     SetParam,
     SetpointTrack,
+    Sticks,
     Takeoff,
     Track,
     UploadMission,
@@ -162,6 +163,12 @@ class CommandScript:
         g, name = self.ground, f"{command.action} at t={command.at_s:g} s"
         if isinstance(command, Track) and command.track.kind == "manual":
             self._sticks = _Sticks(command.track, time_us, time_us)
+            return
+        if isinstance(command, Sticks):  # held until the next: a one-sample manual track
+            held = (command.roll, command.pitch, command.yaw, command.throttle)
+            track = SetpointTrack("manual", (command.at_s,), (held,))
+            heartbeat_us = time_us if self._sticks is None else self._sticks.heartbeat_us
+            self._sticks = _Sticks(track, time_us, heartbeat_us)
             return
         if command.action not in _KEEP_STREAM:
             self._stream = None  # a mode command takes over from a running setpoint stream

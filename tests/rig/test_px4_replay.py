@@ -390,7 +390,7 @@ def test_sticks_are_sent_every_20_ms_interpolated_with_a_heartbeat_each_second()
     track = SetpointTrack("manual", (0.0, 0.2, 0.4), ((0.0, 0.0, 0.0, -1.0),
                                                       (0.5, -0.5, 0.0, 0.0),
                                                       (0.5, -0.5, 0.0, 0.0)))  # fmt: skip
-    commands = (Track(at_s=0.0, track=track), SetMode(at_s=0.1, nav_state=POSCTL))
+    commands = (Track(at_s=0.0, track=track), SetMode(at_s=0.1, name="Position"))
     script = CommandScript(commands, StickGround(), barrier=False)
     sent = []
     for time_us in range(0, 2_000_001, 4000):  # 250 Hz frames

@@ -96,8 +96,15 @@ BAD = [
     ({"environment": {"home": {"lat_deg": 95, "lon_deg": 0, "alt_amsl_m": 0}}},
      "key 'environment.home.lat_deg' = 95: expected a value <= 90"),
     ({"commands": [{"at_s": 1, "action": "flip"}]}, "key 'commands[0].action' = 'flip': "
-     "expected one of 'arm', 'disarm', 'takeoff', 'land', 'hold', 'goto', 'mission', "
-     "'pitch_sweep', 'motor_test', 'set_param'"),
+     "expected one of 'arm', 'disarm', 'takeoff', 'land', 'hold', 'mode', 'sticks', 'goto', "
+     "'mission', 'pitch_sweep', 'motor_test', 'set_param'"),
+    ({"commands": [{"at_s": 1, "action": "mode", "name": "Posctl"}]},
+     "key 'commands[0].name' = 'Posctl': not a PX4 mode to select (Manual, Altitude, Position, "
+     "Mission, Hold, Return, Acro, Offboard, Stabilized, Takeoff, Land, Follow Me, "
+     "Precision Land)"),
+    ({"commands": [{"at_s": 1, "action": "sticks", "pitch": -1.5}]},
+     "key 'commands[0].pitch' = -1.5: expected a value >= -1"),
+    ({"optical_flow": 1}, "key 'optical_flow' = 1: expected a valid boolean"),
     ({"commands": [{"at_s": 1}]}, "key 'commands[0].action' is missing"),
     ({"commands": [{"at_s": 1, "action": "takeoff"}]}, "key 'commands[0].altitude_m' is missing"),
     ({"commands": [{"at_s": 5, "action": "arm"}]},
