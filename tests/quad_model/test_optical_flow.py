@@ -55,7 +55,7 @@ def test_translation_reads_velocity_over_range_in_px4s_sign_convention(camera):
     a motion along +y reads negative about x, along +x positive about y)."""
     model = OpticalFlowModel(camera, BRIGHT, np.random.default_rng(1))
     frames = fly(model, 1.0, down_m=-2.0, vel_ned=(1.0, 0.5, 0.0))
-    assert len(frames) == 122  # a frame at t = 0, then 121 frames a second
+    assert len(frames) == 127  # a frame at t = 0, then 126 frames a second
     assert total_motion(frames) == pytest.approx((-0.25, 0.5), abs=1e-12)
     assert all(f.squal == 230 for f in frames)
 
@@ -121,8 +121,8 @@ def test_quality_falls_with_texture_light_and_blur(camera):
     assert squal(Surface(texture=0.5, illuminance_lux=10_000)) == 115
     assert squal(Surface(texture=1.0, illuminance_lux=30)) == 115  # half the full-exposure light
     assert squal(Surface(texture=0.0, illuminance_lux=10_000)) == 0
-    # In dim light the exposure is a whole frame: 2 rad/s smears 2/121/pixel_rad pixels.
-    blur = 2.0 / 121.0 / camera.pixel_rad
+    # In dim light the exposure is a whole frame: 2 rad/s smears 2/126/pixel_rad pixels.
+    blur = 2.0 / 126.0 / camera.pixel_rad
     dim = Surface(texture=1.0, illuminance_lux=60)
     assert squal(dim, rates=(2.0, 0.0, 0.0)) == round(230 / (1 + blur**2))
     # In daylight the exposure is 60/10,000 of a frame: the same rate barely blurs.
@@ -156,7 +156,7 @@ def test_the_suite_flies_the_camera_only_when_asked_and_only_on_a_vehicle_with_o
 
     plain, with_flow = run(f450), run(f450, optical_flow=True)
     assert all(r.flow is None for r in plain)
-    assert sum(r.flow is not None for r in with_flow) == 6  # at 0, 9, 17, 25, 34 and 42 ms
+    assert sum(r.flow is not None for r in with_flow) == 7  # at 0, 8, 16, 24, 32, 40 and 48 ms
     for a, b in zip(plain, with_flow, strict=True):
         assert np.array_equal(a.imu.gyro_radps, b.imu.gyro_radps)
         assert a.range == b.range
