@@ -34,6 +34,7 @@ __all__ = [
     "COUNTS_PER_RAD",
     "SAMPLE_INTERVAL_US",
     "SPI_SPEED_HZ",
+    "CameraCounts",
     "FlowReport",
     "Pmw3901Driver",
     "motion_read",
@@ -160,6 +161,31 @@ class Pmw3901Driver:
         )
         self._dt_sum_us = self._sum_x = self._sum_y = self._quality_sum = self._count = 0
         return report
+
+
+class CameraCounts:
+    """The camera's frames as the chip counts them, for the host to load.
+
+    The chip reports whole counts of image motion (PX4 reads :data:`COUNTS_PER_RAD` of them
+    to the radian) but tracks the motion finer inside, so the fraction left over from one
+    frame is carried into the next and a long motion's counts never drift from it. The
+    exposure becomes the shutter register: the longest exposure (a whole frame) at its
+    top, ``2**SHUTTER_BITS - 1``.
+    """
+
+    def __init__(self) -> None:
+        self._carry = np.zeros(2)
+
+    def sample(self, flow_xy_rad: tuple[float, float], squal: int,
+               exposure_frames: float) -> regs.Pmw3901Sample:  # fmt: skip
+        """One frame's motion (rad about body x, y), SQUAL, and exposure (in frames)."""
+        motion = self._carry + np.asarray(flow_xy_rad) * COUNTS_PER_RAD
+        counts = np.round(motion)
+        self._carry = motion - counts
+        delta_x, delta_y = (int(np.clip(c, -32767, 32767)) for c in counts)  # int16 registers
+        top = (1 << regs.SHUTTER_BITS) - 1
+        shutter = min(max(round(exposure_frames * top), 0), top)
+        return regs.Pmw3901Sample(delta_x, delta_y, min(max(squal, 0), 255), shutter)
 
 
 def _radians(counts: int) -> float:

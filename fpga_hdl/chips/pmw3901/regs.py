@@ -93,6 +93,8 @@ BURST_LENGTH = len(BURST_ORDER)
 #: ``core.Pmw3901`` defines each.
 OWN_FAULTS = ("stuck", "zero_quality", "drop_frames")
 FAULT_STUCK, FAULT_ZERO_QUALITY, FAULT_DROP_FRAMES = (1 << i for i in range(len(OWN_FAULTS)))
+#: Each own fault's bit, by name.
+FAULT_BITS = {name: 1 << i for i, name in enumerate(OWN_FAULTS)}
 
 SHUTTER_BITS = 13
 #: One camera frame as the host loads it (the host port's ``flow`` channel).
