@@ -104,7 +104,7 @@ class RigLog:
         self._home = (home_lat_deg, home_lon_deg, home_alt_m)
         self._previous_rates: np.ndarray | None = None
         self._previous_rates_us = 0
-        self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0, "lidarlite": 0}
+        self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0, "lidarlite": 0, "pmw3901": 0}
         self._rows: dict[str, Callable[..., None]] = {}
 
     def _row(self, topic: str) -> Callable[..., None]:

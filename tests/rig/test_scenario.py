@@ -114,8 +114,8 @@ BAD = [
     ({"faults": [{"kind": "motor_loss", "motor": 8, "start_s": 1}]},
      "key 'faults[0].motor' = 8: expected a value <= 7"),
     ({"faults": [{"kind": "chip_mute", "chip": "bmi088", "start_s": 1}]},
-     "key 'faults[0].chip' = 'bmi088': expected 'mpu6000', 'ms5611', 'ist8310', 'ublox' or "
-     "'lidarlite'"),
+     "key 'faults[0].chip' = 'bmi088': expected 'mpu6000', 'ms5611', 'ist8310', 'ublox', "
+     "'lidarlite' or 'pmw3901'"),
     ({"faults": [{"kind": "gps_receiver", "fault": "spoofed", "start_s": 1}]},
      "key 'faults[0].fault' = 'spoofed': expected 'loss_of_fix', 'jammed' or 'bad_checksum'"),
     ({"faults": [{"kind": "gps_loss", "start_s": 1, "end_s": 0.5}]},

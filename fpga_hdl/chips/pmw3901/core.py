@@ -193,6 +193,7 @@ class Pmw3901(wiring.Component):
                 m.d.spi += data_next.eq(0)
                 with m.If(writing):
                     self._write(m, address, bank, rx, stored, tracking, reset_seen)
+                    # The power-up reset's motion part (``_write`` does its registers).
                     with m.If((bank == 0) & (address == Reg.POWER_UP_RESET)
                               & (rx == regs.POWER_UP_RESET_VALUE)):  # fmt: skip
                         take()  # empties the accumulators
@@ -203,9 +204,11 @@ class Pmw3901(wiring.Component):
 
         # The byte SDO sends next.
         visible = latch.visible
-        image = {
+        motion = {
             Reg.MOTION: Cat(Const(0, 7), frozen_mot),
             **{r: frozen[r - Reg.DELTA_X_L] for r in regs.DELTA_REGISTERS},
+        }
+        image = {  # the last frame taken; 0 until the chip tracks
             Reg.SQUAL: Mux(own.zero_quality, 0, visible.squal),
             Reg.RAW_DATA_SUM: visible.raw_sum,
             Reg.MAXIMUM_RAW_DATA: visible.raw_max,
@@ -218,9 +221,9 @@ class Pmw3901(wiring.Component):
             Reg.PRODUCT_ID: Const(regs.PRODUCT_ID_VALUE, 8),
             Reg.REVISION_ID: Const(regs.REVISION_ID_VALUE, 8),
             Reg.INVERSE_PRODUCT_ID: Const(regs.INVERSE_PRODUCT_ID_VALUE, 8),
-            **{r: v if r in (Reg.MOTION, *regs.DELTA_REGISTERS) else Mux(tracking, v, 0)
-               for r, v in image.items()},
-        }  # fmt: skip
+            **motion,
+            **{register: Mux(tracking, value, 0) for register, value in image.items()},
+        }
         register_value = Signal(8)
         with m.If(address == Reg.BANK_SELECT):
             m.d.comb += register_value.eq(bank)
