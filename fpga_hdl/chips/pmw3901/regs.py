@@ -34,7 +34,6 @@ Not confirmed by any source read here (the value used, and where it comes from):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -169,20 +168,6 @@ class SpiTiming:
 
 SPI_TIMING = SpiTiming()
 
-
-@dataclass(frozen=True)
-class Optics:
-    """The camera as the physics needs it (module docstring for the sources)."""
-
-    field_of_view_deg: float = 42.0
-    pixels: int = 35  # square array, per side
-    max_rate_radps: float = 7.4
-    min_range_m: float = 0.08
-    max_range_m: float = math.inf
-    frame_rate_hz: float = 126.0
-
-
-OPTICS = Optics()
 
 # The datasheet's performance-optimisation sequence, as PX4's ``sensorInit`` writes it:
 # (register, value) writes, with bank select (0x7F) among them. The reads that decide
