@@ -4,48 +4,38 @@ sticks (PX4 holds its position on flow alone), then a companion computer flies a
 offboard position set-points, and PX4 lands. With the chip's quality at 0 PX4 loses its
 position and falls back to Altitude mode, as its documentation says."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import pyulog
 
-from tests.rig.px4_flights import fly_px4, inside, topic
+from rig.lockstep.loop import RunOptions, run_scenario
+from rig.mavlink.simulator_link import LinkTimeouts
+from rig.scenarios.scenario import FlowChipFault, Goto, load_scenario
+from tests.rig.px4_flights import inside, topic
 
 pytestmark = [pytest.mark.closed_loop, pytest.mark.cosim]
 
-#: The pilot: sticks at idle, Position mode, arm, throttle up for 4 s, then centred (PX4
-#: holds its height and, with the sticks centred, its position).
-PILOT = [
-    {"at_s": 5.0, "action": "sticks", "throttle": -1.0},
-    {"at_s": 6.0, "action": "mode", "name": "Position"},
-    {"at_s": 10.0, "action": "arm"},
-    {"at_s": 11.0, "action": "sticks", "throttle": 0.8},
-    {"at_s": 15.0, "action": "sticks", "throttle": 0.0},
-]
+#: The bundled flight: the pilot's Position-mode take-off by 15 s, hands off, the offboard
+#: square's first corner at 42 s (a leg every 7 s), land at 70 s. The RTL chips at 1 kHz.
+FLIGHT = dataclasses.replace(load_scenario("optical_flow_hold"), sensor_layer="rtl")
 #: Hands off: 20 s of hover, judged on the truth.
 HOVER_S = (20.0, 40.0)
-ALTITUDE_M = 2.3
-#: The square's corners (PX4's local frame, m north and east), a leg each LEG_S from SQUARE_S.
-CORNERS_M = ((2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0))
-SQUARE_S, LEG_S = 42.0, 7.0
-LAND_S = SQUARE_S + LEG_S * len(CORNERS_M)
-#: How close PX4 holds and flies: the issue's figures (measured on v1.14 and v1.17: the hover
-#: within 0.1 m, the corners within 0.3 m).
+SQUARE = [c for c in FLIGHT.commands if isinstance(c, Goto)]
+LEG_S = SQUARE[1].at_s - SQUARE[0].at_s
+#: How close PX4 holds and flies: the issue's figures (measured on v1.14 and v1.17 through
+#: the RTL chips: the hover within 0.1 m, the corners within 0.2 m).
 HOVER_TOLERANCE_M, CORNER_TOLERANCE_M = 0.3, 0.5
-#: A textured mat under the vehicle (indoor flow flying's usual floor).
-MAT = {"surface": {"texture": 1.0}}
 
 
-def _square() -> list[dict]:
-    legs = [{"at_s": SQUARE_S + LEG_S * k, "action": "goto",
-             "position_ned_m": [north, east, -ALTITUDE_M]}
-            for k, (north, east) in enumerate(CORNERS_M)]  # fmt: skip
-    return [*PILOT, *legs, {"at_s": LAND_S, "action": "land"}]
-
-
-def _fly(tmp_path, free_instance, px4_dir, name, duration_s, commands, faults=()):
-    return fly_px4(tmp_path, free_instance, px4_dir, name, duration_s, commands, gps=False,
-                   optical_flow=True, rangefinder=True, environment=MAT, faults=list(faults),
-                   sensor_layer="rtl", rates={"imu_hz": 1000})  # fmt: skip
+def _fly(tmp_path, free_instance, px4_dir, scenario):
+    options = RunOptions(
+        autopilot="px4", px4_dir=px4_dir, instance=free_instance(),
+        out_dir=tmp_path / scenario.name, timeouts=LinkTimeouts(connect_s=60, answer_s=30),
+    )  # fmt: skip
+    result = run_scenario(scenario, options)
+    return pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
 
 
 def _ground_offset(rig_log, px4_log) -> dict[str, float]:
@@ -62,8 +52,7 @@ def test_px4_holds_and_flies_a_square_on_optical_flow_without_gps(tmp_path, free
     """No GPS reaches PX4; EKF2 fuses the chip's flow; hands off in Position mode the truth
     stays within HOVER_TOLERANCE_M of where it hovers for 20 s; the second half of each leg
     of the 2 m square passes within CORNER_TOLERANCE_M of its corner; it lands and disarms."""
-    result = _fly(tmp_path, free_instance, any_px4.root, "flow_square", LAND_S + 15.0, _square())
-    rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
+    rig_log, px4_log = _fly(tmp_path, free_instance, any_px4.root, FLIGHT)
     params = px4_log.initial_parameters
     assert (params["EKF2_GPS_CTRL"], params["EKF2_OF_CTRL"], params["SYS_HAS_GPS"]) == (0, 1, 0)
     assert "vehicle_gps_position" not in {d.name for d in px4_log.data_list}
@@ -81,8 +70,9 @@ def test_px4_holds_and_flies_a_square_on_optical_flow_without_gps(tmp_path, free
     assert -truth["z"][window].mean() > 1.5, "the pilot's climb did not reach hover height"
 
     offset = _ground_offset(rig_log, px4_log)
-    for k, corner in enumerate(CORNERS_M):
-        leg = inside(truth_t, (SQUARE_S + LEG_S * (k + 0.5), SQUARE_S + LEG_S * (k + 1)))
+    for k, goto in enumerate(SQUARE):
+        corner = goto.position_ned_m[:2]
+        leg = inside(truth_t, (goto.at_s + LEG_S / 2, goto.at_s + LEG_S))
         reached = np.column_stack([truth["x"][leg] + offset["x"], truth["y"][leg] + offset["y"]])
         error = np.linalg.norm(reached - corner, axis=1).min()
         assert error < CORNER_TOLERANCE_M, f"corner {k} {corner} missed by {error:.2f} m"
@@ -97,9 +87,12 @@ def test_px4_falls_back_to_altitude_mode_when_the_flow_chip_sees_nothing(
     """SQUAL 0 from the chip at 25 s: PX4's driver drops every reading, EKF2 loses its only
     horizontal aid and, after its no-aid timeout, its position; PX4 leaves Position mode for
     Altitude mode (its position-loss failsafe in a manual mode) and keeps the height."""
-    fault = {"kind": "flow_chip", "mode": "zero_quality", "start_s": 25.0}
-    result = _fly(tmp_path, free_instance, px4_dir, "flow_blind", 40.0, PILOT, [fault])
-    rig_log, px4_log = pyulog.ULog(str(result.rig_log)), pyulog.ULog(str(result.autopilot_log))
+    blind = dataclasses.replace(
+        FLIGHT, name="flow_blind", duration_s=40.0,
+        commands=tuple(c for c in FLIGHT.commands if c.at_s < 40.0),
+        faults=(FlowChipFault(mode="zero_quality", start_s=25.0),),
+    )  # fmt: skip
+    rig_log, px4_log = _fly(tmp_path, free_instance, px4_dir, blind)
     flow_t, flow = topic(px4_log, "sensor_optical_flow")
     assert (flow["quality"][flow_t > 25.5] == 0).all()
     status_t, status = topic(px4_log, "vehicle_status")

@@ -24,6 +24,7 @@ def test_bundled_scenarios_load(name):
 def test_required_bundle_is_shipped():
     assert {
         "takeoff_hover_land", "level_step", "pitch_sweep_bench", "motor_noise_bench", "hil_sim",
+        "optical_flow_hold",
     } <= set(BUNDLED)  # fmt: skip
 
 
