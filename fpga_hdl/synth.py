@@ -60,7 +60,7 @@ from fpga_hdl.top import (
 SYNTH_DIR = BUILD_DIR / "synth"
 TOP_NAME = "sensor_top"
 #: The cores of :class:`SensorTop` synthesized alone, by their attribute names.
-CORES = ("imu", "baro", "mag", "gps", "range", "capture", "host")
+CORES = ("imu", "baro", "mag", "gps", "range", "flow", "capture", "host")
 
 ECP5_PART = "LFE5U-85F"
 ECP5_PACKAGE = "CABGA381"

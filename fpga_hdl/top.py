@@ -3,9 +3,11 @@
 Buses, as on a Pixhawk FMU (e.g. FMUv2/v3, where the MPU-6000 and MS5611 share SPI1):
 
 - one SPI bus, SCLK/MOSI/MISO shared, a chip select per chip (``imu_cs_n``,
-  ``baro_cs_n``). Shared because that is how the boards PX4 runs on wire these two
-  chips, and because a deselected chip must then really release SDO (``miso_oe``): the
-  top drives ``spi_miso`` from the selected chip and flags contention if two drive;
+  ``baro_cs_n``, ``flow_cs_n``): the MPU-6000, the MS5611 and the PMW3901 optical-flow
+  chip. Shared because that is how the boards PX4 runs on wire such chips (a flow chip
+  on a Pixhawk's external SPI), and because a deselected chip must then really release
+  SDO (``miso_oe``): the top drives ``spi_miso`` from the selected chip and flags
+  contention if two drive;
 - one I2C bus shared by the IST8310 (0x0E) and the LIDAR-Lite v3 rangefinder (0x62), as
   on a Pixhawk's external I2C port: open drain, ``i2c_sda_oe`` = 1 when either target
   pulls SDA low (the wired-AND inside the FPGA); the testbench resolves it with its own
@@ -57,6 +59,8 @@ from fpga_hdl.chips.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.chips.mpu6000.core import Mpu6000
 from fpga_hdl.chips.ms5611 import regs as ms5611_regs
 from fpga_hdl.chips.ms5611.core import Ms5611
+from fpga_hdl.chips.pmw3901 import regs as pmw3901_regs
+from fpga_hdl.chips.pmw3901.core import Pmw3901
 from fpga_hdl.chips.pwm_capture.core import CHANNELS, LATENCY_TICKS, PwmCapture, timeout_ticks
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.core import UbloxM8Core
@@ -74,8 +78,12 @@ SAMPLE_CHANNELS = {
     "mag": ist8310_regs.SAMPLE_LAYOUT,
     "gps": ubx.SAMPLE_LAYOUT,
     "range": lidarlite_regs.SAMPLE_LAYOUT,
+    "flow": pmw3901_regs.SAMPLE_LAYOUT,
 }
-FAULT_CHIPS = ("imu", "baro", "mag", "gps", "range")
+#: The chips with a fault word, and each one's own faults beyond mute and flip.
+FAULT_CHIPS: dict[str, tuple[str, ...]] = {
+    "imu": (), "baro": (), "mag": (), "gps": (), "range": (), "flow": pmw3901_regs.OWN_FAULTS,
+}  # fmt: skip
 #: The GPS receiver's ``uart`` clock: a UART crystal, 2 × 1.8432 MHz. Every rate of
 #: ``ublox.core.BAUD_RATES`` divides it exactly (no baud error at all; the divider is 32
 #: at 115200 and 8, ``buses.uart``'s minimum, at 460800), where 1.8432 MHz itself would
@@ -150,8 +158,8 @@ class SensorTop(wiring.Component):
         Shared SPI target data and whether any chip drives it.
     spi_contention : Out(1)
         More than one chip drives SDO (two chip selects low at once).
-    imu_cs_n, baro_cs_n : In(1)
-        Chip selects of the MPU-6000 and the MS5611.
+    imu_cs_n, baro_cs_n, flow_cs_n : In(1)
+        Chip selects of the MPU-6000, the MS5611 and the PMW3901.
     i2c_scl, i2c_sda_i : In(1), i2c_sda_oe : Out(1)
         I2C bus of the IST8310 and the LIDAR-Lite (``i2c_sda_oe`` = 1: one pulls SDA low).
     gps_tx : Out(1), gps_rx : In(1)
@@ -179,6 +187,7 @@ class SensorTop(wiring.Component):
     spi_contention: Out(1)
     imu_cs_n: In(1, init=1)
     baro_cs_n: In(1, init=1)
+    flow_cs_n: In(1, init=1)
     i2c_scl: In(1, init=1)
     i2c_sda_i: In(1, init=1)
     i2c_sda_oe: Out(1)
@@ -206,6 +215,7 @@ class SensorTop(wiring.Component):
         self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
         self.gps = UbloxM8Core(sys_clk_hz=uart_clk_hz)
         self.range = LidarLiteCore(sys_clk_hz=sys_clk_hz)
+        self.flow = Pmw3901(sys_clk_hz=sys_clk_hz)
         self.capture = PwmCapture(tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s)
         # The synchroniser copies a published result within its stages + 1 system
         # cycles, before the next publication (at most one per tick) replaces it.
@@ -222,12 +232,13 @@ class SensorTop(wiring.Component):
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         host, imu, baro, mag, gps = self.host, self.imu, self.baro, self.mag, self.gps
-        rangefinder = self.range
+        rangefinder, flow = self.range, self.flow
         m.submodules.host = host
         m.submodules.imu = imu
         m.submodules.baro = baro
         m.submodules.mag = mag
         m.submodules.range = rangefinder
+        m.submodules.flow = flow
         m.domains.pwm = ClockDomain(local=True)
         m.d.comb += [ClockSignal("pwm").eq(self.pwm_clk), ResetSignal("pwm").eq(self.pwm_rst)]
         m.submodules.capture = capture = DomainRenamer("pwm")(self.capture)
@@ -242,7 +253,7 @@ class SensorTop(wiring.Component):
             host.read_addr.eq(self.read_addr),
             self.read_data.eq(host.read_data),
         ]
-        chips = (("imu", imu), ("baro", baro), ("mag", mag), ("range", rangefinder))
+        chips = (("imu", imu), ("baro", baro), ("mag", mag), ("range", rangefinder), ("flow", flow))
         for name, chip in chips:
             m.d.comb += [
                 chip.sample.eq(getattr(host, name)),
@@ -250,17 +261,23 @@ class SensorTop(wiring.Component):
                 chip.fault.mute.eq(getattr(host, f"{name}_fault_mute")),
                 chip.fault.flip.eq(getattr(host, f"{name}_fault_flip")),
             ]
+        m.d.comb += [
+            getattr(flow.own_fault, name).eq(getattr(host, f"flow_fault_{name}"))
+            for name in pmw3901_regs.OWN_FAULTS
+        ]
         m.d.comb += [chip.now_us.eq(host.now_us) for chip in (baro, mag, rangefinder)]
         m.d.comb += self.pending.eq(Cat(chip.sample_pending for _, chip in chips).any())
 
-        for chip, cs_n in ((imu, self.imu_cs_n), (baro, self.baro_cs_n)):
+        spi_chips = ((imu, self.imu_cs_n), (baro, self.baro_cs_n), (flow, self.flow_cs_n))
+        for chip, cs_n in spi_chips:
             m.d.comb += [chip.spi.sclk.eq(self.spi_sclk), chip.spi.mosi.eq(self.spi_mosi)]
             m.d.comb += chip.spi.cs_n.eq(cs_n)
-        imu_spi, baro_spi = imu.spi, baro.spi
+        drives = Cat(chip.spi.miso_oe for chip, _ in spi_chips)
         m.d.comb += [
-            self.spi_miso.eq((imu_spi.miso & imu_spi.miso_oe) | (baro_spi.miso & baro_spi.miso_oe)),
-            self.spi_miso_oe.eq(imu_spi.miso_oe | baro_spi.miso_oe),
-            self.spi_contention.eq(imu_spi.miso_oe & baro_spi.miso_oe),
+            self.spi_miso.eq(Cat(chip.spi.miso & chip.spi.miso_oe for chip, _ in spi_chips).any()),
+            self.spi_miso_oe.eq(drives.any()),
+            # More than one drives: clearing the lowest set bit leaves another.
+            self.spi_contention.eq((drives & (drives - 1)[: len(drives)]).any()),
         ]
         for chip in (mag, rangefinder):
             m.d.comb += [chip.i2c.scl.eq(self.i2c_scl), chip.i2c.sda_i.eq(self.i2c_sda_i)]

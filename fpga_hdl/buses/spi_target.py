@@ -28,11 +28,13 @@ The engine has three clock domains, all local to the chip that instantiates it:
   byte (after the byte-0 command/address byte). In mode 3 the leading falling edge
   after CS falls comes before any rising edge and shifts nothing.
 
-During the first (command) byte SDO sends zeros: neither chip defines SDO there.
+During the first (command) byte SDO sends zeros: no chip defines SDO there. A chip
+whose transfers hold several commands (the PMW3901's address/data pairs) asks for zeros
+before another command byte with ``tx_skip``.
 """
 
 from amaranth.build import Platform
-from amaranth.hdl import Assert, Cat, ClockDomain, Module, ResetSignal, Signal
+from amaranth.hdl import Assert, Cat, ClockDomain, Module, Mux, ResetSignal, Signal
 from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
@@ -107,6 +109,9 @@ class SpiTarget(wiring.Component):
         High while the byte being received is the transfer's first (command) byte.
     tx_data : In(8)
         The next byte to send; sampled on the falling edge after each completed byte.
+    tx_skip : In(1)
+        Sampled with ``tx_data``: the next byte is another command (or a byte the chip
+        only receives), so SDO sends zeros, unflipped, as during the first byte.
     busy : Out(1)
         CS asserted, synchronised into the ``sync`` domain (lags CS by 2..3 cycles).
     """
@@ -117,6 +122,7 @@ class SpiTarget(wiring.Component):
     rx_stb: Out(1)
     rx_first: Out(1)
     tx_data: In(8)
+    tx_skip: In(1)
     busy: Out(1)
 
     def __init__(self, *, assertions: bool = False) -> None:
@@ -144,10 +150,12 @@ class SpiTarget(wiring.Component):
         ]
 
         shift_out = Signal(8)
+        loaded = Signal(8)  # what a data byte starts with
+        m.d.comb += loaded.eq(Mux(self.tx_skip, 0, self.tx_data ^ self.fault.flip))
         with m.If(bit_count != 0):
             m.d.spi_tx += shift_out.eq(shift_out << 1)
         with m.Elif(~first_byte):  # a byte boundary has passed: start the next data byte
-            m.d.spi_tx += shift_out.eq(self.tx_data ^ self.fault.flip)
+            m.d.spi_tx += shift_out.eq(loaded)
         m.d.comb += [
             pins.miso.eq(shift_out[7]),
             pins.miso_oe.eq(~pins.cs_n & ~self.fault.mute),
@@ -165,7 +173,7 @@ class SpiTarget(wiring.Component):
                 checker.miso_oe.eq(pins.miso_oe),
                 checker.bit_count.eq(bit_count),
                 checker.first_byte.eq(first_byte),
-                checker.loaded.eq(self.tx_data ^ self.fault.flip),
+                checker.loaded.eq(loaded),
             ]
         return m
 

@@ -5,7 +5,7 @@ the other side of those pins on the real rig, as gateware, so a whole transactio
 inside the simulator and Python only asks and waits once:
 
 - the flight controller MCU's peripherals: :class:`~fpga_hdl.buses.spi_controller.SpiController`
-  on the shared SPI bus (chip selects ``imu``, ``baro``),
+  on the shared SPI bus (chip selects ``imu``, ``baro``, ``flow``),
   :class:`~fpga_hdl.buses.i2c_controller.I2cController` on the IST8310's bus (the wired-AND of
   SDA resolved here), :class:`~fpga_hdl.buses.pwm_generator.PwmGenerator` on the PWM pins,
   :class:`UartPeer` on the GPS receiver's UART;
@@ -81,8 +81,8 @@ HARNESS_TOPLEVEL = "cosim_harness"
 #: 400 kHz I2C bit (the I2C target's recommended rate), and SCLK = 10 MHz / 2 = 5 MHz,
 #: exactly PX4's ``SPI_SPEED_SENSOR`` (16 MHz could only give 4 MHz: twice the cycles).
 HARNESS_SYS_CLK_HZ = 10e6
-#: Chip-select order of the SPI controller: index 0 is the MPU-6000, 1 the MS5611.
-SPI_DEVICES = ("imu", "baro")
+#: Chip-select order of the SPI controller: the MPU-6000, the MS5611, the PMW3901.
+SPI_DEVICES = ("imu", "baro", "flow")
 #: A simulation-only clock that waits on ``enable`` (Amaranth cannot express delays, so
 #: this one module is Verilog text, written to ``build/`` beside the generated design).
 #: The first rising edge comes half a period after ``enable`` rises; it stops low.
@@ -388,8 +388,8 @@ class CosimHarness(wiring.Component):
     Ports: ``rst`` and ``pwm_run`` (see the module docstring); per peripheral the ports
     of that peripheral prefixed with ``spi_``, ``i2c_``, ``host_``, ``read_`` and
     ``pwm_``, ``uart_`` (``spi_request``, ``i2c_nack_index``, ``host_words`` ...); the bus
-    wires as monitor outputs (``spi_sclk``, ``spi_mosi``, ``spi_miso``, ``imu_cs_n``,
-    ``baro_cs_n``, ``i2c_scl``, ``i2c_sda``, ``pwm``, ``gps_tx``, ``gps_rx``, ``clk``,
+    wires as monitor outputs (``spi_sclk``, ``spi_mosi``, ``spi_miso``, ``<device>_cs_n``
+    per :data:`SPI_DEVICES`, ``i2c_scl``, ``i2c_sda``, ``pwm``, ``gps_tx``, ``gps_rx``, ``clk``,
     ``pwm_clk``, ``uart_clk``); and the cycle counters ``sync_cycles``, ``pwm_cycles`` and
     ``uart_cycles``, the simulation's cost.
     """
@@ -420,9 +420,8 @@ class CosimHarness(wiring.Component):
             name: Out(1)
             for name in ("clk", "pwm_clk", "uart_clk", "spi_sclk", "spi_mosi", "spi_miso")
         }
-        members |= {
-            name: Out(1) for name in ("spi_miso_oe", "spi_contention", "imu_cs_n", "baro_cs_n")
-        }
+        members |= {name: Out(1) for name in ("spi_miso_oe", "spi_contention")}
+        members |= {f"{device}_cs_n": Out(1) for device in SPI_DEVICES}
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
         members |= {"sync_cycles": Out(32), "pwm_cycles": Out(32), "uart_cycles": Out(32)}
@@ -528,10 +527,11 @@ class CosimHarness(wiring.Component):
         m.d.comb += [
             top.spi_sclk.eq(spi.sclk),
             top.spi_mosi.eq(spi.mosi),
-            top.imu_cs_n.eq(spi.cs_n[SPI_DEVICES.index("imu")]),
-            top.baro_cs_n.eq(spi.cs_n[SPI_DEVICES.index("baro")]),
             spi.miso.eq(top.spi_miso | ~top.spi_miso_oe),
         ]
+        for index, device in enumerate(SPI_DEVICES):
+            m.d.comb += getattr(top, f"{device}_cs_n").eq(spi.cs_n[index])
+            m.d.comb += getattr(self, f"{device}_cs_n").eq(getattr(top, f"{device}_cs_n"))
         # I2C: open drain, SDA is the wired-AND of the controller and the target.
         sda = Signal()
         m.d.comb += [
@@ -549,8 +549,6 @@ class CosimHarness(wiring.Component):
             self.spi_miso.eq(top.spi_miso),
             self.spi_miso_oe.eq(top.spi_miso_oe),
             self.spi_contention.eq(top.spi_contention),
-            self.imu_cs_n.eq(top.imu_cs_n),
-            self.baro_cs_n.eq(top.baro_cs_n),
             self.i2c_scl.eq(i2c.scl),
             self.i2c_sda.eq(sda),
             self.pwm.eq(self.pwm_generator.pwm.pulses),

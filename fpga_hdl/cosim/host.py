@@ -12,7 +12,7 @@ from typing import Any  # a cocotb DUT: its ports, the generated Verilog's, are 
 
 from cocotb.triggers import Timer
 
-from fpga_hdl.host.host_port import HostPortMap
+from fpga_hdl.host.host_port import FaultInputs, HostPortMap
 
 #: Cycles a chip may take to accept a sample after a transfer: synchroniser + copy.
 SETTLE_CYCLES_MAX = 8
@@ -60,7 +60,7 @@ class CocotbHost:
         samples: Mapping[str, Mapping[str, int]],
         *,
         now_us: int | None = None,
-        faults: Mapping[str, tuple[bool, int]] | None = None,
+        faults: Mapping[str, FaultInputs] | None = None,
     ) -> None:
         """Write sample fields (and time, faults) into staging: invisible until commit."""
         words = self.map.encode_frame(samples, now_us=now_us, faults=faults)
@@ -90,7 +90,7 @@ class CocotbHost:
         samples: Mapping[str, Mapping[str, int]],
         *,
         now_us: int | None = None,
-        faults: Mapping[str, tuple[bool, int]] | None = None,
+        faults: Mapping[str, FaultInputs] | None = None,
     ) -> None:
         """Stage, commit and settle: the usual way the rig updates the chips."""
         await self.stage(samples, now_us=now_us, faults=faults)

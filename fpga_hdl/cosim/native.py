@@ -67,7 +67,7 @@ from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, HARNESS_TOPLEVEL, SPI_DEVICES, CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason, simulator_environment, verilator_root
-from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
+from fpga_hdl.host.host_port import WORD_BITS, FaultInputs, HostPortMap, fault_word
 from fpga_hdl.top import PWM_TICK_HZ, UART_CLK_HZ, sensor_top_host_map
 
 __all__ = [
@@ -327,7 +327,7 @@ class NativeHost:
         samples: Mapping[str, Mapping[str, int]],
         *,
         now_us: int | None = None,
-        faults: Mapping[str, tuple[bool, int]] | None = None,
+        faults: Mapping[str, FaultInputs] | None = None,
     ) -> None:
         """Stage the fields (and time, faults), commit, and return once the chips took them.
 
@@ -340,8 +340,8 @@ class NativeHost:
         ]
         if now_us is not None:
             words.append(self._word("time", "now_us", now_us % (1 << 32)))
-        for chip, (mute, flip) in (faults or {}).items():
-            words.append(self._word(chip, "fault", (int(mute) << 8) | flip))
+        for chip, fault in (faults or {}).items():
+            words.append(self._word(chip, "fault", fault_word(*fault)))
         packed = _pack(words, 8 + WORD_BITS, self._write_bytes)
         self._model.call("nh_host_write", packed, len(packed), len(words))
 

@@ -38,7 +38,7 @@ from fpga_hdl.buses.uart import divider_for as uart_divider
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, SPI_DEVICES
-from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
+from fpga_hdl.host.host_port import WORD_BITS, FaultInputs, HostPortMap
 from fpga_hdl.top import HOST_MAP, PWM_TICK_HZ, UART_CLK_HZ, sensor_top_host_map
 
 __all__ = [
@@ -204,7 +204,7 @@ class HarnessHost:
         samples: Mapping[str, Mapping[str, int]],
         *,
         now_us: int | None = None,
-        faults: Mapping[str, tuple[bool, int]] | None = None,
+        faults: Mapping[str, FaultInputs] | None = None,
     ) -> None:
         """Stage the fields (and time, faults), commit, and return once the chips took them."""
         words = self.map.encode_frame(samples, now_us=now_us, faults=faults)

@@ -16,7 +16,8 @@ from fpga_hdl.verification.spi_master import DEFAULT_TIMING, CocotbSpiMaster, Sp
 
 
 class SensorTopPins:
-    """Host port, SPI controller (``imu``, ``baro``) and I2C controller on a SensorTop DUT.
+    """Host port, SPI controller (``imu``, ``baro``, ``flow``) and I2C controller on a
+    SensorTop DUT.
 
     Construction drives every input to its idle level (chip selects high, SCL and SDA
     released, PWM inputs low with their domain unclocked, the GPS UART's RXD high with the
@@ -37,7 +38,7 @@ class SensorTopPins:
             mosi=dut.spi_mosi,
             miso=dut.spi_miso,
             miso_oe=dut.spi_miso_oe,
-            chip_selects={"imu": dut.imu_cs_n, "baro": dut.baro_cs_n},
+            chip_selects={"imu": dut.imu_cs_n, "baro": dut.baro_cs_n, "flow": dut.flow_cs_n},
             timing=spi_timing,
             after_release=self.host.settle,  # a released CS clocks the deferred sample in
         )

@@ -29,8 +29,19 @@ from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 WORD_BITS = 32
-#: Fault word layout: bits 0..7 XOR mask on sent bytes, bit 8 mute.
+#: Fault word layout: bits 0..7 XOR mask on sent bytes, bit 8 mute, then the chip's own
+#: faults (if it has any, e.g. the PMW3901's), one bit each from :data:`FAULT_OWN_SHIFT`.
 FAULT_MUTE_BIT = 8
+FAULT_OWN_SHIFT = FAULT_MUTE_BIT + 1
+
+
+#: A chip's fault inputs as the rig gives them: ``(mute, flip)`` or ``(mute, flip, own)``.
+FaultInputs = tuple[bool, int] | tuple[bool, int, int]
+
+
+def fault_word(mute: bool, flip: int, own: int = 0) -> int:
+    """A chip's fault word: ``own`` is the mask of its own faults, bit 0 the first named."""
+    return own << FAULT_OWN_SHIFT | int(mute) << FAULT_MUTE_BIT | flip
 
 
 class CoherentLatch(wiring.Component):
@@ -48,6 +59,9 @@ class CoherentLatch(wiring.Component):
         The sample the bus reads; changes only while ``busy`` is low.
     pending : Out(1)
         A sample is waiting to become visible.
+    copying : Out(1)
+        The edge ending this cycle copies ``offered`` into ``visible`` (a chip that
+        acts on each new sample, the PMW3901's motion accumulators, acts on it then).
     """
 
     def __init__(self, layout: data.Layout) -> None:
@@ -58,12 +72,14 @@ class CoherentLatch(wiring.Component):
                 "busy": In(1),
                 "visible": Out(layout),
                 "pending": Out(1),
+                "copying": Out(1),
             }
         )
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
-        with m.If(self.pending & ~self.busy):
+        m.d.comb += self.copying.eq(self.pending & ~self.busy)
+        with m.If(self.copying):
             m.d.sync += [self.visible.eq(self.offered), self.pending.eq(0)]
         with m.If(self.offered_stb):  # a strobe in the copy cycle re-arms: latest wins
             m.d.sync += self.pending.eq(1)
@@ -140,10 +156,11 @@ class HostPortMap:
         samples: Mapping[str, Mapping[str, int]],
         *,
         now_us: int | None = None,
-        faults: Mapping[str, tuple[bool, int]] | None = None,
+        faults: Mapping[str, FaultInputs] | None = None,
     ) -> list[tuple[int, int]]:
         """The (address, data) writes that stage one frame: sample fields, the time
-        (wrapped to 32 bits) and each chip's fault word (mute bit 8, flip mask 7..0)."""
+        (wrapped to 32 bits) and each chip's fault word from ``(mute, flip)`` or
+        ``(mute, flip, own)`` (:func:`fault_word`)."""
         words = [
             self.encode(channel, field, value)
             for channel, fields in samples.items()
@@ -151,17 +168,18 @@ class HostPortMap:
         ]
         if now_us is not None:
             words.append(self.encode("time", "now_us", now_us % (1 << 32)))
-        for chip, (mute, flip) in (faults or {}).items():
-            words.append(self.encode(chip, "fault", (int(mute) << 8) | flip))
+        for chip, fault in (faults or {}).items():
+            words.append(self.encode(chip, "fault", fault_word(*fault)))
         return words
 
 
 def host_port_map(
     samples: Mapping[str, data.StructLayout],
-    faults: tuple[str, ...],
+    faults: Mapping[str, tuple[str, ...]],
     results: Mapping[str, Mapping[str, Shape]],
 ) -> HostPortMap:
-    """Assign word addresses: ``now_us`` first, then sample fields, faults, results."""
+    """Assign word addresses: ``now_us`` first, then sample fields, faults, results.
+    ``faults`` names each chip with a fault word and its own faults (often none)."""
     writes = [HostWord(0, "time", "now_us", 32, False)]
     for channel, layout in samples.items():
         for name, field in layout:
@@ -169,8 +187,8 @@ def host_port_map(
             if shape.width > WORD_BITS:
                 raise ValueError(f"{channel}.{name} is {shape.width} bits; words hold 32")
             writes.append(HostWord(len(writes), channel, name, shape.width, shape.signed))
-    for chip in faults:
-        writes.append(HostWord(len(writes), chip, "fault", FAULT_MUTE_BIT + 1, False))
+    for chip, own in faults.items():
+        writes.append(HostWord(len(writes), chip, "fault", FAULT_OWN_SHIFT + len(own), False))
     reads: list[HostWord] = []
     for channel, fields in results.items():
         for name, shape in fields.items():
@@ -186,8 +204,8 @@ class HostPort(wiring.Component):
     ----------
     samples : mapping of channel name to ``StructLayout``
         One sample channel per chip (``"imu"``, ``"baro"``, ``"mag"``).
-    faults : tuple of chip names
-        Chips with fault inputs (``fault_mute``, ``fault_flip``).
+    faults : mapping of chip name to the names of its own faults
+        Chips with fault inputs (``fault_mute``, ``fault_flip`` and ``fault_<own>``).
     results : mapping of channel name to {field: shape}
         Values the rig reads back (PWM capture results), one word each.
 
@@ -205,7 +223,7 @@ class HostPort(wiring.Component):
         Simulated time in microseconds, as last committed.
     <channel> : Out(layout), <channel>_stb : Out(1)
         Offered sample per channel and its one-cycle strobe at commit.
-    <chip>_fault_mute : Out(1), <chip>_fault_flip : Out(8)
+    <chip>_fault_mute : Out(1), <chip>_fault_flip : Out(8), <chip>_fault_<own> : Out(1)
         Fault inputs per chip, as last committed.
     <channel>_<field> : In(shape)
         Result inputs, readable through ``read_addr``/``read_data``.
@@ -214,14 +232,14 @@ class HostPort(wiring.Component):
     def __init__(
         self,
         samples: Mapping[str, data.StructLayout],
-        faults: tuple[str, ...],
+        faults: Mapping[str, tuple[str, ...]],
         results: Mapping[str, Mapping[str, Shape]],
     ) -> None:
         self.map = host_port_map(samples, faults, results)
         if len(self.map.writes) > 256 or len(self.map.reads) > 256:
             raise ValueError("the host port addresses at most 256 words each way")
         self._samples = dict(samples)
-        self._faults = tuple(faults)
+        self._faults = dict(faults)
         members = {
             "write_addr": In(8),
             "write_data": In(WORD_BITS),
@@ -234,9 +252,10 @@ class HostPort(wiring.Component):
         for channel, layout in samples.items():
             members[channel] = Out(layout)
             members[f"{channel}_stb"] = Out(1)
-        for chip in faults:
+        for chip, own in faults.items():
             members[f"{chip}_fault_mute"] = Out(1)
             members[f"{chip}_fault_flip"] = Out(8)
+            members |= {f"{chip}_fault_{name}": Out(1) for name in own}
         for word in self.map.reads:
             members[f"{word.channel}_{word.field}"] = In(word.width)
         super().__init__(members)
@@ -260,6 +279,8 @@ class HostPort(wiring.Component):
                         getattr(self, f"{word.channel}_fault_flip").eq(value[:8]),
                         getattr(self, f"{word.channel}_fault_mute").eq(value[FAULT_MUTE_BIT]),
                     ]
+                    for bit, name in enumerate(self._faults[word.channel], FAULT_OWN_SHIFT):
+                        m.d.sync += getattr(self, f"{word.channel}_fault_{name}").eq(value[bit])
                 else:
                     offered = getattr(self, word.channel)[word.field]
                     m.d.sync += offered.eq(value)

@@ -9,7 +9,7 @@ dataclass so a test can set one field to a datasheet limit.
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from cocotb.handle import LogicObject
@@ -75,9 +75,16 @@ class CocotbSpiMaster:
     def _read_miso(self) -> int:
         return int(self.miso.value) if int(self.miso_oe.value) else self.timing.idle_level
 
-    async def transfer(self, device: str, tx: bytes, *, sclk_hz: float) -> bytes:
+    async def transfer(
+        self, device: str, tx: bytes, *, sclk_hz: float, gaps_s: Sequence[float] = ()
+    ) -> bytes:
+        """One chip select over ``tx``; ``gaps_s[i]`` holds SCLK idle that much longer
+        between byte ``i`` and byte ``i + 1`` (a chip's inter-byte delays, e.g. the
+        PMW3901's t_SRAD between a read's address and its data)."""
         check_clock_hz("sclk_hz", sclk_hz)
         check_spi_request(device, tx, self.chip_selects)
+        if len(gaps_s) >= max(len(tx), 1) or any(gap < 0 for gap in gaps_s):
+            raise ValueError(f"{len(gaps_s)} gaps for {len(tx)} bytes; each must be >= 0")
         cs_n = self.chip_selects[device]
         timing, half = self.timing, Timer(_ps(0.5 / sclk_hz), unit="ps")
         mode3 = timing.mode == 3
@@ -85,7 +92,9 @@ class CocotbSpiMaster:
         if timing.cs_setup_s:
             await Timer(_ps(timing.cs_setup_s), unit="ps")
         rx = bytearray()
-        for byte in tx:
+        for index, byte in enumerate(tx):
+            if 0 < index <= len(gaps_s) and gaps_s[index - 1]:
+                await Timer(_ps(gaps_s[index - 1]), unit="ps")
             value = 0
             for bit in range(7, -1, -1):
                 if mode3:

@@ -25,13 +25,15 @@ Requests (rig → co-simulation):
   |---|---|---|
   | now_us | u64 | simulated time |
   | flags | u8 | bit 0 IMU sample, 1 mag sample, 2 baro sample, 3 read the mag, 4 GPS, |
-  |  |  | 5 rangefinder sample |
+  |  |  | 5 rangefinder sample, 6 flow camera frame |
   | imu | 7 × i32 | MPU-6000 finest-resolution words: accel x/y/z, temp, gyro x/y/z |
   | mag | 3 × i16 | IST8310 counts x, y, z |
   | baro | 2 × u32 | MS5611 D1, D2 |
-  | faults | 5 × (u8 mute, u8 flip) | mpu6000, ms5611, ist8310, ublox, lidarlite |
+  | faults | 6 × (u8 mute, u8 flip, u8 own) | mpu6000, ms5611, ist8310, ublox, lidarlite, |
+  |  |  | pmw3901 (``own``: the chip's own fault mask) |
   | gps | NAV-PVT fields | the receiver's solution, as ``ubx.NAV_PVT_LAYOUT``'s loaded fields |
   | range | u16, u8, u8 | LIDAR-Lite distance (cm), signal strength, peak strength |
+  | flow | i16, i16, u8, u16, 3 × u8 | PMW3901 frame: delta x/y, SQUAL, shutter, raw data |
   | pulse count | u16 | then per pulse: u8 channel, u64 start_us, u32 width_us |
 
   The pulses are those starting after the previous frame's ``now_us`` and up to this
@@ -56,6 +58,8 @@ bytes and read from the RTL PWM capture core:
   | error count | u8 | then per error: u8 chip index, u16 length, UTF-8 text |
   | GPS fix count | u8 | then per fix: u64 time_us, u64 sent_us, then ``GpsFix`` in order |
   | range | u8, f64, i8 | a rangefinder reading collected (0/1), distance m, quality |
+  | flow | u8, 2 × f64, u32, u8, u64 | a flow report published (0/1), pixel flow x/y rad, |
+  |  |  | integration time µs, quality, timestamp µs |
 """
 
 from __future__ import annotations
@@ -68,6 +72,8 @@ from fpga_hdl.chips.ist8310.regs import Ist8310Sample
 from fpga_hdl.chips.lidarlite.driver import Range
 from fpga_hdl.chips.lidarlite.regs import LidarLiteSample
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
+from fpga_hdl.chips.pmw3901.driver import FlowReport
+from fpga_hdl.chips.pmw3901.regs import Pmw3901Sample
 from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix
 from fpga_hdl.chips.ublox.ubx import NAV_PVT_LAYOUT, NavPvt
 from rig.chips.layer import CHIPS, NO_FAULT, ChipFault, ChipFrame, ChipReadout
@@ -79,8 +85,10 @@ _LENGTH = struct.Struct("<I")
 _START = struct.Struct("<IB")
 _NAV_PVT = struct.Struct("<" + "".join(fmt for _, fmt, loaded in NAV_PVT_LAYOUT if loaded))
 _RANGE_SAMPLE = struct.Struct("<HBB")
+_FLOW_SAMPLE = struct.Struct("<hhBHBBB")
 _FRAME_HEAD = struct.Struct(
-    f"<QB7i3h2I{2 * len(CHIPS)}B{_NAV_PVT.format[1:]}{_RANGE_SAMPLE.format[1:]}H"
+    f"<QB7i3h2I{3 * len(CHIPS)}B{_NAV_PVT.format[1:]}{_RANGE_SAMPLE.format[1:]}"
+    f"{_FLOW_SAMPLE.format[1:]}H"
 )
 #: ReceivedFix: time_us, sent_us, then GpsFix's fields (two counts, 13 floats, a flag).
 _GPS_FIX = struct.Struct("<QQBB13d?")
@@ -89,7 +97,9 @@ _READOUT_HEAD = struct.Struct("<7dB3d2dB")
 _PWM_CHANNEL = struct.Struct("<dB")
 _ERROR_HEAD = struct.Struct("<BH")
 _RANGE = struct.Struct("<?db")
+_FLOW = struct.Struct("<?2dIBQ")
 _NO_RANGE = LidarLiteSample(0, 0, 0)
+_NO_FLOW = Pmw3901Sample(0, 0, 0, 0)
 
 
 def encode_start(pwm_period_us: int, motors: int) -> bytes:
@@ -107,16 +117,18 @@ def encode_frame(frame: ChipFrame) -> bytes:
     mag = frame.mag
     flags = (imu is not None) | (mag is not None) << 1 | (frame.baro_d1_d2 is not None) << 2
     flags |= frame.read_mag << 3 | (frame.gps is not None) << 4 | (frame.range is not None) << 5
+    flags |= (frame.flow is not None) << 6
     imu_words = tuple(imu.fields().values()) if imu is not None else (0,) * 7
     mag_counts = (mag.x_counts, mag.y_counts, mag.z_counts) if mag is not None else (0, 0, 0)
     faults = []
     for chip in CHIPS:
         fault = frame.faults.get(chip, NO_FAULT)
-        faults += [int(fault.mute), fault.flip]
+        faults += [int(fault.mute), fault.flip, fault.own]
     gps = astuple(frame.gps or NavPvt())
     body = _FRAME_HEAD.pack(
         frame.now_us, flags, *imu_words, *mag_counts, *(frame.baro_d1_d2 or (0, 0)), *faults,
-        *gps, *astuple(frame.range or _NO_RANGE), len(frame.pulses),
+        *gps, *astuple(frame.range or _NO_RANGE), *astuple(frame.flow or _NO_FLOW),
+        len(frame.pulses),
     )  # fmt: skip
     body += b"".join(_PULSE.pack(p.channel, p.start_us, p.width_us) for p in frame.pulses)
     return bytes([FRAME]) + body
@@ -126,14 +138,16 @@ def decode_frame(body: bytes) -> ChipFrame:
     values = _FRAME_HEAD.unpack_from(body)
     now_us, flags = values[0], values[1]
     imu, mag, baro = values[2:9], values[9:12], values[12:14]
-    fault_end = 14 + 2 * len(CHIPS)
-    fault_bytes, gps, count = values[14:fault_end], values[fault_end:-4], values[-1]
-    ranged = values[-4:-1]
+    fault_end = 14 + 3 * len(CHIPS)
+    flow_start = len(values) - 1 - len(_FLOW_SAMPLE.format[1:])
+    range_start = flow_start - len(_RANGE_SAMPLE.format[1:])
+    fault_bytes, gps, count = values[14:fault_end], values[fault_end:range_start], values[-1]
+    ranged, flow = values[range_start:flow_start], values[flow_start:-1]
     faults: dict[str, ChipFault] = {}
     for index, chip in enumerate(CHIPS):
-        mute, flip = fault_bytes[2 * index], fault_bytes[2 * index + 1]
-        if mute or flip:
-            faults[chip] = ChipFault(bool(mute), flip)
+        mute, flip, own = fault_bytes[3 * index : 3 * index + 3]
+        if mute or flip or own:
+            faults[chip] = ChipFault(bool(mute), flip, own)
     offset = _FRAME_HEAD.size
     pulses = []
     for _ in range(count):
@@ -149,6 +163,7 @@ def decode_frame(body: bytes) -> ChipFrame:
         pulses=tuple(pulses),
         gps=NavPvt(*gps) if flags & 16 else None,
         range=LidarLiteSample(*ranged) if flags & 32 else None,
+        flow=Pmw3901Sample(*flow) if flags & 64 else None,
     )
 
 
@@ -170,6 +185,9 @@ def encode_readout(readout: ChipReadout) -> bytes:
         body += _GPS_FIX.pack(received.time_us, received.sent_us, *astuple(received.fix))
     ranged = readout.range
     body += _RANGE.pack(ranged is not None, *astuple(ranged or Range(0.0, 0)))
+    flow = readout.flow or FlowReport((0.0, 0.0), 0, 0, 0)
+    body += _FLOW.pack(readout.flow is not None, *flow.pixel_flow_rad,
+                       flow.integration_timespan_us, flow.quality, flow.timestamp_us)  # fmt: skip
     return bytes([OK]) + body
 
 
@@ -197,6 +215,9 @@ def decode_readout(body: bytes) -> ChipReadout:
         gps.append(ReceivedFix(time_us, sent_us, GpsFix(*fix)))
         offset += _GPS_FIX.size
     collected, distance_m, quality = _RANGE.unpack_from(body, offset)
+    published, flow_x, flow_y, span_us, flow_quality, stamp_us = _FLOW.unpack_from(
+        body, offset + _RANGE.size
+    )
     return ChipReadout(
         accel_mps2=values[0:3],
         gyro_radps=values[3:6],
@@ -208,6 +229,7 @@ def decode_readout(body: bytes) -> ChipReadout:
         bus_errors=tuple(errors),
         gps=tuple(gps),
         range=Range(distance_m, quality) if collected else None,
+        flow=FlowReport((flow_x, flow_y), span_us, flow_quality, stamp_us) if published else None,
     )
 
 

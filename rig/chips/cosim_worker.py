@@ -6,11 +6,11 @@ with the flight controller's SPI/I2C controllers, its PWM timer and the host-por
 writer/reader around it as gateware). It connects to the Unix socket named by
 ``RIG_COSIM_SOCKET`` and answers the requests of :mod:`rig.chips.channel` one by one.
 
-Everything is RTL: the MPU-6000 and the MS5611 on the shared SPI bus, the IST8310 on
-I2C, and the PWM capture core, which measures the pulses the harness's PWM generator
-replays from the autopilot's outputs. Python only asks and waits once per transaction
-(``fpga_hdl.cosim.peripherals``); the clocks are gated Verilog clocks, so no Python runs
-per cycle.
+Everything is RTL: the MPU-6000, the MS5611 and the PMW3901 on the shared SPI bus, the
+IST8310 and the LIDAR-Lite on I2C, and the PWM capture core, which measures the pulses the
+harness's PWM generator replays from the autopilot's outputs. Python only asks and waits
+once per transaction (``fpga_hdl.cosim.peripherals``); the clocks are gated Verilog
+clocks, so no Python runs per cycle.
 
 Time. Simulated time follows rig time from an *epoch* (the simulated time of rig time 0,
 fixed after start-up), so the capture core sees the real pulse durations. Its tick clock

@@ -9,6 +9,10 @@ every 10 ms (D2 then D1, so a pressure every 20 ms), and the PWM capture's width
 Quantization, full-scale saturation, conversion latency and bus faults therefore reach the
 autopilot as on the real rig.
 
+Optical flow: the PMW3901 shares the SPI bus. Each frame that carries a camera frame
+(``ChipFrame.flow``) loads it; PX4's pmw3901 cycle runs every 10 ms of simulated time from
+start-up (the 12-byte motion read, a report every second cycle), as ``ChipReadout.flow``.
+
 Rangefinder: the LIDAR-Lite v3 shares the IST8310's I2C bus. PX4's ll40ls driver runs on
 the frames that carry a rangefinder sample (the loop samples the physics at the driver's
 20 Hz): the sample is loaded, the acquisition started one cycle before is collected and
@@ -61,6 +65,14 @@ from fpga_hdl.chips.mpu6000.model import Mpu6000Model
 from fpga_hdl.chips.ms5611 import regs as ms_regs
 from fpga_hdl.chips.ms5611.driver import CONVERSION_INTERVAL_US, Ms5611Driver
 from fpga_hdl.chips.ms5611.model import Ms5611Model
+from fpga_hdl.chips.pmw3901.driver import (
+    COUNTS_PER_RAD,
+    SAMPLE_INTERVAL_US,
+    FlowReport,
+    Pmw3901Driver,
+)
+from fpga_hdl.chips.pmw3901.model import Pmw3901Model
+from fpga_hdl.chips.pmw3901.regs import Pmw3901Sample
 from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix, UbloxDriver
 from fpga_hdl.chips.ublox.link import TlmUbloxUart
 from fpga_hdl.chips.ublox.model import UbloxM8Model
@@ -78,6 +90,7 @@ class Chip(StrEnum):
     IST8310 = "ist8310"
     UBLOX = "ublox"
     LIDARLITE = "lidarlite"
+    PMW3901 = "pmw3901"
 
 
 CHIPS = tuple(Chip)
@@ -91,10 +104,12 @@ class SensorLayerError(RuntimeError):
 
 @dataclass(frozen=True)
 class ChipFault:
-    """Bus fault of one chip: ``mute`` (stops answering), ``flip`` (XOR on sent bytes)."""
+    """Bus fault of one chip: ``mute`` (stops answering), ``flip`` (XOR on sent bytes), and
+    ``own``: the mask of the chip's own faults (the PMW3901's ``regs.FAULT_*``)."""
 
     mute: bool = False
     flip: int = 0
+    own: int = 0
 
 
 NO_FAULT = ChipFault()
@@ -118,6 +133,8 @@ class ChipFrame:
     gps: NavPvt | None = None
     #: The rangefinder's scene for this frame's driver cycle (None: no cycle this frame).
     range: LidarLiteSample | None = None
+    #: One camera frame of the flow chip to load this frame (None: no new frame).
+    flow: Pmw3901Sample | None = None
 
 
 @dataclass(frozen=True)
@@ -138,11 +155,13 @@ class ChipReadout:
     gps: tuple[ReceivedFix, ...] = ()
     #: The rangefinder reading PX4's driver collected this frame, if it collected one.
     range: Range | None = None
+    #: What PX4's pmw3901 driver published this frame, if it published.
+    flow: FlowReport | None = None
 
 
 #: SensorTop's host-port channel and fault names for the rig's chip names.
 HOST_CHIP = {Chip.MPU6000: "imu", Chip.MS5611: "baro", Chip.IST8310: "mag", Chip.UBLOX: "gps",
-             Chip.LIDARLITE: "range"}  # fmt: skip
+             Chip.LIDARLITE: "range", Chip.PMW3901: "flow"}  # fmt: skip
 
 
 def gps_fix(sample: GpsSample) -> GpsFix:
@@ -170,7 +189,7 @@ def gps_fix(sample: GpsSample) -> GpsFix:
 
 def host_port_inputs(
     frame: ChipFrame,
-) -> tuple[dict[str, dict[str, int]], dict[str, tuple[bool, int]]]:
+) -> tuple[dict[str, dict[str, int]], dict[str, tuple[bool, int, int]]]:
     """The frame's sample fields and fault words as the RTL's host port takes them (the
     compiled and the cocotb layer load the same)."""
     samples: dict[str, dict[str, int]] = {}
@@ -185,10 +204,12 @@ def host_port_inputs(
         samples["gps"] = frame.gps.fields()
     if frame.range is not None:
         samples["range"] = frame.range.fields()
+    if frame.flow is not None:
+        samples["flow"] = frame.flow.fields()
     faults = {}
     for chip in CHIPS:
         fault = frame.faults.get(chip, NO_FAULT)
-        faults[HOST_CHIP[chip]] = (fault.mute, fault.flip)
+        faults[HOST_CHIP[chip]] = (fault.mute, fault.flip, fault.own)
     return samples, faults
 
 
@@ -262,6 +283,8 @@ class SensorEngine:
         self.mag = Ist8310Driver(i2c)
         self.gps = UbloxDriver(uart)
         self.range = LidarLiteDriver(i2c)
+        self.flow = Pmw3901Driver(spi, "flow")
+        self._next_flow_us = 0  # PX4 ScheduleOnInterval: a fixed 10 ms grid from start-up
         self._range_collect = False  # PX4 ``_collect_phase``: an acquisition is running
         self._next_baro_us = 0
         self._baro_phase_d1 = False  # False: a D2 (temperature) conversion is running
@@ -288,6 +311,9 @@ class SensorEngine:
             if await self.range.probe() is not LidarLiteVersion.V1_V3:
                 raise SensorLayerError("LIDAR-Lite probe: not the v1/v3 PX4 expects at 0x62")
             await self.range.reset()
+            if not await self.flow.probe():
+                raise SensorLayerError("PMW3901 Product_ID does not read 0x49")
+            await self.flow.init()
         except BusError as error:
             raise SensorLayerError(f"sensor start-up failed: {error}") from None
 
@@ -321,6 +347,14 @@ class SensorEngine:
                 ranged = await self._range_cycle()
             except BusError as error:
                 errors.append(("lidarlite", str(error)))
+        flow = None
+        if frame.now_us >= self._next_flow_us:
+            while self._next_flow_us <= frame.now_us:
+                self._next_flow_us += SAMPLE_INTERVAL_US
+            try:
+                flow = await self.flow.cycle(frame.now_us)
+            except BusError as error:
+                errors.append(("pmw3901", str(error)))
         baro = None
         if frame.now_us >= self._next_baro_us:
             self._next_baro_us = frame.now_us + CONVERSION_INTERVAL_US
@@ -337,6 +371,7 @@ class SensorEngine:
             "bus_errors": tuple(errors),
             "gps": self.gps.poll(frame.now_us),
             "range": ranged,
+            "flow": flow,
         }
         self._sensed = (frame.now_us, sensed)
 
@@ -391,13 +426,23 @@ class TlmChips:
         self.ist8310 = Ist8310Model()
         self.ublox = UbloxM8Model()
         self.lidarlite = LidarLiteModel()
-        self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611})
+        self.pmw3901 = Pmw3901Model()
+        self.spi = TlmSpiBus({"imu": self.mpu6000, "baro": self.ms5611, "flow": self.pmw3901})
         self.i2c = TlmI2cBus({chip.address: chip for chip in (self.ist8310, self.lidarlite)})
         self.uart = TlmUbloxUart(self.ublox, clk_hz=UART_CLK_HZ)
         self.pwm = PwmCapture(motors, tick_hz=pwm_tick_hz)
         self._faults: Mapping[str, ChipFault] | None = None  # the fault inputs set last
 
     async def load(self, frame: ChipFrame) -> None:
+        # Faults first: the host port commits them with the samples, and the flow chip's
+        # own faults decide whether it takes the frame committed with them.
+        if frame.faults is not self._faults:  # the injector hands the same map until it changes
+            self._faults = frame.faults
+            for name in CHIPS:
+                fault = frame.faults.get(name, NO_FAULT)
+                chip = getattr(self, name)
+                chip.fault_mute, chip.fault_flip = fault.mute, fault.flip
+            self.pmw3901.fault_own = frame.faults.get(Chip.PMW3901, NO_FAULT).own
         self.ms5611.now_us = self.ist8310.now_us = self.lidarlite.now_us = frame.now_us
         if frame.imu is not None:
             self.mpu6000.load_sample(frame.imu)
@@ -409,12 +454,8 @@ class TlmChips:
             self.ublox.load_fix(frame.gps)
         if frame.range is not None:
             self.lidarlite.load_sample(frame.range)
-        if frame.faults is not self._faults:  # the injector hands the same map until it changes
-            self._faults = frame.faults
-            for name in CHIPS:
-                fault = frame.faults.get(name, NO_FAULT)
-                chip = getattr(self, name)
-                chip.fault_mute, chip.fault_flip = fault.mute, fault.flip
+        if frame.flow is not None:
+            self.pmw3901.load_sample(frame.flow)
 
     async def capture(
         self, pulses: tuple[Pulse, ...], now_us: int
@@ -451,13 +492,16 @@ def _xyz(vector: Iterable[float]) -> tuple[float, float, float]:
 class BypassSensorLayer(SensorLayer):
     """No chips: the SI samples go straight into HIL_SENSOR and HIL_GPS (no receiver, no
     UART time) and the commanded pulse widths straight to the motors, as a bare simulator
-    (Gazebo's) feeds PX4. For measuring what
-    the chips cost (``make bench``); the credible rig is ``tlm`` or ``rtl``."""
+    (Gazebo's) feeds PX4. Each camera frame's flow is reported as it comes (its angle,
+    ``ChipFrame.flow``'s counts over PX4's 385 per radian, integrated since the previous
+    camera frame), as Gazebo's flow plugin sends it. For measuring what the chips cost
+    (``make bench``); the credible rig is ``tlm`` or ``rtl``."""
 
     def __init__(self, *, motors: int) -> None:
         self._widths_us = [0.0] * motors
         self._healthy = (False,) * motors
         self._sensed: ChipFrame | None = None
+        self._flow_us = 0  # the previous camera frame's time
 
     def start(self) -> None:
         """Nothing to bring up."""
@@ -476,6 +520,11 @@ class BypassSensorLayer(SensorLayer):
         imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
         ranged = readings.range
         now_us = frame.now_us
+        flow = None
+        if frame.flow is not None:
+            angles = (frame.flow.delta_x / COUNTS_PER_RAD, frame.flow.delta_y / COUNTS_PER_RAD)
+            flow = FlowReport(angles, now_us - self._flow_us, frame.flow.squal, now_us)
+            self._flow_us = now_us
         return ChipReadout(
             accel_mps2=_xyz(imu.accel_mps2),
             gyro_radps=_xyz(imu.gyro_radps),
@@ -487,6 +536,7 @@ class BypassSensorLayer(SensorLayer):
             gps=() if gps is None else (ReceivedFix(now_us, now_us, gps_fix(gps)),),
             range=None if ranged is None or ranged.distance_m is None
             else Range(ranged.distance_m, 100),
+            flow=flow,
         )  # fmt: skip
 
     def close(self) -> None:

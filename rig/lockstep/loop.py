@@ -49,6 +49,7 @@ from fpga_hdl.chips.lidarlite.driver import PX4_CYCLE_US, PX4_MAX_DISTANCE_M, sa
 from fpga_hdl.chips.lidarlite.regs import MIN_RANGE_M
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
+from fpga_hdl.chips.pmw3901.driver import CameraCounts
 from fpga_hdl.chips.ublox.link import receiver_solution
 from quad_model import QuadModel, SensorSuite, load_vehicle
 from quad_model.frames import ned_to_geodetic, yaw_quat
@@ -72,7 +73,13 @@ from rig.lockstep.pacing import Pacer
 from rig.logs.rig_log import RigLog
 from rig.mavlink.ground_link import GroundLink
 from rig.mavlink.px4_api import Ports, mavlink
-from rig.mavlink.sim_messages import distance_sensor, hil_gps, hil_sensor, hil_state_quaternion
+from rig.mavlink.sim_messages import (
+    distance_sensor,
+    hil_gps,
+    hil_optical_flow,
+    hil_sensor,
+    hil_state_quaternion,
+)
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
 from rig.scenarios.faults import FaultInjector, check_motors, describe
 from rig.scenarios.scenario import Rates, Scenario
@@ -330,6 +337,10 @@ class _Loop:
             attitude_quat=yaw_quat(math.radians(start.yaw_deg)),
             battery_voltage_v=scenario.start.battery_voltage_v,
         )
+        #: The flow chip's counts of the camera's frames (the fraction carried frame to frame).
+        self._camera_counts = CameraCounts()
+        camera = vehicle.optical_flow
+        self._camera_frame_rate_hz = 0.0 if camera is None else camera.frame_rate_hz
         self.sensors = SensorSuite(
             vehicle, environment, sensor_rng, self.rates.imu_hz, self.rates.mag_hz,
             self.rates.baro_hz, RANGEFINDER_RATE_HZ if scenario.rangefinder else None,
@@ -460,7 +471,7 @@ class _Loop:
         """Load ``frame``'s samples into the chips and read them as PX4's drivers do; the
         PWM capture waits for :meth:`_finish`."""
         started = time.perf_counter()
-        imu, mag, baro = readings.imu, readings.mag, readings.baro
+        imu, mag, baro, flow = readings.imu, readings.mag, readings.baro, readings.flow
         assert imu is not None, "the IMU is due every frame"
         chip_frame = ChipFrame(
             now_us=frame * self.frame_us,
@@ -475,6 +486,8 @@ class _Loop:
             gps=None if readings.gps is None else receiver_solution(
                 gps_fix(readings.gps), readings.gps.epoch_us, self.faults.gps_fault()),
             range=None if readings.range is None else sample_from_range(readings.range.distance_m),
+            flow=None if flow is None else self._camera_counts.sample(
+                flow.flow_xy_rad, flow.squal, flow.exposure_s * self._camera_frame_rate_hz),
         )  # fmt: skip
         self.layer.sense(chip_frame)
         self._spent_s["chips"] += time.perf_counter() - started
@@ -508,6 +521,9 @@ class _Loop:
         if out.range is not None:
             self.log.rangefinder(self.time_us, out.range.distance_m, out.range.signal_quality,
                                  RANGEFINDER_LIMITS_M)  # fmt: skip
+        if out.flow is not None:
+            self.log.optical_flow(self.time_us, out.flow.pixel_flow_rad,
+                                  out.flow.integration_timespan_us, out.flow.quality)  # fmt: skip
 
     def _sensor_messages(self, out: ChipReadout) -> list[mavlink.MAVLink_message]:
         """What the drivers read this frame, as PX4's simulator messages."""
@@ -533,6 +549,14 @@ class _Loop:
                     self.link.mav, self.time_us, distance_m=out.range.distance_m,
                     signal_quality=out.range.signal_quality, min_m=RANGEFINDER_LIMITS_M[0],
                     max_m=RANGEFINDER_LIMITS_M[1],
+                )
+            )  # fmt: skip
+        if out.flow is not None:
+            messages.append(
+                hil_optical_flow(
+                    self.link.mav, self.time_us, pixel_flow_rad=out.flow.pixel_flow_rad,
+                    integration_timespan_us=out.flow.integration_timespan_us,
+                    quality=out.flow.quality,
                 )
             )  # fmt: skip
         return messages

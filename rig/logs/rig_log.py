@@ -4,7 +4,7 @@ Ground truth uses PX4 SITL's ``*_groundtruth`` topics (same formats as
 ``vehicle_attitude``, ``vehicle_local_position``, ``vehicle_angular_velocity``), the
 sensor data is logged as delivered to the autopilot (after the chips and faults:
 ``sensor_combined``, ``sensor_mag``, ``sensor_baro``, ``sensor_gps``, the rangefinder's
-``distance_sensor``), the autopilot's
+``distance_sensor``, the flow chip's ``sensor_optical_flow``), the autopilot's
 commands as ``actuator_motors`` (0..1) and the PWM the capture core measured as
 ``actuator_outputs`` (µs). Field names and types follow PX4's ``msg/*.msg`` (checked
 against a real PX4 v1.17 log's format section); only the fields the rig can fill are
@@ -64,6 +64,8 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
                         ("float", "max_distance"), ("float", "current_distance"),
                         ("float", "variance"), ("int8_t", "signal_quality"), ("uint8_t", "type"),
                         ("uint8_t", "orientation")],
+    "sensor_optical_flow": [("uint64_t", "timestamp_sample"), ("float[2]", "pixel_flow"),
+                            ("uint32_t", "integration_timespan_us"), ("uint8_t", "quality")],
     "actuator_motors": [("uint64_t", "timestamp_sample"), ("float[12]", "control"),
                         ("uint16_t", "reversible_flags")],
     "actuator_outputs": [("uint32_t", "noutputs"), ("float[16]", "output")],
@@ -102,7 +104,7 @@ class RigLog:
         self._home = (home_lat_deg, home_lon_deg, home_alt_m)
         self._previous_rates: np.ndarray | None = None
         self._previous_rates_us = 0
-        self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0, "lidarlite": 0}
+        self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0, "lidarlite": 0, "pmw3901": 0}
         self._rows: dict[str, Callable[..., None]] = {}
 
     def _row(self, topic: str) -> Callable[..., None]:
@@ -179,6 +181,12 @@ class RigLog:
                           max_distance=limits_m[1], current_distance=distance_m, variance=0.0,
                           signal_quality=signal_quality, type=_LASER,
                           orientation=_DOWNWARD_FACING)  # fmt: skip
+
+    def optical_flow(self, time_us: int, pixel_flow_rad: tuple[float, float],
+                     integration_timespan_us: int, quality: int) -> None:  # fmt: skip
+        """A flow report as PX4's pmw3901 driver publishes it."""
+        self._row("sensor_optical_flow")(time_us, time_us, *pixel_flow_rad,
+                                         integration_timespan_us, quality)  # fmt: skip
 
     def motors(self, time_us: int, commanded_us: int, controls: Sequence[float]) -> None:
         unused = (math.nan,) * (_CONTROLS - len(controls))

@@ -14,6 +14,7 @@ and is logged when it starts and when it ends:
 | ``chip_mute`` | chip (RTL or TLM) | ``fault_mute``: the chip stops answering |
 | ``gps_loss`` | GPS receiver | no HIL_GPS is sent |
 | ``gps_receiver`` | u-blox chip | ``loss_of_fix``/``jammed`` solution; ``bad_checksum`` on UART |
+| ``flow_chip`` | PMW3901 chip | ``stuck`` image, ``zero_quality`` SQUAL, ``drop_frames`` |
 | ``pwm_dropout`` | PWM lines | no pulses on ``channel`` (all if absent): the capture times out |
 
 A motor fault names a motor of the vehicle flown (``0`` to its rotor count less one, in PX4's
@@ -30,6 +31,7 @@ from typing import Protocol
 
 import numpy as np
 
+from fpga_hdl.chips.pmw3901 import regs as pmw3901_regs
 from fpga_hdl.chips.ublox.link import BAD_CHECKSUM_FLIP, GpsFault
 from quad_model.sensors import SensorReadings
 from rig.chips.layer import Chip, ChipFault
@@ -177,7 +179,7 @@ class FaultInjector:
     def _chip_inputs(self) -> dict[str, ChipFault]:
         faults: dict[str, ChipFault] = {}
         for fault in self._active:
-            chip = getattr(fault, "chip", None)
+            chip = Chip.PMW3901 if fault.kind == "flow_chip" else getattr(fault, "chip", None)
             if chip is None:
                 continue
             current = faults.get(chip, ChipFault())
@@ -185,6 +187,9 @@ class FaultInjector:
                 faults[chip] = dataclasses.replace(current, mute=True)
             elif fault.kind == "bus_bit_flip":
                 faults[chip] = dataclasses.replace(current, flip=current.flip | fault.mask)
+            elif fault.kind == "flow_chip":
+                own = current.own | pmw3901_regs.FAULT_BITS[fault.mode]
+                faults[chip] = dataclasses.replace(current, own=own)
         if any(getattr(f, "fault", None) is GpsFault.BAD_CHECKSUM for f in self._active):
             current = faults.get(Chip.UBLOX, ChipFault())
             faults[Chip.UBLOX] = dataclasses.replace(current, flip=current.flip | BAD_CHECKSUM_FLIP)

@@ -470,6 +470,17 @@ class GpsReceiverFault(_Fault):
 
 
 @table(kw_only=True)
+class FlowChipFault(_Fault):
+    """A fault of the PMW3901 optical-flow chip itself (``fpga_hdl.chips.pmw3901``):
+    ``stuck`` (its image freezes: no motion, SQUAL held), ``zero_quality`` (SQUAL reads 0),
+    ``drop_frames`` (it takes no new frames: no motion, MOT clear). The scenario must fly
+    the camera (``optical_flow = true``)."""
+
+    kind: Literal["flow_chip"] = "flow_chip"
+    mode: Literal["stuck", "zero_quality", "drop_frames"]
+
+
+@table(kw_only=True)
 class PwmDropout(_Fault):
     """A PWM line goes quiet; no channel: every motor's."""
 
@@ -479,7 +490,7 @@ class PwmDropout(_Fault):
 
 FaultSpec = Annotated[
     MotorLoss | MotorDegradation | SensorStuck | SensorBias | NoiseBurst | BusBitFlip
-    | ChipMute | GpsLoss | GpsReceiverFault | PwmDropout,
+    | ChipMute | GpsLoss | GpsReceiverFault | FlowChipFault | PwmDropout,
     Field(discriminator="kind"),
 ]  # fmt: skip
 
@@ -543,6 +554,11 @@ class Scenario:
                         getattr(item, time),
                         f"not before the end of the run (duration_s = {self.duration_s})",
                     )
+        for index, fault in enumerate(self.faults):
+            if fault.kind == "flow_chip" and not self.optical_flow:
+                raise FieldError(
+                    f"faults[{index}].kind", fault.kind, "no optical-flow camera is flown"
+                )
         # Commands run in time order whatever the file's order (a stable sort keeps the
         # file's order among commands due at the same time).
         object.__setattr__(self, "commands", tuple(sorted(self.commands, key=_at)))

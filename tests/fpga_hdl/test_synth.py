@@ -9,6 +9,7 @@ from fpga_hdl.chips.ist8310 import regs as ist8310_regs
 from fpga_hdl.chips.lidarlite import regs as lidarlite_regs
 from fpga_hdl.chips.mpu6000 import regs as mpu6000_regs
 from fpga_hdl.chips.ms5611 import regs as ms5611_regs
+from fpga_hdl.chips.pmw3901 import regs as pmw3901_regs
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.synth import (
@@ -50,6 +51,7 @@ def state_bits(top: SensorTop) -> dict[str, int]:
         "mag": ist8310_regs.SAMPLE_LAYOUT.size,
         "gps": ubx.SAMPLE_LAYOUT.size,
         "range": lidarlite_regs.SAMPLE_LAYOUT.size,
+        "flow": pmw3901_regs.SAMPLE_LAYOUT.size,
         "capture": 3 * CHANNELS * top.capture.counter_bits,
         "host": sum(word.width for word in top.host.map.writes),
     }

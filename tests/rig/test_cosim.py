@@ -6,9 +6,10 @@ runs under cocotb in its own process (``rig.chips.rtl``). The same frames throug
 three layers (TLM, cocotb RTL, compiled RTL) must give the same decoded values, bus
 errors and captured PWM, frame by frame, at the default 1 µs capture tick on every one of
 the capture core's eight channels (an octo's motors) and at a coarser tick on a quad's
-four, and the same GPS fixes at the same times (through the u-blox core's UART and
-PX4's decoder, with receiver and line faults). The RTL is read at the frame time,
-whatever the pulses do; nothing steers it.
+four, the same GPS fixes at the same times (through the u-blox core's UART and PX4's
+decoder, with receiver and line faults), and the same optical-flow reports (the PMW3901's
+camera frames through PX4's pmw3901 cycle, with the chip's own faults). The RTL is read at
+the frame time, whatever the pulses do; nothing steers it.
 """
 
 import numpy as np
@@ -18,6 +19,9 @@ from fpga_hdl.chips.ist8310.driver import sample_from_field_gauss
 from fpga_hdl.chips.lidarlite.driver import Range, decode_range, sample_from_range
 from fpga_hdl.chips.mpu6000.regs import Mpu6000Sample
 from fpga_hdl.chips.ms5611.model import raw_from_si
+from fpga_hdl.chips.pmw3901 import regs as flow_regs
+from fpga_hdl.chips.pmw3901.driver import FlowReport
+from fpga_hdl.chips.pmw3901.regs import Pmw3901Sample
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.ublox.driver import GpsFix, ReceivedFix
 from fpga_hdl.chips.ublox.link import BAD_CHECKSUM_FLIP, GpsFault, receiver_solution
@@ -58,6 +62,15 @@ GPS_FAULTS = {100: GpsFault.LOSS_OF_FIX, 150: GpsFault.JAMMED, 200: GpsFault.BAD
 #: GPS epochs; the LIDAR-Lite is muted over the cycles at frames 175 and 225.
 RANGE_EVERY, RANGE_OFFSET = 50, 25
 RANGE_MUTED = range(170, 230)
+#: A PMW3901 camera frame every this many frames (125 Hz at 1 kHz, near its 126 fps); its
+#: own faults over spans of frames, and a mute.
+FLOW_EVERY = 8
+FLOW_FAULTS = {
+    **{k: ChipFault(own=flow_regs.FAULT_STUCK) for k in range(60, 100)},
+    **{k: ChipFault(own=flow_regs.FAULT_ZERO_QUALITY) for k in range(120, 160)},
+    **{k: ChipFault(own=flow_regs.FAULT_DROP_FRAMES) for k in range(200, 240)},
+    **{k: ChipFault(mute=True) for k in range(265, 285)},
+}
 
 
 def _gps_fix(rng):
@@ -85,6 +98,12 @@ def _frames(rng, count, *, motors, frame_us=1000, faults=None):
             frame_faults = {**frame_faults, "ublox": ChipFault(flip=BAD_CHECKSUM_FLIP)}
         if k in RANGE_MUTED:
             frame_faults = {**frame_faults, "lidarlite": ChipFault(mute=True)}
+        if k in FLOW_FAULTS:
+            frame_faults = {**frame_faults, "pmw3901": FLOW_FAULTS[k]}
+        flow = None
+        if k % FLOW_EVERY == 0:
+            dx, dy = (int(v) for v in rng.integers(-60, 61, 2))
+            flow = Pmw3901Sample(dx, dy, int(rng.integers(20, 200)), int(rng.integers(8192)))
         ranged = None
         if k % RANGE_EVERY == RANGE_OFFSET:
             ranged = sample_from_range(float(rng.uniform(0.1, 30.0)) if k != 325 else None)
@@ -101,6 +120,7 @@ def _frames(rng, count, *, motors, frame_us=1000, faults=None):
             pulses=tuple(outputs.pulses(now_us + 1, dropped)),
             gps=gps,
             range=ranged,
+            flow=flow,
         )
         if frame_us == 1000 and k in BOUNDARY_FRAMES:
             # The periods take the last command before their start: one starting at
@@ -123,7 +143,10 @@ def _boundary(motors):
 def test_frame_codec_round_trip():
     rng = np.random.default_rng(3)
     faults = {5: {"mpu6000": ChipFault(flip=0x81), "ist8310": ChipFault(mute=True)}}
-    for frame in _frames(rng, 30, motors=OCTO, faults=faults):
+    faults[16] = {"pmw3901": ChipFault(flip=0x0F, own=flow_regs.FAULT_DROP_FRAMES)}
+    frames = list(_frames(rng, 30, motors=OCTO, faults=faults))
+    assert any(frame.flow for frame in frames)
+    for frame in frames:
         assert decode_frame(encode_frame(frame)[1:]) == frame
     assert decode_start(encode_start(2500, OCTO)[1:]) == (2500, OCTO)
 
@@ -134,7 +157,7 @@ def test_readout_codec_round_trip():
         mag_gauss=(0.2, 0.01, 0.43), baro_pa_degc=None, pwm_widths_us=(1500.0, 0.0, 1000.0, 2000.0),
         pwm_timed_out=(False, True, False, False), bus_errors=(("ms5611", "MS5611 not ready ü"),),
         gps=(ReceivedFix(208_697, 200_000, _gps_fix(np.random.default_rng(1))),),
-        range=Range(12.34, 100),
+        range=Range(12.34, 100), flow=FlowReport((0.25, -1.5), 20_000, 117, 40_005),
     )  # fmt: skip
     assert decode_readout(encode_readout(readout)[1:]) == readout
 
@@ -172,10 +195,12 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
     faults = {k: {"mpu6000": ChipFault(flip=0x40)} for k in range(50, 55)}
     faults |= {k: {"ms5611": ChipFault(mute=True)} for k in range(100, 141)}
     corrupted, widths, timed_out, pwm, boundary, fixes = set(), set(), [], [], 0, []
-    loaded, collected = {}, {}
+    loaded, collected, flows = {}, {}, {}
     cocotb_rtl, compiled_rtl = Scoreboard("RTL vs TLM"), Scoreboard("compiled RTL vs TLM")
     for frame in _frames(np.random.default_rng(11), 400, motors=OCTO, faults=faults):
         rtl, reference = rtl_layer.frame(frame), tlm.frame(frame)
+        if reference.flow is not None:
+            flows[frame.now_us // 1000] = reference.flow
         fixes += [(frame.now_us, received) for received in reference.gps]
         if frame.range is not None:
             k = frame.now_us // 1000
@@ -232,6 +257,17 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
           for k in (25, 75, 125, 275)}  # fmt: skip
     assert collected == {25: None, 75: cm[25], 125: cm[75], 175: "nack", 225: "nack",
                          275: cm[125], 325: cm[275], 375: Range(0.01, 0)}  # fmt: skip
+    # PX4's pmw3901 cycle every 10 ms from start-up publishes every second one (20 ms
+    # windows); stuck: no flow, the old quality; zero quality: PX4 drops the reads (quality
+    # 0, no flow); dropped frames: no flow; muted: 0xFF bytes, -1 counts at quality 255.
+    assert sorted(flows) == list(range(20, 401, 20))
+    assert {r.integration_timespan_us for r in flows.values()} == {20_000}
+    assert any(flows[k].pixel_flow_rad != (0.0, 0.0) for k in (20, 40, 180, 320))
+    assert all(flows[k].pixel_flow_rad == (0.0, 0.0) for k in (80, 220))
+    assert flows[80].quality > 0
+    assert flows[140] == FlowReport((0.0, 0.0), 20_000, 0, 140_000)
+    minus_two = float(np.float32(-2) / np.float32(385))  # two reads of -1 counts
+    assert flows[280] == FlowReport((minus_two, minus_two), 20_000, 255, 280_000)
     kinds = {r.sent_us // 1000: (r.fix.fix_type, r.fix.satellites_used) for _, r in fixes}
     assert kinds[100] == (0, 0)
     assert kinds[150] == (2, 3)  # jammed: a 2D fix from 3 satellites
@@ -328,13 +364,18 @@ def test_bypass_layer_passes_the_si_samples_and_commanded_widths():
     pulses = tuple(Pulse(channel, 0, 1500 + channel) for channel in range(hexa))
     frame = ChipFrame(now_us=1000, imu=None, mag=None, baro_d1_d2=None, read_mag=True,
                       pulses=pulses, si=readings)  # fmt: skip
-    out = BypassSensorLayer(motors=hexa).frame(frame)
+    bypass = BypassSensorLayer(motors=hexa)
+    out = bypass.frame(frame)
+    assert out.flow is None
     assert out.accel_mps2 == (0.1, -0.2, -9.8)
     assert out.gyro_radps == (0.01, 0.0, -0.02)
     assert out.mag_gauss == (0.2, 0.0, 0.4)
     assert out.baro_pa_degc == (95_500.0, 20.0)
     assert out.pwm_widths_us == (1500.0, 1501.0, 1502.0, 1503.0, 1504.0, 1505.0)
     assert out.pwm_timed_out == (False,) * hexa
+    camera = Pmw3901Sample(77, -385, 90, 0)
+    out = bypass.frame(ChipFrame(**{**frame.__dict__, "now_us": 9000, "flow": camera}))
+    assert out.flow == FlowReport((0.2, -1.0), 9000, 90, 9000)
 
 
 def test_a_finish_without_a_sensed_frame_is_a_one_line_error():

@@ -152,6 +152,33 @@ def test_a_rangefinder_on_a_vehicle_without_one_is_one_line_naming_the_key(tmp_p
     )
 
 
+def test_optical_flow_reaches_the_autopilot_as_px4s_driver_reports_it_without_gps(
+    tmp_path, free_instance
+):
+    """The PMW3901 read as PX4's driver does: a HIL_OPTICAL_FLOW every 20 ms (a report every
+    second 10 ms cycle) with the window's time, no gyro and no distance; its flow is the
+    truth's image motion over the window (climbing level and still, ~0 but for the noise
+    and the counts); with ``gps = false`` no HIL_GPS at all and no sensor_gps in rig.ulg."""
+    _, log, received = fly(
+        tmp_path, free_instance, "--behaviour", "px4", "--throttle", "0.7", duration_s=1.5,
+        optical_flow=True, gps=False,
+    )  # fmt: skip
+    assert not [m for m in received if m["mavpackettype"] == "HIL_GPS"]
+    assert "sensor_gps" not in {d.name for d in log.data_list}
+    flows = [m for m in received if m["mavpackettype"] == "HIL_OPTICAL_FLOW"]
+    times_us = [m["time_usec"] for m in flows]
+    assert times_us == list(range(20_000, 1_500_001, 20_000))
+    assert {m["integration_time_us"] for m in flows} == {20_000}
+    assert all(math.isnan(m["integrated_xgyro"]) and m["distance"] == -1.0 for m in flows)
+    # F450 camera on a textured (0.8) floor in daylight: SQUAL 230 × 0.8, the driver's mean.
+    assert {m["quality"] for m in flows} == {184}
+    motion = np.array([(m["integrated_x"], m["integrated_y"]) for m in flows])
+    assert np.abs(motion).max() < 4 / 385  # a few counts of noise and rounding, no motion
+    logged = data(log, "sensor_optical_flow")
+    assert logged["pixel_flow[0]"] == pytest.approx(motion[:, 0], abs=1e-7)
+    assert list(logged["integration_timespan_us"]) == [20_000] * len(flows)
+
+
 def test_an_x8_gets_a_pwm_channel_per_motor_and_a_dropout_stops_motor_8(tmp_path, free_instance):
     """Eight motors from HIL_ACTUATOR_CONTROLS through eight PWM lines and capture
     channels to the model's eight rotors; motor 8's line goes quiet at 0.5 s, its capture

@@ -26,6 +26,7 @@ from rig.autopilots.px4 import (
     airframe_parameters,
     cpus_of_pinned_px4,
     find_px4,
+    sensor_parameters,
 )
 from rig.errors import RigError
 from rig.lockstep.loop import RunOptions, run_scenario
@@ -208,6 +209,19 @@ def test_airframe_parameters_follow_the_vehicle_file():
     assert params["MPC_THR_HOVER"] == 0.609
     assert params["BAT1_N_CELLS"] == 3
     assert params["MAV_TYPE"] == 2  # MAV_TYPE_QUADROTOR
+
+
+def test_sensor_parameters_say_what_the_vehicle_flies_with():
+    """A GPS receiver and no camera are PX4's defaults (nothing set); without GPS none is
+    expected or fused and the height is the barometer's; a camera is fused from its mount."""
+    from quad_model import load_vehicle
+
+    vehicle = load_vehicle("f450_high_precision")
+    assert sensor_parameters(vehicle, gps=True, optical_flow=False) == {}
+    assert sensor_parameters(vehicle, gps=False, optical_flow=True) == {
+        "SYS_HAS_GPS": 0, "EKF2_GPS_CTRL": 0, "EKF2_HGT_REF": 0, "EKF2_OF_CTRL": 1,
+        "SENS_FLOW_ROT": 0, "EKF2_OF_POS_X": 0.03, "EKF2_OF_POS_Y": 0.0, "EKF2_OF_POS_Z": -0.10,
+    }  # fmt: skip
 
 
 def test_a_hexa_or_an_x8_gets_every_motor_on_its_own_output(tmp_path):

@@ -35,6 +35,7 @@ def test_every_frame_row_matches_the_by_name_write(tmp_path):
         log.imu(t, 4000, accel, gyro)
         log.motors(t, t - 100, controls)
         log.pwm(t, widths)
+        log.optical_flow(t, (0.01 * frame, -0.02), 20_000, 200)
 
         rates = truth.angular_rate_frd_radps
         derivative = np.zeros(3) if previous is None else (rates - previous) / 0.004
@@ -65,6 +66,9 @@ def test_every_frame_row_matches_the_by_name_write(tmp_path):
         expected.write("actuator_motors", t, timestamp_sample=t - 100,
                        control=list(controls) + [math.nan] * 8, reversible_flags=0)  # fmt: skip
         expected.write("actuator_outputs", t, noutputs=4, output=list(widths) + [0.0] * 12)
+        expected.write("sensor_optical_flow", t, timestamp_sample=t,
+                       pixel_flow=[0.01 * frame, -0.02], integration_timespan_us=20_000,
+                       quality=200)  # fmt: skip
     log.close()
     expected.close()
 

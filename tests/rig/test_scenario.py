@@ -24,6 +24,7 @@ def test_bundled_scenarios_load(name):
 def test_required_bundle_is_shipped():
     assert {
         "takeoff_hover_land", "level_step", "pitch_sweep_bench", "motor_noise_bench", "hil_sim",
+        "optical_flow_hold",
     } <= set(BUNDLED)  # fmt: skip
 
 
@@ -105,6 +106,10 @@ BAD = [
     ({"commands": [{"at_s": 1, "action": "sticks", "pitch": -1.5}]},
      "key 'commands[0].pitch' = -1.5: expected a value >= -1"),
     ({"optical_flow": 1}, "key 'optical_flow' = 1: expected a valid boolean"),
+    ({"faults": [{"kind": "flow_chip", "mode": "stuck", "start_s": 1}]},
+     "key 'faults[0].kind' = 'flow_chip': no optical-flow camera is flown"),
+    ({"optical_flow": True, "faults": [{"kind": "flow_chip", "mode": "blind", "start_s": 1}]},
+     "key 'faults[0].mode' = 'blind': expected 'stuck', 'zero_quality' or 'drop_frames'"),
     ({"commands": [{"at_s": 1}]}, "key 'commands[0].action' is missing"),
     ({"commands": [{"at_s": 1, "action": "takeoff"}]}, "key 'commands[0].altitude_m' is missing"),
     ({"commands": [{"at_s": 5, "action": "arm"}]},
@@ -114,8 +119,8 @@ BAD = [
     ({"faults": [{"kind": "motor_loss", "motor": 8, "start_s": 1}]},
      "key 'faults[0].motor' = 8: expected a value <= 7"),
     ({"faults": [{"kind": "chip_mute", "chip": "bmi088", "start_s": 1}]},
-     "key 'faults[0].chip' = 'bmi088': expected 'mpu6000', 'ms5611', 'ist8310', 'ublox' or "
-     "'lidarlite'"),
+     "key 'faults[0].chip' = 'bmi088': expected 'mpu6000', 'ms5611', 'ist8310', 'ublox', "
+     "'lidarlite' or 'pmw3901'"),
     ({"faults": [{"kind": "gps_receiver", "fault": "spoofed", "start_s": 1}]},
      "key 'faults[0].fault' = 'spoofed': expected 'loss_of_fix', 'jammed' or 'bad_checksum'"),
     ({"faults": [{"kind": "gps_loss", "start_s": 1, "end_s": 0.5}]},
