@@ -16,12 +16,8 @@ import pytest
 
 from quad_model import QuadModel, SensorReadings, SensorSuite, VehicleTruth, load_vehicle
 from quad_model.frames import euler_from_quat, quat_to_dcm
-from rig.autopilots.px4 import sensor_parameters
 from rig.autopilots.reference import FlightController, GpsFix, Parameters, SensorFrame
 from rig.autopilots.reference.navigator import NavState
-from rig.autopilots.reference.params import is_parameter
-from rig.autopilots.reference.sensors import FlowReading, RangeReading
-from rig.lockstep.loop import RANGEFINDER_LIMITS_M, RANGEFINDER_RATE_HZ
 
 #: Gazebo's and PX4's default IMU rate; 1 kHz changes nothing these bounds test.
 IMU_RATE_HZ = 250
@@ -46,20 +42,14 @@ HOVER_BODY_RATE_RMS_BOUND_RADPS = 0.05
 STEP_TILT_BOUND_RAD = math.radians(3.0)
 
 
-#: PX4's pmw3901 driver publishes the camera's frames summed every 20 ms.
-FLOW_PUBLISH_US = 20_000
-
-
-def sensor_frame(readings: SensorReadings, flow: FlowReading | None = None) -> SensorFrame:
-    """quad_model's SI samples as the autopilot's frame (what HIL_SENSOR, HIL_GPS and
-    DISTANCE_SENSOR carry; ``flow`` a HIL_OPTICAL_FLOW that arrived since the last frame)."""
+def sensor_frame(readings: SensorReadings) -> SensorFrame:
+    """quad_model's SI samples as the autopilot's frame (what HIL_SENSOR/HIL_GPS carry)."""
     imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
     fix = None
     if gps is not None:
         velocity = (float(gps.vel_ned_mps[0]), float(gps.vel_ned_mps[1]), float(gps.vel_ned_mps[2]))
         fix = GpsFix(gps.lat_deg, gps.lon_deg, gps.alt_amsl_m, velocity, gps.eph_m, gps.epv_m,
                      gps.fix_type, gps.satellites_visible)  # fmt: skip
-    ranged = readings.range
     return SensorFrame(
         accel_mps2=imu.accel_mps2,
         gyro_radps=imu.gyro_radps,
@@ -67,35 +57,7 @@ def sensor_frame(readings: SensorReadings, flow: FlowReading | None = None) -> S
         baro_pressure_pa=None if baro is None else baro.pressure_pa,
         baro_temperature_degc=None if baro is None else baro.temperature_degc,
         gps=fix,
-        range=None
-        if ranged is None or ranged.distance_m is None
-        else RangeReading(ranged.distance_m, 100, *RANGEFINDER_LIMITS_M),
-        flow=flow,
     )
-
-
-class FlowDriver:
-    """PX4's pmw3901 driver: the camera's frames summed and published every 20 ms with their
-    mean quality, stamped at publication; the autopilot takes it with the next frame."""
-
-    def __init__(self) -> None:
-        self.motion = np.zeros(2)
-        self.squals: list[int] = []
-        self.published_us = 0
-        self.pending: FlowReading | None = None
-
-    def step(self, readings: SensorReadings, time_us: int) -> FlowReading | None:
-        """The reading that arrived before this frame; sums this frame's camera frame."""
-        arrived, self.pending = self.pending, None
-        if readings.flow is not None:
-            self.motion += readings.flow.flow_xy_rad
-            self.squals.append(readings.flow.squal)
-        if time_us - self.published_us >= FLOW_PUBLISH_US and self.squals:
-            motion = (float(self.motion[0]), float(self.motion[1]))
-            self.pending = FlowReading(time_us, motion, time_us - self.published_us,
-                                       round(float(np.mean(self.squals))))  # fmt: skip
-            self.motion, self.squals, self.published_us = np.zeros(2), [], time_us
-        return arrived
 
 
 @dataclass
@@ -106,25 +68,14 @@ class Flight:
     sensors: SensorSuite
     controller: FlightController
     throttle: np.ndarray
-    flow: FlowDriver | None = None
 
     @classmethod
-    def start(cls, seed: int, *, gps: bool = True, optical_flow: bool = False) -> "Flight":
-        """The F450; without ``gps``, with ``optical_flow`` (and then its LIDAR-Lite), told
-        what the rig tells an autopilot of those sensors (``sensor_parameters``)."""
+    def start(cls, seed: int) -> "Flight":
         vehicle = load_vehicle("f450_high_precision")
         model_rng, sensor_rng = np.random.default_rng(seed).spawn(2)
         model = QuadModel(vehicle, model_rng)
-        rangefinder_hz = RANGEFINDER_RATE_HZ if optical_flow else None
-        sensors = SensorSuite(vehicle, model.environment, sensor_rng, IMU_RATE_HZ,
-                              rangefinder_rate_hz=rangefinder_hz, optical_flow=optical_flow,
-                              gps=gps)  # fmt: skip
-        told = sensor_parameters(vehicle, gps=gps, optical_flow=optical_flow)
-        params = Parameters({name: value for name, value in told.items() if is_parameter(name)})
-        if optical_flow:
-            params.set("MPC_THR_HOVER", round(model.hover_throttle(), 3))
-        flow = FlowDriver() if optical_flow else None
-        return cls(model, sensors, FlightController(params), np.zeros(4), flow)
+        sensors = SensorSuite(vehicle, model.environment, sensor_rng, IMU_RATE_HZ)
+        return cls(model, sensors, FlightController(Parameters()), np.zeros(4))
 
     @property
     def truth(self) -> VehicleTruth:
@@ -135,9 +86,7 @@ class Flight:
         for _ in range(round(seconds * IMU_RATE_HZ)):
             self.model.advance(self.throttle, FRAME_US * 1e-6)
             truth = self.model.truth
-            readings = self.sensors.sample(truth)
-            flow = None if self.flow is None else self.flow.step(readings, truth.time_us)
-            frame = sensor_frame(readings, flow)
+            frame = sensor_frame(self.sensors.sample(truth))
             controls = self.controller.update(frame, truth.time_us)
             self.throttle = np.array(controls.motors) if controls.armed else np.zeros(4)
             if on_frame is not None:
@@ -297,52 +246,3 @@ def test_offboard_body_rates_drive_the_rate_loop_only():
     assert np.sqrt((settled[:, :2] ** 2).mean(axis=0)).max() < HOVER_BODY_RATE_RMS_BOUND_RADPS
     turned = (euler_from_quat(flight.truth.attitude_quat)[2] - yaw_start) % (2 * math.pi)
     assert turned == pytest.approx(np.array(rates)[:, 2].sum() / IMU_RATE_HZ, abs=0.05)
-
-
-def test_without_gps_it_flies_on_optical_flow():
-    """No GPS; the F450's PMW3901 and LIDAR-Lite: arm and take off to 2.5 m, hold 20 s within
-    0.3 m of the take-off point (the truth), fly a 2 m square of offboard position targets
-    (6 s a corner) within 0.5 m of each corner, land and disarm. The square is flown in the
-    estimator's frame, whose north is magnetic (no GPS, no declination): the corners are
-    judged in that frame, rotated by the heading estimate's error (about 3°). Measured: the
-    hold within 0.08 m (x) and 0.21 m (y), the corners within 0.12-0.32 m."""
-    flight = Flight.start(seed=7, gps=False, optical_flow=True)
-    flight.fly(3.0)
-    controller = flight.controller
-    assert controller.preflight_failure() is None
-    assert controller.position.origin is None
-    controller.set_parameter("MIS_TAKEOFF_ALT", 2.5)
-    assert controller.takeoff(math.nan).result == 0
-    assert controller.arm().result == 0
-    start = flight.truth.position_ned_m.copy()
-    flight.fly(8.0)
-    assert -flight.truth.position_ned_m[2] == pytest.approx(2.5, abs=HOVER_ALTITUDE_BOUND_M)
-    held = []
-    flight.fly(20.0, lambda f: held.append(f.truth.position_ned_m[:2] - start[:2]))
-    assert controller.nav_state == NavState.AUTO_LOITER
-    assert np.abs(np.array(held)).max() < 0.3
-    home = controller.navigator.home_ned
-    errors = []
-    for corner in ((2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)):
-        target = np.array([home[0] + corner[0], home[1] + corner[1], home[2] - 2.5])
-
-        def stream(f: Flight, target=target) -> None:
-            f.controller.set_offboard_setpoint(target, np.full(3, np.nan), 0.0, math.nan)
-
-        stream(flight)
-        if controller.nav_state != NavState.OFFBOARD:
-            assert controller.set_mode(NavState.OFFBOARD).result == 0
-        flight.fly(6.0, stream)
-        heading_error = euler_from_quat(controller.attitude.q)[2] - euler_from_quat(
-            flight.truth.attitude_quat)[2]  # fmt: skip
-        c, s_ = math.cos(heading_error), math.sin(heading_error)
-        moved = flight.truth.position_ned_m[:2] - start[:2]
-        in_frame = np.array([c * moved[0] - s_ * moved[1], s_ * moved[0] + c * moved[1]])
-        errors.append(float(np.hypot(*(in_frame - corner))))
-    assert max(errors) < 0.5, errors
-    assert controller.land().result == 0
-    flight.fly(15.0)
-    assert not controller.armed
-    texts = [text for _, text in controller.status_messages]
-    assert texts[-2:] == ["Landing detected", "Disarmed: landed (COM_DISARM_LAND)"]
-    assert not any("Failsafe" in text for text in texts)
