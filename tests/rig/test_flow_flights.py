@@ -91,3 +91,23 @@ def test_without_gps_it_holds_and_flies_a_square_on_optical_flow(tmp_path):
     assert "Landing detected" in messages
     assert any(text.startswith("Disarmed") for text in messages)
     assert not any("Failsafe" in text for text in messages), messages
+
+
+def test_the_flow_chip_blind_in_a_hover_ends_in_the_descend_failsafe(tmp_path):
+    """The chip sees nothing from 12 s (SQUAL 0: PX4's driver drops its readings): no flow is
+    fused, EKF2_NOAID_TOUT (5 s) later the local position is invalid and, as PX4 falls back
+    when neither Hold nor Land can run, it descends level, says why, and lands."""
+    blind = {"kind": "flow_chip", "mode": "zero_quality", "start_s": 12.0}
+    scenario = {"name": "flow_blind", "vehicle": "f450_high_precision", "duration_s": 30.0,
+                "seed": 3, "sensor_layer": "tlm", "gps": False, "optical_flow": True,
+                "rangefinder": True, "commands": _commands()[:2], "faults": [blind]}  # fmt: skip
+    result = fly(scenario, tmp_path / "run")
+    autopilot_log = pyulog.ULog(str(result.autopilot_log))
+    messages = [(m.timestamp / 1e6, m.message) for m in autopilot_log.logged_messages]
+    failsafe = [(t, text) for t, text in messages if "Failsafe" in text]
+    assert failsafe, messages
+    assert failsafe[0][1] == "Failsafe: no position (optical flow lost), Descend"
+    assert 17.0 <= failsafe[0][0] < 17.5  # the last fusion before 12 s, plus 5 s
+    t, z = _series(pyulog.ULog(str(result.rig_log)), "vehicle_local_position_groundtruth", "z")
+    assert -z[np.searchsorted(t, 16.9)] > 2.0  # held until then
+    assert -z[-1] < 0.05  # down
