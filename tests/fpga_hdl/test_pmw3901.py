@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """PMW3901 TLM model, PX4-side driver and core without a cocotb simulator: PX4's sequence and
 arithmetic, the datasheet's motion rules, and the core under ``amaranth.sim`` scored against
 the model (the pin-level timing is in cocotb_pmw3901.py)."""
