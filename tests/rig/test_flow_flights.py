@@ -5,6 +5,7 @@ Every position judged comes from the rig's ground truth (rig.ulg); the autopilot
 its heading, whose north is magnetic here (no GPS, so no declination from the WMM).
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 import pyulog
 
 from quad_model.frames import euler_from_quat
+from rig.scenarios.scenario import load_scenario
 from tests.rig.flights import fly
 
 pytestmark = pytest.mark.closed_loop
@@ -111,3 +113,49 @@ def test_the_flow_chip_blind_in_a_hover_ends_in_the_descend_failsafe(tmp_path):
     t, z = _series(pyulog.ULog(str(result.rig_log)), "vehicle_local_position_groundtruth", "z")
     assert -z[np.searchsorted(t, 16.9)] > 2.0  # held until then
     assert -z[-1] < 0.05  # down
+
+
+#: The bundled flight's times (rig/scenarios/optical_flow_hold.toml): the throttle stick
+#: centred at 15 s, the first offboard corner at 42 s, 7 s apart, the landing at 70 s.
+STICK_HOLD_S = (17.0, 37.0)
+STICK_CORNER_START_S = 42.0
+STICK_CORNER_S = 7.0
+
+
+def test_the_bundled_flow_flight_takes_off_and_hovers_on_the_pilots_sticks(tmp_path):
+    """`optical_flow_hold` (sensor_layer "tlm") with the reference autopilot: Position mode
+    from the sticks, armed, the throttle stick at 0.8 for 4 s takes it off (PX4's take-off
+    ramp), centred it holds hands-off within ±0.3 m for 20 s, then flies the offboard square
+    (each corner within 0.5 m) and lands and disarms, with no failsafe."""
+    flight = dataclasses.replace(load_scenario("optical_flow_hold"), sensor_layer="tlm")
+    result = fly(flight, tmp_path / "run")
+    rig_log = pyulog.ULog(str(result.rig_log))
+    autopilot_log = pyulog.ULog(str(result.autopilot_log))
+    messages = [m.message for m in autopilot_log.logged_messages]
+    t, x, y, z = _series(rig_log, "vehicle_local_position_groundtruth", "x", "y", "z")
+    start = np.array([x[np.searchsorted(t, 10.0)], y[np.searchsorted(t, 10.0)]])
+    hold = (t >= STICK_HOLD_S[0]) & (t < STICK_HOLD_S[1])
+    assert -z[hold].min() > 1.0, (-z[hold].min(), messages)
+    drift = np.abs(np.column_stack([x[hold], y[hold]]) - np.array([x[hold][0], y[hold][0]]))
+    height = -z[hold]
+    print(f"hover at {height.mean():.2f} m, drift {drift.max(axis=0)}, "
+          f"height range {np.ptp(height):.3f} m, start {start}")  # fmt: skip
+    assert drift.max() < HOLD_BOUND_M, drift.max(axis=0)
+    assert np.ptp(height) < 2 * HOLD_BOUND_M
+    t_true, yaw_true = _yaw(rig_log, "vehicle_attitude_groundtruth")
+    t_est, yaw_est = _yaw(autopilot_log, "vehicle_attitude")
+    errors = []
+    for i, corner in enumerate(CORNERS):
+        at = STICK_CORNER_START_S + STICK_CORNER_S * (i + 1) - 0.05
+        k = np.searchsorted(t, at)
+        heading = yaw_est[np.searchsorted(t_est, at)] - yaw_true[np.searchsorted(t_true, at)]
+        c, s = math.cos(heading), math.sin(heading)
+        moved = np.array([x[k], y[k]]) - start
+        in_frame = np.array([c * moved[0] - s * moved[1], s * moved[0] + c * moved[1]])
+        errors.append(float(np.hypot(*(in_frame - corner))))
+    print(f"corner errors {errors}")
+    assert max(errors) < CORNER_BOUND_M, errors
+    assert -z[-1] < 0.05
+    assert "Landing detected" in messages
+    assert any(text.startswith("Disarmed") for text in messages)
+    assert not any("Failsafe" in text for text in messages), messages
