@@ -5,6 +5,7 @@ Every position judged comes from the rig's ground truth (rig.ulg); the autopilot
 its heading, whose north is magnetic here (no GPS, so no declination from the WMM).
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 import pyulog
 
 from quad_model.frames import euler_from_quat
+from rig.scenarios.scenario import load_scenario
 from tests.rig.flights import fly
 
 pytestmark = pytest.mark.closed_loop
@@ -111,3 +113,87 @@ def test_the_flow_chip_blind_in_a_hover_ends_in_the_descend_failsafe(tmp_path):
     t, z = _series(pyulog.ULog(str(result.rig_log)), "vehicle_local_position_groundtruth", "z")
     assert -z[np.searchsorted(t, 16.9)] > 2.0  # held until then
     assert -z[-1] < 0.05  # down
+
+
+#: The bundled flight's times (rig/scenarios/optical_flow_hold.toml): the throttle stick
+#: centred at 15 s, the first offboard corner at 42 s, 7 s apart, the landing at 70 s.
+STICK_HOLD_S = (17.0, 37.0)
+STICK_CORNER_START_S = 42.0
+STICK_CORNER_S = 7.0
+
+
+def test_the_bundled_flow_flight_takes_off_and_hovers_on_the_pilots_sticks(tmp_path):
+    """`optical_flow_hold` (sensor_layer "tlm") with the reference autopilot: Position mode
+    from the sticks, armed, the throttle stick at 0.8 for 4 s takes it off (PX4's take-off
+    ramp), centred it holds hands-off within ±0.3 m for 20 s, then flies the offboard square
+    (each corner within 0.5 m) and lands and disarms, with no failsafe. Measured: the
+    hover at 2.70 m, within 0.07 m (x), 0.04 m (y) and 0.16 m of height; the corners within
+    0.11-0.18 m."""
+    flight = dataclasses.replace(load_scenario("optical_flow_hold"), sensor_layer="tlm")
+    result = fly(flight, tmp_path / "run")
+    rig_log = pyulog.ULog(str(result.rig_log))
+    autopilot_log = pyulog.ULog(str(result.autopilot_log))
+    messages = [m.message for m in autopilot_log.logged_messages]
+    t, x, y, z = _series(rig_log, "vehicle_local_position_groundtruth", "x", "y", "z")
+    start = np.array([x[np.searchsorted(t, 10.0)], y[np.searchsorted(t, 10.0)]])
+    hold = (t >= STICK_HOLD_S[0]) & (t < STICK_HOLD_S[1])
+    assert -z[hold].min() > 1.5, messages  # it took off on the throttle stick
+    held = np.column_stack([x[hold], y[hold], z[hold]])
+    assert np.abs(held - held[0]).max() < HOLD_BOUND_M, np.abs(held - held[0]).max(axis=0)
+    t_true, yaw_true = _yaw(rig_log, "vehicle_attitude_groundtruth")
+    t_est, yaw_est = _yaw(autopilot_log, "vehicle_attitude")
+    errors = []
+    for i, corner in enumerate(CORNERS):
+        at = STICK_CORNER_START_S + STICK_CORNER_S * (i + 1) - 0.05
+        k = np.searchsorted(t, at)
+        heading = yaw_est[np.searchsorted(t_est, at)] - yaw_true[np.searchsorted(t_true, at)]
+        c, s = math.cos(heading), math.sin(heading)
+        moved = np.array([x[k], y[k]]) - start
+        in_frame = np.array([c * moved[0] - s * moved[1], s * moved[0] + c * moved[1]])
+        errors.append(float(np.hypot(*(in_frame - corner))))
+    assert max(errors) < CORNER_BOUND_M, errors
+    assert -z[-1] < 0.05
+    assert "Landing detected" in messages
+    assert any(text.startswith("Disarmed") for text in messages)
+    assert not any("Failsafe" in text for text in messages), messages
+
+
+def test_flow_lost_in_position_mode_falls_back_to_altitude_and_the_throttle_stick_lands(
+    tmp_path,
+):
+    """Position mode from the sticks, the chip blind from 14 s: EKF2_NOAID_TOUT later the
+    position is invalid and, the pilot being on the sticks, PX4 falls back to Altitude
+    (height held on the barometer and the rangefinder); the throttle stick held down from
+    24 s lands it, and the land detector disarms it. Measured: the fallback at 19.0 s, the
+    height held at 2.62-2.69 m (it coasts on at the 0.5 m/s it picked up while dead
+    reckoning: Altitude mode has no horizontal control), landed at 28.8 s, disarmed at
+    30.8 s."""
+    commands = [
+        {"at_s": 2.0, "action": "sticks", "throttle": -1.0},
+        {"at_s": 3.0, "action": "mode", "name": "Position"},
+        {"at_s": 4.0, "action": "arm"},
+        {"at_s": 5.0, "action": "sticks", "throttle": 0.8},
+        {"at_s": 9.0, "action": "sticks", "throttle": 0.0},
+        {"at_s": 24.0, "action": "sticks", "throttle": -1.0},
+    ]
+    blind = {"kind": "flow_chip", "mode": "zero_quality", "start_s": 14.0}
+    scenario = {"name": "flow_sticks_blind", "vehicle": "f450_high_precision",
+                "duration_s": 36.0, "seed": 3, "sensor_layer": "tlm", "gps": False,
+                "optical_flow": True, "rangefinder": True, "commands": commands,
+                "faults": [blind]}  # fmt: skip
+    result = fly(scenario, tmp_path / "run")
+    autopilot_log = pyulog.ULog(str(result.autopilot_log))
+    messages = [(m.timestamp / 1e6, m.message) for m in autopilot_log.logged_messages]
+    failsafe = [(t, text) for t, text in messages if "Failsafe" in text]
+    assert [text for _, text in failsafe] == [
+        "Failsafe: no position (optical flow lost), Altitude"
+    ], messages
+    assert 19.0 <= failsafe[0][0] < 19.5  # the last fusion before 14 s, plus 5 s
+    t, z = _series(pyulog.ULog(str(result.rig_log)), "vehicle_local_position_groundtruth", "z")
+    held = -z[(t >= 19.5) & (t < 24.0)]
+    assert held.min() > 1.5
+    assert np.ptp(held) < 2 * HOLD_BOUND_M
+    assert -z[-1] < 0.05
+    texts = [text for _, text in messages]
+    assert "Landing detected" in texts
+    assert "Disarmed: landed (COM_DISARM_LAND)" in texts

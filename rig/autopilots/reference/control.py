@@ -448,9 +448,10 @@ class PositionController:
         feed_forward = np.nan_to_num(velocity_sp)
         vel_sp = np.empty(3)
         vel_sp[:2] = constrain_xy(vel_from_pos[:2], feed_forward[:2], velocity_limits_mps[0])
-        vel_sp[2] = min(
-            max(vel_from_pos[2] + feed_forward[2], -velocity_limits_mps[1]),
-            velocity_limits_mps[2],
+        # the up limit wins, as in PX4's constrain: during a take-off ramp it is negative
+        vel_sp[2] = max(
+            min(vel_from_pos[2] + feed_forward[2], velocity_limits_mps[2]),
+            -velocity_limits_mps[1],
         )
         # an axis with neither a position nor a velocity set-point is not controlled: zero
         # acceleration (level flight for x/y), as PX4 does for NaN set-points

@@ -43,6 +43,7 @@ from rig.autopilots.reference.estimator import (
 )
 from rig.autopilots.reference.flight_log import ImuAverage
 from rig.autopilots.reference.land_detector import LandDetector
+from rig.autopilots.reference.manual import ManualTask, Sticks
 from rig.autopilots.reference.navigator import MissionItem, Navigator, NavState, Setpoint
 from rig.autopilots.reference.params import Parameters
 from rig.autopilots.reference.sensors import GroundTruth, RangeReading, SensorFrame, SensorMonitor
@@ -62,6 +63,8 @@ _GPS_ACCEL_TAU_S = 0.1
 #: Modes that need a position estimate.
 _POSITION_MODES = {NavState.POSCTL, NavState.AUTO_MISSION, NavState.AUTO_LOITER,
                    NavState.AUTO_TAKEOFF, NavState.AUTO_LAND, NavState.OFFBOARD}  # fmt: skip
+#: Modes flown from a pilot's sticks.
+_STICK_MODES = {NavState.POSCTL, NavState.ALTCTL}
 _SEVERITY_LEVEL = {mavlink.MAV_SEVERITY_CRITICAL: "crit", mavlink.MAV_SEVERITY_WARNING: "warn",
                    mavlink.MAV_SEVERITY_INFO: "info"}  # fmt: skip
 
@@ -140,6 +143,9 @@ class FlightController:
         self.user_nav_state = NavState.AUTO_LOITER
         self.failsafe = False
         self.land_detector = LandDetector()
+        self.manual = ManualTask(self.params)
+        #: The pilot's sticks as last received (MANUAL_CONTROL), None before any.
+        self.sticks: Sticks | None = None
         self.time_us = 0
         self.home: tuple[float, float, float] | None = None  # lat, lon, alt AMSL
         self.motors = self._stopped()
@@ -223,6 +229,8 @@ class FlightController:
                 return self.refuse(reason)
         if self.nav_state == NavState.OFFBOARD and not self._offboard_fresh():
             return self.refuse("Arming denied: no offboard setpoint")
+        if self.nav_state in _STICK_MODES and not self.sticks_present():
+            return self.refuse("Arming denied: no manual control input")
         self.armed = True
         self._took_off = False
         self.gyro_calibration.reset()
@@ -254,6 +262,10 @@ class FlightController:
             return self.refuse("Switching to mission denied: no global position (GPS)")
         if nav_state == NavState.OFFBOARD and not self._offboard_fresh():
             return self.refuse("Switching to offboard denied: no offboard setpoint")
+        if nav_state == NavState.ALTCTL and not self.height_valid():
+            return self.refuse("Switching to ALTCTL denied: no height estimate")
+        if nav_state in _STICK_MODES and not self.sticks_present():
+            return self.refuse(f"Switching to {nav_state.name} denied: no manual control input")
         self.user_nav_state = nav_state
         self.failsafe = False
         self._enter(nav_state)
@@ -305,6 +317,10 @@ class FlightController:
         self._offboard_body = None
         self._offboard_sp_time_us = self.time_us
 
+    def set_sticks(self, sticks: Sticks) -> None:
+        """MANUAL_CONTROL: the pilot's sticks, used by Position and Altitude modes."""
+        self.sticks = sticks
+
     def set_offboard_attitude(self, q: NDArray[np.float64], thrust: float) -> None:
         """SET_ATTITUDE_TARGET: attitude and collective thrust 0..1, position control off."""
         thrust = min(max(thrust, 0.0), 1.0)
@@ -345,6 +361,18 @@ class FlightController:
         """PX4's local position ``xy_valid``: a horizontal aid (GPS, optical flow) is fused."""
         return (self.position.origin is not None and self._gps_good) or self.flow.aiding(
             self.time_us
+        )
+
+    def height_valid(self) -> bool:
+        """PX4's local position ``z_valid``: a height aid (barometer, GPS, rangefinder) works."""
+        t = self.time_us
+        return self.monitors["baro"].healthy(t) or self._gps_good or self.ground.valid(t)
+
+    def sticks_present(self) -> bool:
+        """Sticks heard within COM_RC_LOSS_T (PX4's ``manual_control_signal_lost`` false)."""
+        sticks = self.sticks
+        return sticks is not None and (
+            self.time_us - sticks.time_us <= self.params["COM_RC_LOSS_T"] * 1e6
         )
 
     def attitude_valid(self) -> bool:
@@ -546,14 +574,28 @@ class FlightController:
             self._disarm(f"Failsafe: IMU {imu_fault}, motors off")
             return
         if self.nav_state in _POSITION_MODES and not self.position_valid():
-            # PX4: no local position, so neither Hold nor Land can run; Descend needs only
-            # the height
+            # PX4: no local position, so neither Hold nor Land can run; Position mode falls
+            # back to Altitude while a pilot is on the sticks; Descend needs only the height
+            self.failsafe = True
+            lost = "optical flow" if self.flow.active else "GPS"
+            fallback = NavState.DESCEND
+            if self.nav_state == NavState.POSCTL and self.height_valid() and self.sticks_present():
+                fallback = NavState.ALTCTL
+            self._enter(fallback)
+            name = "Altitude" if fallback == NavState.ALTCTL else "Descend"
+            text = f"Failsafe: no position ({lost} lost), {name}"
+            self.notify(mavlink.MAV_SEVERITY_CRITICAL, text)
+        if self.nav_state == NavState.ALTCTL and not self.height_valid():
             self.failsafe = True
             self._enter(NavState.DESCEND)
-            lost = "optical flow" if self.flow.active else "GPS"
-            self.notify(
-                mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: no position ({lost} lost), Descend"
-            )
+            self.notify(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: no height estimate, Descend")
+        if self.nav_state in _STICK_MODES and not self.sticks_present():
+            # PX4's NAV_RCL_ACT: Return, or Land without one, or Descend without a position
+            self.failsafe = True
+            land = self.position_valid()
+            self._enter(NavState.AUTO_LAND if land else NavState.DESCEND)
+            text = f"Failsafe: manual control lost, {'Land' if land else 'Descend'}"
+            self.notify(mavlink.MAV_SEVERITY_CRITICAL, text)
         if self.nav_state == NavState.OFFBOARD and not self._offboard_fresh():
             self.failsafe = True
             self._enter(NavState.AUTO_LOITER)
@@ -614,6 +656,8 @@ class FlightController:
             return True
         if self.nav_state == NavState.AUTO_TAKEOFF:
             return False
+        if self.nav_state in _STICK_MODES:
+            return self.sticks is None or not self.manual.wants_takeoff(self.sticks)
         if self.nav_state == NavState.AUTO_MISSION:
             return self.navigator.mission_finished
         if self.nav_state == NavState.OFFBOARD:
@@ -668,6 +712,8 @@ class FlightController:
             self.setpoint = None
             self.position_control.reset_integral()
             nav.enter(position, np.zeros(3), float(euler_from_quat(self.attitude.q)[2]))
+            if self.nav_state in _STICK_MODES:  # PX4: ready for take-off, the ramp from 0
+                self.manual.activate(position, self.nav_state == NavState.POSCTL, on_ground=True)
             self.collective_thrust = 0.0
             return
         if self.nav_state == NavState.AUTO_TAKEOFF:
@@ -689,6 +735,11 @@ class FlightController:
             return  # _control applies the body setpoint every frame
         elif self.nav_state == NavState.OFFBOARD:
             setpoint = nav.offboard()
+        elif self.nav_state in _STICK_MODES and self.sticks is not None:
+            height = nav.home_ned[2] - position[2] if dist_bottom is None else dist_bottom
+            yaw = float(euler_from_quat(self.attitude.q)[2])
+            setpoint = self.manual.update(self.sticks, position, est.velocity_ned_mps, yaw,
+                                          height, dt_s)  # fmt: skip
         else:
             setpoint = nav.hold(dt_s)
         self.setpoint = setpoint
@@ -718,6 +769,8 @@ class FlightController:
         self.navigator.enter(
             est.position_ned_m, est.velocity_ned_mps, float(euler_from_quat(self.attitude.q)[2])
         )
+        if nav_state in _STICK_MODES:
+            self.manual.activate(est.position_ned_m, nav_state == NavState.POSCTL, self.landed)
 
     def _prepare_takeoff(self) -> None:
         """Climb from here to the requested altitude, at least MIS_TAKEOFF_ALT above home

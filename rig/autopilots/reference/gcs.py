@@ -33,6 +33,7 @@ import numpy as np
 
 from quad_model.frames import euler_from_quat
 from rig.autopilots.reference.flight_controller import CommandResult, FlightController
+from rig.autopilots.reference.manual import sticks_from_manual_control
 from rig.autopilots.reference.navigator import (
     MissionItem,
     NavState,
@@ -256,6 +257,7 @@ class GroundStation:
             "MISSION_ACK": lambda link, msg: None,
             "SET_POSITION_TARGET_LOCAL_NED": self._set_position_target,
             "SET_ATTITUDE_TARGET": self._set_attitude_target,
+            "MANUAL_CONTROL": self._manual_control,
             "FILE_TRANSFER_PROTOCOL": self._file_transfer,
         }
 
@@ -362,7 +364,7 @@ class GroundStation:
             return CommandResult(mavlink.MAV_RESULT_UNSUPPORTED)
         nav_state = _mode_from_custom(int(p[1]), int(p[2]))
         if nav_state is None:
-            return self.fc.refuse(f"Mode {int(p[1])}/{int(p[2])} not available (no RC pilot)")
+            return self.fc.refuse(f"Mode {int(p[1])}/{int(p[2])} not available")
         return self.fc.set_mode(nav_state)
 
     def _set_interval(
@@ -618,6 +620,12 @@ class GroundStation:
             self.unexpected += 1
             return
         self.fc.set_offboard_setpoint(position, velocity, yaw, yaw_rate)
+
+    def _manual_control(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
+        """A pilot's sticks (PX4 ignores those addressed to another system)."""
+        if msg.target != int(self.fc.params["MAV_SYS_ID"]):
+            return
+        self.fc.set_sticks(sticks_from_manual_control(msg.x, msg.y, msg.z, msg.r, self.fc.time_us))
 
     def _set_attitude_target(self, link: MavlinkLink, msg: mavlink.MAVLink_message) -> None:
         """PX4's type_mask semantics (mavlink_receiver.cpp): the attitude when it is not

@@ -1,4 +1,4 @@
-"""Flight modes and where each one wants the vehicle: PX4's navigator, for a quad without RC.
+"""Flight modes and where each one wants the vehicle: PX4's navigator.
 
 Modes are PX4's ``vehicle_status.nav_state`` values and travel in HEARTBEAT as PX4's custom
 mode (``px4_custom_mode.h``: main mode in bits 16-23, sub mode in 24-31), so QGroundControl
@@ -29,6 +29,7 @@ _NAN3 = np.full(3, np.nan)
 class NavState(enum.IntEnum):
     """PX4 ``vehicle_status.nav_state`` (msg/VehicleStatus.msg)."""
 
+    ALTCTL = 1
     POSCTL = 2
     AUTO_MISSION = 3
     AUTO_LOITER = 4
@@ -64,6 +65,7 @@ class Px4AutoMode(enum.IntEnum):
 
 #: nav_state → (main mode, sub mode) as PX4's ``get_px4_custom_mode`` reports it.
 _CUSTOM_MODES = {
+    NavState.ALTCTL: (Px4MainMode.ALTCTL, 0),
     NavState.POSCTL: (Px4MainMode.POSCTL, 0),
     NavState.AUTO_MISSION: (Px4MainMode.AUTO, Px4AutoMode.MISSION),
     NavState.AUTO_LOITER: (Px4MainMode.AUTO, Px4AutoMode.LOITER),
@@ -76,7 +78,7 @@ _CUSTOM_MODES = {
 #: Modes a ground station may select (DESCEND and TERMINATION are failsafe-only).
 _SELECTABLE: dict[tuple[int, int], NavState] = {  # (main mode, sub mode): a mode is its int
     _CUSTOM_MODES[s]: s
-    for s in (NavState.POSCTL, NavState.AUTO_MISSION, NavState.AUTO_LOITER,
+    for s in (NavState.ALTCTL, NavState.POSCTL, NavState.AUTO_MISSION, NavState.AUTO_LOITER,
               NavState.OFFBOARD, NavState.AUTO_TAKEOFF, NavState.AUTO_LAND)
 }  # fmt: skip
 
@@ -89,8 +91,8 @@ def custom_mode(nav_state: NavState) -> int:
 
 def nav_state_from_custom(main_mode: int, sub_mode: int) -> NavState | None:
     """The nav_state a DO_SET_MODE asks for, or None when this autopilot has no such mode
-    (manual modes need a pilot on sticks, which a HIL rig does not have)."""
-    if main_mode in (Px4MainMode.POSCTL, Px4MainMode.OFFBOARD):
+    (Manual, Stabilized, Acro)."""
+    if main_mode in (Px4MainMode.ALTCTL, Px4MainMode.POSCTL, Px4MainMode.OFFBOARD):
         sub_mode = 0
     return _SELECTABLE.get((main_mode, sub_mode))
 

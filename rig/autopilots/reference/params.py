@@ -116,6 +116,19 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("MPC_ACC_UP_MAX", 4.0, 2.0, 15.0, "m/s^2", "Maximum upwards acceleration"),
     _p("MPC_ACC_DOWN_MAX", 3.0, 2.0, 15.0, "m/s^2", "Maximum downwards acceleration"),
     # src/modules/mc_pos_control/multicopter_takeoff_land_params.yaml
+    # src/modules/mc_pos_control/mc_pos_control_params.c: the manual modes (Position, Altitude)
+    _p("MPC_HOLD_DZ", 0.1, 0.0, 1.0, "", "Deadzone of the sticks where position hold is enabled"),
+    _p("MPC_XY_MAN_EXPO", 0.6, 0.0, 1.0, "", "Manual position control stick exponential curve"),
+    _p("MPC_Z_MAN_EXPO", 0.6, 0.0, 1.0, "", "Manual control stick vertical exponential curve"),
+    _p("MPC_YAW_EXPO", 0.6, 0.0, 1.0, "", "Manual control stick yaw rotation exponential curve"),
+    _p("MPC_VEL_MANUAL", 10.0, 3.0, 20.0, "m/s", "Maximum horizontal speed in Position mode"),
+    _p("MPC_HOLD_MAX_XY", 0.8, 0.0, 3.0, "m/s", "Below this speed the position is held"),
+    _p("MPC_HOLD_MAX_Z", 0.6, 0.0, 3.0, "m/s", "Below this climb rate the height is held"),
+    _p("MPC_MAN_Y_MAX", 150.0, 0.0, 400.0, "deg/s", "Max manual yaw rate"),
+    _p("MPC_MAN_Y_TAU", 0.08, 0.0, 5.0, "s", "Manual yaw rate input filter time constant"),
+    _p("MPC_MAN_TILT_MAX", 35.0, 0.0, 90.0, "deg", "Maximal tilt angle in Altitude mode"),
+    # src/modules/mc_att_control/mc_att_control_params.c
+    _p("MC_MAN_TILT_TAU", 0.0, 0.0, 2.0, "s", "Manual tilt input filter time constant"),
     _p("MPC_TKO_SPEED", 1.5, 1.0, 5.0, "m/s", "Takeoff climb rate"),
     _p("MPC_TKO_RAMP_T", 3.0, 0.0, 5.0, "s", "Smooth takeoff ramp time constant"),
     _p("MPC_LAND_SPEED", 0.7, 0.6, _INF, "m/s", "Landing descend rate"),
@@ -177,6 +190,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     _p("COM_SPOOLUP_TIME", 1.0, 0.0, 5.0, "s", "Motor spool-up time before takeoff"),
     _p("COM_DISARM_LAND", 2.0, -1.0, 20.0, "s", "Auto-disarm after landing (-1: never)"),
     _p("COM_DISARM_PRFLT", 10.0, -1.0, 20.0, "s", "Auto-disarm if no takeoff (-1: never)"),
+    _p("COM_RC_LOSS_T", 0.5, 0.0, 35.0, "s", "Manual control loss timeout"),
     _p("COM_OF_LOSS_T", 1.0, 0.0, 60.0, "s", "Offboard setpoint loss timeout"),
     _p("COM_POS_FS_DELAY", 1.0, 1.0, 100.0, "s", "GPS loss failsafe delay"),
     _p("COM_IMU_LOSS_T", 0.1, 0.01, 10.0, "s", "IMU loss timeout (motors off)"),
