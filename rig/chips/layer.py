@@ -10,8 +10,10 @@ Quantization, full-scale saturation, conversion latency and bus faults therefore
 autopilot as on the real rig.
 
 Optical flow: the PMW3901 shares the SPI bus. Each frame that carries a camera frame
-(``ChipFrame.flow``) loads it; PX4's pmw3901 cycle runs every 10 ms of simulated time from
-start-up (the 12-byte motion read, a report every second cycle), as ``ChipReadout.flow``.
+(``ChipFrame.flow``) loads it; PX4's pmw3901 cycle runs every 10 ms of simulated time on a
+grid from start-up (the 12-byte motion read, a report every second cycle), as
+``ChipReadout.flow``, from the first camera frame on: PX4 runs the driver only on a vehicle
+configured with the chip (``SENS_EN_PMW3901``), and a run without the camera loads none.
 
 Rangefinder: the LIDAR-Lite v3 shares the IST8310's I2C bus. PX4's ll40ls driver runs on
 the frames that carry a rangefinder sample (the loop samples the physics at the driver's
@@ -285,6 +287,7 @@ class SensorEngine:
         self.range = LidarLiteDriver(i2c)
         self.flow = Pmw3901Driver(spi, "flow")
         self._next_flow_us = 0  # PX4 ScheduleOnInterval: a fixed 10 ms grid from start-up
+        self._flow_flown = False  # a camera frame was loaded: the vehicle has the chip
         self._range_collect = False  # PX4 ``_collect_phase``: an acquisition is running
         self._next_baro_us = 0
         self._baro_phase_d1 = False  # False: a D2 (temperature) conversion is running
@@ -348,7 +351,8 @@ class SensorEngine:
             except BusError as error:
                 errors.append(("lidarlite", str(error)))
         flow = None
-        if frame.now_us >= self._next_flow_us:
+        self._flow_flown |= frame.flow is not None
+        if self._flow_flown and frame.now_us >= self._next_flow_us:
             while self._next_flow_us <= frame.now_us:
                 self._next_flow_us += SAMPLE_INTERVAL_US
             try:
