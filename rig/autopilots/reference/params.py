@@ -12,6 +12,8 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
+import numpy as np
+
 from quad_model.vehicle import MAX_ROTORS, MIN_ROTORS
 
 
@@ -280,7 +282,10 @@ class Parameters:
             value = int(value)
         else:
             value = float(value)
-        if not spec.minimum <= value <= spec.maximum:
+        # PX4's parameters are float32, and so are a log's: 0.01 there is 0.0099999998, inside
+        # a 0.01 minimum, as PX4 compares it.
+        low, high, single = (np.float32(v) for v in (spec.minimum, spec.maximum, value))
+        if not low <= single <= high:
             raise ParameterError(
                 f"parameter {name}: {value} outside {spec.minimum}..{spec.maximum} {spec.unit}"
             )
