@@ -57,6 +57,24 @@ def _yaw(log: pyulog.ULog, topic: str) -> tuple[np.ndarray, np.ndarray]:
     return t, np.array([euler_from_quat(np.array(row))[2] for row in zip(*q, strict=True)])
 
 
+def _corner_errors(rig_log, autopilot_log, start, first_s, leg_s) -> list[float]:
+    """How far the truth is from each corner at the end of its leg, in the autopilot's own
+    frame (its north is magnetic without GPS: the truth is turned by its heading error)."""
+    t, x, y = _series(rig_log, "vehicle_local_position_groundtruth", "x", "y")
+    t_true, yaw_true = _yaw(rig_log, "vehicle_attitude_groundtruth")
+    t_est, yaw_est = _yaw(autopilot_log, "vehicle_attitude")
+    errors = []
+    for i, corner in enumerate(CORNERS):
+        at = first_s + leg_s * (i + 1) - 0.05
+        k = np.searchsorted(t, at)
+        heading = yaw_est[np.searchsorted(t_est, at)] - yaw_true[np.searchsorted(t_true, at)]
+        c, s = math.cos(heading), math.sin(heading)
+        moved = np.array([x[k], y[k]]) - start
+        in_frame = np.array([c * moved[0] - s * moved[1], s * moved[0] + c * moved[1]])
+        errors.append(float(np.hypot(*(in_frame - corner))))
+    return errors
+
+
 def test_without_gps_it_holds_and_flies_a_square_on_optical_flow(tmp_path):
     """F450, `gps = false`, `optical_flow = true`, `rangefinder = true`, sensor_layer "tlm":
     it arms, takes off to 2.5 m, holds 20 s within ±0.3 m of its take-off point, flies a
@@ -76,17 +94,7 @@ def test_without_gps_it_holds_and_flies_a_square_on_optical_flow(tmp_path):
     hold_error = np.abs(np.column_stack([x[hold], y[hold]]) - start).max(axis=0)
     assert hold_error.max() < HOLD_BOUND_M, hold_error
     assert np.abs(-z[hold] - HOVER_M).max() < 0.4
-    t_true, yaw_true = _yaw(rig_log, "vehicle_attitude_groundtruth")
-    t_est, yaw_est = _yaw(autopilot_log, "vehicle_attitude")
-    errors = []
-    for i, corner in enumerate(CORNERS):
-        at = CORNER_START_S + CORNER_S * (i + 1) - 0.05
-        k = np.searchsorted(t, at)
-        heading = yaw_est[np.searchsorted(t_est, at)] - yaw_true[np.searchsorted(t_true, at)]
-        c, s = math.cos(heading), math.sin(heading)
-        moved = np.array([x[k], y[k]]) - start
-        in_frame = np.array([c * moved[0] - s * moved[1], s * moved[0] + c * moved[1]])
-        errors.append(float(np.hypot(*(in_frame - corner))))
+    errors = _corner_errors(rig_log, autopilot_log, start, CORNER_START_S, CORNER_S)
     assert max(errors) < CORNER_BOUND_M, errors
     assert -z[-1] < 0.05
     messages = [m.message for m in autopilot_log.logged_messages]
@@ -140,17 +148,7 @@ def test_the_bundled_flow_flight_takes_off_and_hovers_on_the_pilots_sticks(tmp_p
     assert -z[hold].min() > 1.5, messages  # it took off on the throttle stick
     held = np.column_stack([x[hold], y[hold], z[hold]])
     assert np.abs(held - held[0]).max() < HOLD_BOUND_M, np.abs(held - held[0]).max(axis=0)
-    t_true, yaw_true = _yaw(rig_log, "vehicle_attitude_groundtruth")
-    t_est, yaw_est = _yaw(autopilot_log, "vehicle_attitude")
-    errors = []
-    for i, corner in enumerate(CORNERS):
-        at = STICK_CORNER_START_S + STICK_CORNER_S * (i + 1) - 0.05
-        k = np.searchsorted(t, at)
-        heading = yaw_est[np.searchsorted(t_est, at)] - yaw_true[np.searchsorted(t_true, at)]
-        c, s = math.cos(heading), math.sin(heading)
-        moved = np.array([x[k], y[k]]) - start
-        in_frame = np.array([c * moved[0] - s * moved[1], s * moved[0] + c * moved[1]])
-        errors.append(float(np.hypot(*(in_frame - corner))))
+    errors = _corner_errors(rig_log, autopilot_log, start, STICK_CORNER_START_S, STICK_CORNER_S)
     assert max(errors) < CORNER_BOUND_M, errors
     assert -z[-1] < 0.05
     assert "Landing detected" in messages
