@@ -43,14 +43,14 @@ import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from benchmarks.figures import Figure, budget_detail, peak_rss_mib
+from benchmarks.figures import Figure, budget_detail, chips_detail, lowest_of, peak_rss_mib
 from benchmarks.lockstep_exchange import exchange_us
 from rig.chips.rtl import COCOTB_LAYER
 from rig.errors import RigError
 from rig.lockstep.loop import Progress, RunOptions, RunResult, run_scenario
 from rig.mavlink.px4_api import Ports
 from rig.mavlink.simulator_link import LinkTimeouts
-from rig.scenarios.scenario import Scenario, scenario_from_dict
+from rig.scenarios.scenario import Scenario, load_scenario, scenario_from_dict
 
 REPO = Path(__file__).resolve().parent.parent
 DOUBLE = REPO / "tests" / "rig" / "autopilot_double.py"
@@ -60,6 +60,9 @@ SIMULATED_S = {"tlm": 6.0, "rtl": 6.0, COCOTB_LAYER: 3.0}
 LAYER_NAMES = {"tlm": "TLM", "rtl": "RTL", COCOTB_LAYER: "RTL under cocotb"}
 PEAK_RSS_SIMULATED_S = 60.0
 GOALS = {("tlm", 1000, "reference"): "≥ 20×", ("rtl", 1000, "reference"): "≥ 2×"}
+#: Runs of each case with a goal (the goal counts the lowest: a short flight's factor moves
+#: by ±10 % from run to run on a shared machine).
+REPEATS = 3
 
 
 def _scenario(
@@ -111,14 +114,19 @@ def _fly(
 
 
 def _case(sensor_layer: str, imu_hz: int, autopilot: str) -> Figure:
+    """One case's real-time factor: the lowest of :data:`REPEATS` runs if it has a goal."""
     name = (f"closed loop, {LAYER_NAMES[sensor_layer]}, IMU {imu_hz} Hz, "
             f"{AUTOPILOT_NAMES[autopilot]}")  # fmt: skip
     goal = GOALS.get((sensor_layer, imu_hz, autopilot), "")
-    try:
-        result = _fly(sensor_layer, imu_hz, autopilot, SIMULATED_S[sensor_layer])
-    except RigError as error:
-        return Figure(name, float("nan"), "× real time", goal, f"failed: {error}")
-    return Figure(name, result.real_time_factor, "× real time", goal, budget_detail(result.budget))
+    runs = []
+    for _ in range(REPEATS if goal else 1):
+        try:
+            result = _fly(sensor_layer, imu_hz, autopilot, SIMULATED_S[sensor_layer])
+        except RigError as error:
+            return Figure(name, float("nan"), "× real time", goal, f"failed: {error}")
+        detail = "; ".join(filter(None, [budget_detail(result.budget), chips_detail(result)]))
+        runs.append(Figure(name, result.real_time_factor, "× real time", goal, detail))
+    return lowest_of(runs, goal) if goal else runs[0]
 
 
 def _children_peak_rss_mib() -> float:
@@ -195,7 +203,26 @@ def rtl_pwm_tick_cases() -> Iterator[Figure]:
                          f"hil_sim's 60 s take {HIL_SIM_S / rtf:.0f} s")  # fmt: skip
 
 
+def hil_sim_at_real_time() -> Figure:
+    """``make hil-sim``'s flight as it flies it (the bundled ``hil_sim``, RTL, ``--speed 1``,
+    no view): the factor it achieved, the lowest of :data:`REPEATS` runs."""
+    name = "make hil-sim's flight with --speed 1 (achieved)"
+    runs = []
+    for _ in range(REPEATS):
+        with tempfile.TemporaryDirectory() as folder:
+            options = RunOptions(instance=RTL_TICK_INSTANCE, out_dir=Path(folder), speed=1.0,
+                                 timeouts=LinkTimeouts(connect_s=600, answer_s=30))  # fmt: skip
+            try:
+                result = run_scenario(load_scenario("hil_sim"), options)
+            except RigError as error:
+                return Figure(name, float("nan"), "× real time", "1.00×", f"failed: {error}")
+        detail = "; ".join(filter(None, [budget_detail(result.budget), chips_detail(result)]))
+        runs.append(Figure(name, result.real_time_factor, "× real time", "1.00×", detail))
+    return lowest_of(runs, "1.00×")
+
+
 def figures() -> Iterator[Figure]:
+    yield hil_sim_at_real_time()
     yield from exchange_floor()
     autopilots = ["reference", "double"]
     for sensor_layer in ("tlm", "rtl"):

@@ -7,11 +7,12 @@ PX4) to ``build/bench/<module>.log`` and prints one table.
 
 from __future__ import annotations
 
+import math
 import resource
 from dataclasses import dataclass
 from pathlib import Path
 
-from rig.lockstep.loop import FrameBudget
+from rig.lockstep.loop import FrameBudget, RunResult
 
 #: Parts of a lockstep frame's wall time, as the budget column shows them.
 BUDGET_PARTS = (
@@ -42,6 +43,32 @@ def budget_detail(budget: FrameBudget) -> str:
     """A frame's wall time by part, µs: where a real-time factor comes from."""
     parts = " · ".join(f"{label} {getattr(budget, name):.0f}" for label, name in BUDGET_PARTS)
     return f"µs/frame: {parts} = {budget.total_us:.0f}"
+
+
+def chips_detail(result: RunResult) -> str:
+    """The compiled chips' share of a frame by kind of call (µs and clock cycles per frame;
+    the worker thread's capture runs beside the rig, not in its frame): the per-frame
+    budget of the RTL, measured inside the simulator library."""
+    frames = max(result.frames, 1)
+    parts = [
+        f"{cost.what} {cost.seconds / frames * 1e6:.0f} µs / {cost.cycles / frames:.0f} "
+        f"{cost.clock} cycles ({cost.seconds / max(cost.cycles, 1) * 1e9:.0f} ns each)"
+        for cost in sorted(result.chip_costs, key=lambda c: -c.seconds)
+        if cost.calls
+    ]
+    return "chips per frame: " + " · ".join(parts) if parts else ""
+
+
+def lowest_of(runs: list[Figure], goal: str = "") -> Figure:
+    """Repeated runs of one figure as one: the lowest value (a goal counts the low end of
+    the spread), the spread and the lowest run's detail."""
+    failed = [run for run in runs if math.isnan(run.value)]
+    if failed:
+        return failed[0]
+    low = min(runs, key=lambda run: run.value)
+    values = ", ".join(f"{run.value:.2f}" for run in sorted(runs, key=lambda run: run.value))
+    spread = f"lowest of {len(runs)} runs ({values})"
+    return Figure(low.name, low.value, low.unit, goal, f"{spread}; {low.detail}")
 
 
 def peak_rss_mib() -> float:

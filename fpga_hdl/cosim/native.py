@@ -48,6 +48,7 @@ import shutil
 import subprocess
 import tempfile
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from fpga_hdl.build import BUILD_DIR, generate_verilog
@@ -72,6 +73,7 @@ from fpga_hdl.top import PWM_TICK_HZ, UART_CLK_HZ, sensor_top_host_map
 
 __all__ = [
     "NATIVE_CLOCK_VERILOG",
+    "CallCost",
     "NativeHarness",
     "NativeHarnessError",
     "NativeHost",
@@ -196,6 +198,8 @@ _SIGNATURES = {
     "nh_destroy": ([ctypes.c_void_p], None),
     "nh_error": ([ctypes.c_void_p], ctypes.c_char_p),
     "nh_cycles": ([ctypes.c_void_p, *[ctypes.POINTER(ctypes.c_uint64)] * 3], ctypes.c_int),
+    "nh_costs": ([ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint64), ctypes.c_size_t],
+                 ctypes.c_int),
     "nh_reset": ([ctypes.c_void_p, *[ctypes.c_uint32] * 3], ctypes.c_int),
     "nh_spi": ([ctypes.c_void_p, *[ctypes.c_uint32] * 4, ctypes.c_char_p, _u8p, ctypes.c_size_t],
                ctypes.c_int),
@@ -220,6 +224,44 @@ def _load(path: Path) -> ctypes.CDLL:
         function = getattr(library, name)
         function.argtypes, function.restype = argtypes, restype
     return library
+
+
+#: ``native_harness.cpp``'s cost slots: one per SPI device index, one per 7-bit I2C
+#: address, then these, each with the clock its cycles are counted on.
+_SPI_SLOTS = 8
+_I2C_SLOT = _SPI_SLOTS
+_OTHER_SLOTS = (
+    ("host-port write", "system"),
+    ("host-port read", "system"),
+    ("GPS UART exchange", "UART"),
+    ("PWM capture clock", "capture"),
+    ("PWM capture clock, worker thread", "capture"),
+)
+_COST_SLOTS = _I2C_SLOT + 128 + len(_OTHER_SLOTS)
+
+
+@dataclass(frozen=True)
+class CallCost:
+    """What one kind of call into the compiled harness has cost so far.
+
+    ``what`` names it (``SPI imu``, ``I2C 0x0e``, ``host-port write`` ...); ``cycles`` are
+    of ``clock`` (system, UART or capture); ``seconds`` is wall time, measured inside the
+    library (a host-port read or a capture run at once includes waiting for the worker
+    thread; the worker thread's runs overlap the caller's work).
+    """
+
+    what: str
+    calls: int
+    cycles: int
+    clock: str
+    seconds: float
+
+    def since(self, earlier: CallCost | None) -> CallCost:
+        """This cost less ``earlier``'s (the same kind, read before): what came between."""
+        if earlier is None:
+            return self
+        return CallCost(self.what, self.calls - earlier.calls, self.cycles - earlier.cycles,
+                        self.clock, self.seconds - earlier.seconds)  # fmt: skip
 
 
 class _Model:
@@ -463,6 +505,23 @@ class NativeHarness:
         self._model.call(
             "nh_reset", round(ticks_s * HARNESS_SYS_CLK_HZ), 3, round(ticks_s * UART_CLK_HZ)
         )
+
+    def costs(self) -> list[CallCost]:
+        """Each kind of call made so far (not those never made): the per-frame budget."""
+        words = (ctypes.c_uint64 * (3 * _COST_SLOTS))()
+        self._model.call("nh_costs", words, len(words))
+        names = [
+            *(f"SPI {SPI_DEVICES[i]}" if i < len(SPI_DEVICES) else f"SPI device {i}"
+              for i in range(_SPI_SLOTS)),
+            *(f"I2C 0x{address:02x}" for address in range(128)),
+            *(name for name, _ in _OTHER_SLOTS),
+        ]  # fmt: skip
+        clocks = ["system"] * (_SPI_SLOTS + 128) + [clock for _, clock in _OTHER_SLOTS]
+        return [
+            CallCost(name, words[3 * slot], words[3 * slot + 1], clock, words[3 * slot + 2] / 1e9)
+            for slot, (name, clock) in enumerate(zip(names, clocks, strict=True))
+            if words[3 * slot]
+        ]
 
     def cycles(self) -> tuple[int, int, int]:
         """(system, capture, UART) clock cycles so far: what the simulation has cost."""

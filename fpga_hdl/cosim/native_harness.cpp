@@ -23,10 +23,16 @@
 // a worker thread (nh_pwm_cycles_later) while the caller's bus transfers run on `model`;
 // only the calls that touch `capture` wait for it.
 //
+// Costs: every call that clocks the design adds its wall time and cycles to a slot
+// (nh_costs): one per SPI device, per I2C address, the host writes, the host reads, the
+// UART exchanges, the capture clock run at once and the capture clock run on the worker
+// thread. That is the per-frame budget `make bench` prints, measured where it is spent.
+//
 // Errors: every function returns 0 on success and -1 on failure, with the reason in
 // nh_error(). Ports are copied as little-endian bytes, whatever their Verilated type.
 
 #include <algorithm>
+#include <chrono>
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
@@ -56,6 +62,48 @@ namespace {
 // cycles, PX4's slowest GPS exchange at 9600 baud ~45 k UART cycles): a peripheral that
 // never acknowledges is reported, not waited for forever.
 constexpr uint64_t CYCLE_LIMIT = 10'000'000;
+
+// The cost slots (see the top of this file; fpga_hdl.cosim.native names them).
+constexpr size_t SPI_SLOTS = 8;  // by SPI device index
+constexpr size_t I2C_SLOT = SPI_SLOTS;  // + the 7-bit address
+constexpr size_t HOST_WRITE_SLOT = I2C_SLOT + 128;
+constexpr size_t HOST_READ_SLOT = HOST_WRITE_SLOT + 1;
+constexpr size_t UART_SLOT = HOST_READ_SLOT + 1;
+constexpr size_t PWM_SLOT = UART_SLOT + 1;
+constexpr size_t PWM_LATER_SLOT = PWM_SLOT + 1;
+constexpr size_t COST_SLOTS = PWM_LATER_SLOT + 1;
+
+// What one kind of call has cost so far: calls, clock cycles, wall time.
+struct Cost {
+    uint64_t calls = 0;
+    uint64_t cycles = 0;
+    uint64_t ns = 0;
+};
+
+uint64_t now_ns() {
+    return static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+        std::chrono::steady_clock::now().time_since_epoch()).count());
+}
+
+// Adds the wall time and the cycles of `counter` between construction and destruction.
+class Charge {
+  public:
+    Charge(Cost& cost, const uint64_t& counter)
+        : cost_{cost}, counter_{counter}, cycles_{counter}, started_{now_ns()} {}
+    ~Charge() {
+        cost_.calls += 1;
+        cost_.cycles += counter_ - cycles_;
+        cost_.ns += now_ns() - started_;
+    }
+    Charge(const Charge&) = delete;
+    Charge& operator=(const Charge&) = delete;
+
+  private:
+    Cost& cost_;
+    const uint64_t& counter_;
+    uint64_t cycles_;
+    uint64_t started_;
+};
 
 }  // namespace
 
@@ -98,6 +146,7 @@ struct Harness {
     uint64_t sys_cycles = 0;
     uint64_t pwm_cycles = 0;
     uint64_t uart_cycles = 0;
+    Cost costs[COST_SLOTS];
     std::string error;
     // Capture-clock cycles left to a worker thread (nh_pwm_cycles_later). Only one of the
     // two threads touches `capture` at a time: every call that does first waits until the
@@ -126,7 +175,10 @@ struct Harness {
             if (quit) return;
             const uint64_t count = queued;
             lock.unlock();
-            for (uint64_t i = 0; i < count; ++i) pwm_cycle();
+            {
+                const Charge charge{costs[PWM_LATER_SLOT], pwm_cycles};
+                for (uint64_t i = 0; i < count; ++i) pwm_cycle();
+            }
             lock.lock();
             queued = 0;
             changed.notify_all();
@@ -287,6 +339,22 @@ EXPORT int nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles,
     return 0;
 }
 
+// Every slot's calls, cycles and nanoseconds, three words a slot (`words` of them).
+EXPORT int nh_costs(void* handle, uint64_t* out, size_t words) {
+    auto* h = static_cast<Harness*>(handle);
+    if (words != 3 * COST_SLOTS) {
+        return status(h->fail("nh_costs: " + std::to_string(words) + " words for " +
+                              std::to_string(COST_SLOTS) + " slots of three"));
+    }
+    h->wait_idle();
+    for (size_t slot = 0; slot < COST_SLOTS; ++slot) {
+        out[3 * slot] = h->costs[slot].calls;
+        out[3 * slot + 1] = h->costs[slot].cycles;
+        out[3 * slot + 2] = h->costs[slot].ns;
+    }
+    return 0;
+}
+
 // Reset every domain: `rst` high for these cycles of each clock, then the system and
 // UART clocks run until they stop by themselves. (`model`'s capture clock and
 // `capture`'s other clocks never run: each instance resets only the domains it runs.)
@@ -313,6 +381,8 @@ EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles,
 EXPORT int nh_spi(void* handle, uint32_t device, uint32_t length, uint32_t divider, uint32_t mode3,
            const uint8_t* tx, uint8_t* rx, size_t bytes) {
     auto* h = static_cast<Harness*>(handle);
+    if (device >= SPI_SLOTS) return status(h->fail("SPI device " + std::to_string(device)));
+    const Charge charge{h->costs[device], h->sys_cycles};
     Vharness& m = h->model;
     m.spi_device = device;
     m.spi_length = length;
@@ -330,6 +400,7 @@ EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t r
            const uint8_t* tx, size_t tx_bytes, uint8_t* rx, size_t rx_bytes,
            int32_t* nack_index) {
     auto* h = static_cast<Harness*>(handle);
+    const Charge charge{h->costs[I2C_SLOT + (address & 0x7f)], h->sys_cycles};
     Vharness& m = h->model;
     m.i2c_address = address;
     m.i2c_write_len = write_len;
@@ -345,6 +416,7 @@ EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t r
 // The host writer's burst: `count` packed (address, data) words, commit, chips settled.
 EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint32_t count) {
     auto* h = static_cast<Harness*>(handle);
+    const Charge charge{h->costs[HOST_WRITE_SLOT], h->sys_cycles};
     Vharness& m = h->model;
     m.host_count = count;
     bool ok = put(*h, m.host_words, words, bytes, "host_words") &&
@@ -356,6 +428,7 @@ EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint3
 // results copied in first).
 EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
     auto* h = static_cast<Harness*>(handle);
+    const Charge charge{h->costs[HOST_READ_SLOT], h->sys_cycles};  // the wait included
     h->wait_idle();
     h->copy_capture_results();
     Vharness& m = h->model;
@@ -372,6 +445,7 @@ EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_
                    uint32_t tx_len, uint8_t* rx, size_t rx_bytes, uint32_t* rx_len,
                    uint32_t* line_cycles) {
     auto* h = static_cast<Harness*>(handle);
+    const Charge charge{h->costs[UART_SLOT], h->uart_cycles};
     Vharness& m = h->model;
     m.uart_divider = divider;
     m.uart_tx_len = tx_len;
@@ -406,6 +480,7 @@ EXPORT int nh_pwm_cycles_later(void* handle, uint64_t count) {
 // `count` cycles of the capture clock (the generator's and the capture core's domains).
 EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
     auto* h = static_cast<Harness*>(handle);
+    const Charge charge{h->costs[PWM_SLOT], h->pwm_cycles};  // the wait included
     h->wait_idle();
     evaluate(h->capture);  // inputs written since the last eval settle before the first edge
     for (uint64_t i = 0; i < count; ++i) h->pwm_cycle();

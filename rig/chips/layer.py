@@ -45,7 +45,7 @@ import math
 from collections.abc import Coroutine, Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from fpga_hdl.buses.transactions import (
     BusError,
@@ -82,6 +82,9 @@ from fpga_hdl.chips.ublox.ubx import NavPvt
 from fpga_hdl.top import UART_CLK_HZ
 from quad_model.sensors import GpsSample, SensorReadings
 from rig.chips.pwm import PWM_TICK_HZ, Pulse, PwmCapture
+
+if TYPE_CHECKING:  # the compiled harness's module: imported only where a layer builds it
+    from fpga_hdl.cosim.native import CallCost
 
 
 class Chip(StrEnum):
@@ -259,6 +262,10 @@ class SensorLayer(Protocol):
         return self.finish(frame.pulses)
 
     def close(self) -> None: ...
+
+    def costs(self) -> tuple[CallCost, ...]:
+        """What each kind of call into a compiled simulator has cost so far (none here)."""
+        return ()
 
 
 def run_now(coroutine: Coroutine[Any, Any, _T]) -> _T:

@@ -36,6 +36,7 @@ loop nothing.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
@@ -52,7 +53,7 @@ from rig.chips.pwm import PWM_TICK_HZ, Pulse, PwmTimingError, replay_periods
 from rig.errors import CosimError
 
 if TYPE_CHECKING:  # the harness module builds a simulator: imported when a layer starts
-    from fpga_hdl.cosim.native import NativeHarness
+    from fpga_hdl.cosim.native import CallCost, NativeHarness
 
 
 class NativeChips:
@@ -213,6 +214,15 @@ class NativeSensorLayer(SensorLayer):
             return run_now(self.engine.finish(pulses))
         except Exception as error:
             raise CosimError(f"the RTL co-simulation failed: {_one_line(error)}") from error
+
+    def costs(self) -> tuple[CallCost, ...]:
+        """The harness's calls so far, the I2C ones named by the chip at the address."""
+        addresses = {"mag": self.engine.mag.address, "range": self.engine.range.address}
+        chips = {f"I2C 0x{address:02x}": f"I2C {name}" for name, address in addresses.items()}
+        return tuple(
+            dataclasses.replace(cost, what=chips.get(cost.what, cost.what))
+            for cost in self.harness.costs()
+        )
 
     def close(self) -> None:
         self.harness.close()

@@ -85,8 +85,32 @@ def run_options(args: argparse.Namespace) -> RunOptions:
         timeouts=LinkTimeouts(connect_s=args.connect_timeout),
         autopilot_params=tuple(args.param),
         px4_dir=args.px4,
-        speed=args.speed if args.speed is not None else DEFAULT_SPEED.get(args.command, math.inf),
+        speed=_asked_speed(args),
         force=args.force,
+    )
+
+
+def _asked_speed(args: argparse.Namespace) -> float:
+    """``--speed``, or the command's default (real time for hil-sim, else as fast as it can)."""
+    return args.speed if args.speed is not None else DEFAULT_SPEED.get(args.command, math.inf)
+
+
+#: Below this share of ``--speed`` a run says it could not keep it (pacing sleeps in whole
+#: milliseconds, so a run that keeps up ends a little under).
+KEPT_SPEED_SHARE = 0.97
+
+
+def speed_shortfall(result: RunResult, speed: float) -> str | None:
+    """One line when a run fell short of ``--speed``, saying where its frames' time went."""
+    if math.isinf(speed) or result.real_time_factor >= KEPT_SPEED_SHARE * speed:
+        return None
+    frame_us = result.simulated_s / max(result.frames, 1) * 1e6
+    budget = result.budget
+    return (
+        f"could not keep --speed {speed:g}: it ran at {result.real_time_factor:.2f}x real time; "
+        f"each {frame_us:,.0f} µs frame took {budget.total_us:,.0f} µs here, "
+        f"{budget.chips_us:,.0f} of them in the chips and {budget.autopilot_wait_us:,.0f} "
+        "waiting for the autopilot (make bench has the breakdown)"
     )
 
 
@@ -112,10 +136,12 @@ def fly(
     and make the plots."""
     with _live_view(args, console, name) as view:
         result = run_with_progress(console, run, view)
+    shortfall = speed_shortfall(result, _asked_speed(args))
     console.print(
         f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "
         f"(RTF {result.real_time_factor:.2f}x, {result.frames} frames)\n"
-        f"autopilot:     {result.autopilot}\n"
+        + (f"speed:         {shortfall}\n" if shortfall else "")
+        + f"autopilot:     {result.autopilot}\n"
         f"rig log:       {result.rig_log}\n"
         f"autopilot log: {result.autopilot_log or '(written by the autopilot, e.g. PX4)'}",
         highlight=False,

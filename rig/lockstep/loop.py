@@ -41,6 +41,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -84,6 +85,9 @@ from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
 from rig.scenarios.faults import FaultInjector, check_motors, describe
 from rig.scenarios.scenario import Rates, Scenario
 from rig.scenarios.script import Action, CommandScript
+
+if TYPE_CHECKING:  # the compiled harness's module: imported when the rtl layer starts
+    from fpga_hdl.cosim.native import CallCost
 
 #: ``RunOptions.sensor_layer`` that skips the chips (benchmarks only, not a scenario's).
 BYPASS = "bypass"
@@ -202,6 +206,9 @@ class RunResult:
     #: The autopilot flown: ``PX4 v1.17.0 (DIR; parameters through …)``, a hand-started
     #: PX4, or the reference autopilot.
     autopilot: str = "the reference autopilot"
+    #: What each kind of call into the compiled chips cost over the frames (``rtl`` only):
+    #: the chips' part of the budget, by bus transaction and clock.
+    chip_costs: tuple[CallCost, ...] = ()
 
     @property
     def real_time_factor(self) -> float:
@@ -282,6 +289,7 @@ class _Loop:
         self.last_event = ""
         self._wall_start = time.monotonic()
         self._wall_end: float | None = None
+        self._chip_costs: tuple[CallCost, ...] = ()
         self._closers: list[Callable[[], None]] = []
         #: Wall time of each part of the frames so far (s), for :class:`FrameBudget`.
         self._spent_s = dict.fromkeys(("model", "sensor physics", "chips", "messages", "logging"),
@@ -392,6 +400,7 @@ class _Loop:
         self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")
         frames_total = round(self.duration_s * 1e6) // self.frame_us
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
+        costs_before = {cost.what: cost for cost in self.layer.costs()}
         pacer = Pacer(self.options.speed)
         state_next_us = self.clock_start_us
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
@@ -453,6 +462,8 @@ class _Loop:
                 self._report(self.progress, this_truth)
             pacer.wait(self.run_us / 1e6)
         self._wall_end = time.monotonic()
+        self._chip_costs = tuple(cost.since(costs_before.get(cost.what))
+                                 for cost in self.layer.costs())  # fmt: skip
         self.log.event(self.time_us, f"run completed: {self.frames} frames")
 
     def _advance(self, frame: int) -> tuple[VehicleTruth, SensorReadings]:
@@ -641,6 +652,7 @@ class _Loop:
             link=self.link.stats,
             budget=self._budget(wall_end - self._wall_start),
             autopilot=self.autopilot.description(),
+            chip_costs=self._chip_costs,
         )
 
     def _budget(self, wall_s: float) -> FrameBudget:

@@ -110,6 +110,41 @@ def test_px4s_gps_handshake_is_answered_and_timed_as_the_twin_predicts(harness):
     assert (silence.data, silence.line_us) == (b"", 0)
 
 
+def test_every_call_is_charged_to_its_bus_and_clock(harness):
+    """The per-frame budget's source: each SPI device, I2C address, host-port burst and
+    capture run has its own calls, cycles (of its clock) and wall time, and together the
+    cycles are the clocks' counters."""
+
+    def costs():
+        return {cost.what: cost for cost in harness.costs()}
+
+    before, cycles_before = costs(), harness.cycles()
+    for _ in range(3):
+        _run(harness.spi.transfer("baro", bytes(4), sclk_hz=1e6))
+    _run(harness.i2c.write_read(0x0E, bytes([0x00]), 1, scl_hz=400e3))
+    _run(harness.i2c.write_read(0x0E, bytes([0x00]), 1, scl_hz=400e3))
+    harness.host.results()
+    harness.pwm.cycles(250)
+    harness.pwm.cycles(750, later=True)
+    after, cycles_after = costs(), harness.cycles()
+    spent = {what: cost.since(before.get(what)) for what, cost in after.items()}
+    spent = {what: cost for what, cost in spent.items() if cost.calls}
+    assert {what: (cost.calls, cost.clock) for what, cost in spent.items()} == {
+        "SPI baro": (3, "system"),
+        "I2C 0x0e": (2, "system"),
+        "host-port read": (1, "system"),
+        "PWM capture clock": (1, "capture"),
+        "PWM capture clock, worker thread": (1, "capture"),
+    }
+    # A 4-byte transfer at a fifth of the system clock: 32 SCLK periods of 10 cycles.
+    assert spent["SPI baro"].cycles >= 3 * 32 * 10
+    assert spent["PWM capture clock"].cycles == 250
+    assert spent["PWM capture clock, worker thread"].cycles == 750
+    system = sum(cost.cycles for cost in spent.values() if cost.clock == "system")
+    assert system == cycles_after[0] - cycles_before[0]
+    assert all(cost.seconds > 0 for cost in spent.values())
+
+
 FIX = GpsFix(
     fix_type=3, satellites_used=12, latitude_deg=47.3977419, longitude_deg=8.5455938,
     altitude_msl_m=488.1, altitude_ellipsoid_m=535.4, eph=0.8, epv=1.2, vel_n_m_s=1.0,
