@@ -77,3 +77,35 @@ def test_the_lockstep_exchange_alone_answers_every_frame(mode):
 def test_the_lockstep_exchange_refuses_an_unknown_mode():
     with pytest.raises(ValueError, match=r"mode must be one of .*not 'udp'"):
         exchange_us(10, "udp")
+
+
+def test_repeated_runs_count_the_lowest_and_show_the_spread():
+    from benchmarks.figures import lowest_of
+
+    runs = [Figure("RTL", value, "× real time", detail=f"run {value}") for value in (0.9, 0.7, 0.8)]
+    figure = lowest_of(runs, "≥ 2×")
+    assert (figure.value, figure.goal) == (0.7, "≥ 2×")
+    assert figure.detail == "lowest of 3 runs (0.70, 0.80, 0.90); run 0.7"
+    failed = Figure("RTL", float("nan"), "× real time", detail="failed: stalled")
+    assert lowest_of([*runs, failed]) is failed  # a failure is never hidden by the others
+
+
+def test_the_chips_budget_is_per_frame_and_most_expensive_first():
+    from pathlib import Path
+
+    from benchmarks.figures import chips_detail
+    from fpga_hdl.cosim.native import CallCost
+    from rig.lockstep.loop import FrameBudget, RunResult
+    from rig.mavlink.simulator_link import LinkStats
+
+    costs = (
+        CallCost("I2C mag", 50, 7_600, "system", 0.15),
+        CallCost("SPI imu", 1000, 249_000, "system", 0.25),
+        CallCost("SPI flow", 0, 0, "system", 0.0),  # never called over the frames
+    )
+    result = RunResult(Path("r"), Path("r/rig.ulg"), None, 1.0, 1.2, 1000, LinkStats(),
+                       FrameBudget(*[0.0] * 8), chip_costs=costs)  # fmt: skip
+    assert chips_detail(result) == (
+        "chips per frame: SPI imu 250 µs / 249 system cycles (1004 ns each) · "
+        "I2C mag 150 µs / 8 system cycles (19737 ns each)"
+    )

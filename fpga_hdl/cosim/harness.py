@@ -18,11 +18,18 @@ Each peripheral takes a *request toggle* and answers with an *acknowledge*: Pyth
 ``<name>_request`` and awaits a change of ``<name>_acknowledge``, two wake-ups per
 transaction however many bits it moves.
 
-Clocks, without Python per cycle: three :data:`GATED_CLOCK_VERILOG` instances, a
+Clocks, without Python per cycle: four :data:`GATED_CLOCK_VERILOG` instances, a
 behavioural Verilog clock that *waits* on its enable (no polling, so a stopped clock
 costs nothing). The system clock (``sync``, :data:`HARNESS_SYS_CLK_HZ`) runs while
 a request is pending, a peripheral is busy, a chip still waits to take a sample, or
-``rst`` is high. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while ``pwm_run`` is
+``rst`` is high. The SPI controller has a clock of its own at the same rate (``spi_ctrl``,
+as the flight controller's peripheral runs on the MCU's clock): an SPI transfer clocks
+only the controller and the chips' SCLK domains, not every register of the design, and
+then the system clock runs :data:`SPI_SETTLE_CYCLES` cycles, in which the chips' system
+side sees the transfer end (its chip select through their synchronisers, the flow
+chip's take of its motion), before the transfer is acknowledged. What a transfer moves
+is the same, clock for clock on the bus; the system side sees its chip select only after
+the transfer, as it would see a transfer too short for its synchronisers. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while ``pwm_run`` is
 high: the capture must count every tick of every period, so in a closed loop it runs all
 the time. The UART clock (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the
 autopilot's UART) runs while a UART exchange is requested or under way, or ``rst`` is
@@ -59,6 +66,7 @@ from amaranth.lib.wiring import In, Out
 from fpga_hdl.buses.i2c_controller import I2cController
 from fpga_hdl.buses.pwm_generator import PwmGenerator
 from fpga_hdl.buses.spi_controller import SpiController
+from fpga_hdl.buses.spi_target import CS_SYNC_STAGES
 from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
 from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, UART_CLK_HZ, SensorTop
@@ -83,6 +91,10 @@ HARNESS_TOPLEVEL = "cosim_harness"
 HARNESS_SYS_CLK_HZ = 10e6
 #: Chip-select order of the SPI controller: the MPU-6000, the MS5611, the PMW3901.
 SPI_DEVICES = ("imu", "baro", "flow")
+#: System cycles after an SPI transfer before its acknowledge: the chips' chip-select
+#: synchronisers (``CS_SYNC_STAGES``) see the select high, and what reacts to them (a
+#: chip's ``busy``, the PMW3901's motion take) has a cycle more to act, with a margin.
+SPI_SETTLE_CYCLES = 2 * CS_SYNC_STAGES + 2
 #: A simulation-only clock that waits on ``enable`` (Amaranth cannot express delays, so
 #: this one module is Verilog text, written to ``build/`` beside the generated design).
 #: The first rising edge comes half a period after ``enable`` rises; it stops low.
@@ -390,8 +402,8 @@ class CosimHarness(wiring.Component):
     ``pwm_``, ``uart_`` (``spi_request``, ``i2c_nack_index``, ``host_words`` ...); the bus
     wires as monitor outputs (``spi_sclk``, ``spi_mosi``, ``spi_miso``, ``<device>_cs_n``
     per :data:`SPI_DEVICES`, ``i2c_scl``, ``i2c_sda``, ``pwm``, ``gps_tx``, ``gps_rx``, ``clk``,
-    ``pwm_clk``, ``uart_clk``); and the cycle counters ``sync_cycles``, ``pwm_cycles`` and
-    ``uart_cycles``, the simulation's cost.
+    ``pwm_clk``, ``uart_clk``); and the cycle counters ``sync_cycles``, ``spi_cycles`` (the
+    SPI controller's clock), ``pwm_cycles`` and ``uart_cycles``, the simulation's cost.
     """
 
     def __init__(
@@ -424,7 +436,8 @@ class CosimHarness(wiring.Component):
         members |= {f"{device}_cs_n": Out(1) for device in SPI_DEVICES}
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
-        members |= {"sync_cycles": Out(32), "pwm_cycles": Out(32), "uart_cycles": Out(32)}
+        members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "pwm_cycles",
+                                               "uart_cycles")}  # fmt: skip
         super().__init__(members)
 
     def _forwarded(self) -> tuple[tuple[str, wiring.Component, tuple[str, ...]], ...]:
@@ -442,7 +455,7 @@ class CosimHarness(wiring.Component):
         top, spi, i2c = self.top, self.spi, self.i2c
         writer, reader = self.host_writer, self.host_reader
         m.submodules.top = top
-        m.submodules.spi = spi
+        m.submodules.spi = DomainRenamer("spi_ctrl")(spi)
         m.submodules.i2c = i2c
         m.submodules.pwm_generator = DomainRenamer("pwm_out")(self.pwm_generator)
         m.submodules.host_writer = writer
@@ -450,6 +463,8 @@ class CosimHarness(wiring.Component):
         m.submodules.uart = uart = DomainRenamer("uart_peer")(self.uart)
         for prefix, part, names in self._forwarded():
             for name in names:
+                if (prefix, name) == ("spi", "acknowledge"):
+                    continue  # after the settle cycles, below
                 outer, inner = getattr(self, f"{prefix}_{name}"), getattr(part, name)
                 if part.signature.members[name].flow == In:
                     m.d.comb += inner.eq(outer)
@@ -460,13 +475,23 @@ class CosimHarness(wiring.Component):
         # domain (``pwm_out``) runs on the capture clock, as if the autopilot's timer ticked
         # with it, and the UART peer's (``uart_peer``) on the receiver's UART clock.
         m.domains.sync = ClockDomain()
+        m.domains.spi_ctrl = ClockDomain()
         m.domains.pwm_out = ClockDomain()
+        # The SPI controller's acknowledge, passed on once the system clock has run the
+        # settle cycles after it (see the module docstring).
+        spi_settled = Signal()
+        settle = Signal(range(SPI_SETTLE_CYCLES))
+        with m.If(spi_settled != spi.acknowledge):
+            with m.If(settle == SPI_SETTLE_CYCLES - 1):
+                m.d.sync += [spi_settled.eq(spi.acknowledge), settle.eq(0)]
+            with m.Else():
+                m.d.sync += settle.eq(settle + 1)
+        m.d.comb += self.spi_acknowledge.eq(spi_settled)
         sync_run = Signal()
         m.d.comb += sync_run.eq(
             self.rst
             | top.pending
-            | spi.busy
-            | (spi.request != spi.acknowledge)
+            | (spi_settled != spi.acknowledge)
             | i2c.busy
             | (i2c.request != i2c.acknowledge)
             | writer.busy
@@ -474,12 +499,18 @@ class CosimHarness(wiring.Component):
             | reader.busy
             | (reader.request != reader.acknowledge)
         )
-        pwm_clk = Signal()
+        pwm_clk, spi_clk = Signal(), Signal()
         m.submodules.sync_clock = Instance(
             "cosim_gated_clock",
             p_HALF_PERIOD_PS=_half_period_ps(self.sys_clk_hz),
             i_enable=sync_run,
             o_clk=self.clk,
+        )
+        m.submodules.spi_clock = Instance(
+            "cosim_gated_clock",
+            p_HALF_PERIOD_PS=_half_period_ps(self.sys_clk_hz),
+            i_enable=self.rst | spi.busy | (spi.request != spi.acknowledge),
+            o_clk=spi_clk,
         )
         m.submodules.pwm_clock = Instance(
             "cosim_gated_clock",
@@ -497,6 +528,8 @@ class CosimHarness(wiring.Component):
         m.d.comb += [
             ClockSignal("sync").eq(self.clk),
             ResetSignal("sync").eq(self.rst),
+            ClockSignal("spi_ctrl").eq(spi_clk),
+            ResetSignal("spi_ctrl").eq(self.rst),
             ClockSignal("pwm_out").eq(pwm_clk),
             ResetSignal("pwm_out").eq(self.rst),
             top.pwm_clk.eq(pwm_clk),
@@ -508,6 +541,7 @@ class CosimHarness(wiring.Component):
             top.uart_rst.eq(self.rst),
         ]
         m.d.sync += self.sync_cycles.eq(self.sync_cycles + 1)
+        m.d.spi_ctrl += self.spi_cycles.eq(self.spi_cycles + 1)
         m.d.pwm_out += self.pwm_cycles.eq(self.pwm_cycles + 1)
         m.d.uart_peer += self.uart_cycles.eq(self.uart_cycles + 1)
 

@@ -21,8 +21,9 @@ C++ sets to 1 and which clears itself on its own rising edge, so one ``eval()`` 
 whole cycle (nothing in the design uses a falling clock edge). That halves the cost
 of a cycle against a rising and a falling ``eval()`` (measured on the harness: about 100
 instead of 270 ns per capture tick, 230 instead of 520 ns per system cycle). The system
-clock keeps the gated clock's rule, whole cycles while its ``enable`` is high, and so
-does the UART clock, which only a UART exchange enables (nothing else runs meanwhile), so
+clock keeps the gated clock's rule, whole cycles while its ``enable`` is high, and so do
+the SPI controller's clock, which only an SPI transfer enables, and the UART clock, which
+only a UART exchange enables (nothing else runs meanwhile), so
 each transaction sees the same edges as under cocotb, where the design sees no time but
 its clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
 caller asks (:meth:`NativePwm.cycles`), at once or on the library's worker thread while
@@ -86,9 +87,10 @@ __all__ = [
 
 SOURCE = Path(__file__).with_name("native_harness.cpp")
 #: The harness's clock instances (``CosimHarness.elaborate``: ``m.submodules.sync_clock``,
-#: ``pwm_clock``, ``uart_clock``); the C++ reaches their registers through Verilator's root
+#: ``spi_clock``, ``pwm_clock``, ``uart_clock``); the C++ reaches their registers through Verilator's root
 #: members.
-_SYNC_CLOCK, _PWM_CLOCK, _UART_CLOCK = "sync_clock", "pwm_clock", "uart_clock"
+_SYNC_CLOCK, _SPI_CLOCK = "sync_clock", "spi_clock"
+_PWM_CLOCK, _UART_CLOCK = "pwm_clock", "uart_clock"
 #: SensorTop's PWM results' synchroniser (``SensorTop._capture_results``): the C++ copies
 #: its source side, ``held`` and ``gray``, from the capture clock's instance of the
 #: harness into the system clock's.
@@ -146,6 +148,8 @@ def build_native_harness(harness: CosimHarness, *, build_dir: Path = BUILD_DIR) 
     defines = {
         "SYNC_CLOCK": _root_member(_SYNC_CLOCK, "clk"),
         "SYNC_ENABLE": _root_member(_SYNC_CLOCK, "enable"),
+        "SPI_CLOCK": _root_member(_SPI_CLOCK, "clk"),
+        "SPI_ENABLE": _root_member(_SPI_CLOCK, "enable"),
         "PWM_CLOCK": _root_member(_PWM_CLOCK, "clk"),
         "UART_CLOCK": _root_member(_UART_CLOCK, "clk"),
         "UART_ENABLE": _root_member(_UART_CLOCK, "enable"),

@@ -10,8 +10,10 @@
 // (fpga_hdl.cosim.native): a register that this file sets to 1 and that clears itself
 // on its own rising edge, so one eval() is one whole clock cycle. The system clock
 // follows the gated clock's rule: whole cycles while its `enable` (the harness's
-// `sync_run`) is high, checked after every cycle; so does the UART clock (the GPS
-// receiver's domain and the autopilot's UART), which only a UART exchange enables.
+// `sync_run`) is high, checked after every cycle; so do the SPI controller's clock, which
+// only an SPI transfer enables (its cycles then run alone, and the system clock's settle
+// cycles after them), and the UART clock (the GPS receiver's domain and the autopilot's
+// UART), which only a UART exchange enables.
 //
 // Two instances of the harness. `model` runs the system and UART clocks: host port,
 // buses, chips. `capture` runs only the capture clock: the PWM generator, the capture
@@ -48,9 +50,9 @@
 // The root members of the three clocks' registers, the gated ones' enables and the
 // results' synchroniser's source side, given by fpga_hdl.cosim.native as -D flags (their
 // names follow the harness's hierarchy).
-#if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(PWM_CLOCK) || \
-    !defined(UART_CLOCK) || !defined(UART_ENABLE) || !defined(CAPTURE_HELD) || \
-    !defined(CAPTURE_GRAY)
+#if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(SPI_CLOCK) || \
+    !defined(SPI_ENABLE) || !defined(PWM_CLOCK) || !defined(UART_CLOCK) || \
+    !defined(UART_ENABLE) || !defined(CAPTURE_HELD) || !defined(CAPTURE_GRAY)
 #error "build through fpga_hdl.cosim.native: the clock and register -D flags are missing"
 #endif
 
@@ -208,6 +210,14 @@ struct Harness {
         ++sys_cycles;
     }
 
+    // The SPI controller's clock: the system clock's rate, so its cycles count as system
+    // cycles (bus time).
+    void spi_cycle() {
+        model.rootp->SPI_CLOCK = 1;
+        evaluate(model);
+        ++sys_cycles;
+    }
+
     void pwm_cycle() {
         capture.rootp->PWM_CLOCK = 1;
         evaluate(capture);
@@ -249,11 +259,22 @@ struct Harness {
         return run_gated(model.rootp->UART_ENABLE, [this] { uart_cycle(); }, "UART", what);
     }
 
-    // Flip a peripheral's request toggle and clock until it has acknowledged: the system
-    // clock, or with `uart` the UART clock.
-    bool request(CData& request, const CData& acknowledge, const char* what, bool uart = false) {
+    bool run_spi(const char* what) {
+        return run_gated(model.rootp->SPI_ENABLE, [this] { spi_cycle(); }, "SPI", what);
+    }
+
+    // The clocks a request runs, in turn: the system clock; the UART clock; or the SPI
+    // controller's, then the system clock's settle cycles.
+    enum class Clocks { SYNC, UART, SPI };
+
+    // Flip a peripheral's request toggle and clock until it has acknowledged.
+    bool request(CData& request, const CData& acknowledge, const char* what,
+                 Clocks clocks = Clocks::SYNC) {
         request ^= 1;
-        if (!(uart ? run_uart(what) : run_sync(what))) return false;
+        const bool ran = clocks == Clocks::UART  ? run_uart(what)
+                         : clocks == Clocks::SPI ? run_spi(what) && run_sync(what)
+                                                 : run_sync(what);
+        if (!ran) return false;
         if (acknowledge != request) {
             error = std::string(what) + ": the clock stopped before the acknowledge";
             return false;
@@ -368,13 +389,14 @@ EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles,
     evaluate(m);
     evaluate(h->capture);
     for (uint32_t i = 0; i < sys_cycles; ++i) h->sync_cycle();
+    for (uint32_t i = 0; i < sys_cycles; ++i) h->spi_cycle();
     for (uint32_t i = 0; i < pwm_cycles; ++i) h->pwm_cycle();
     for (uint32_t i = 0; i < uart_cycles; ++i) h->uart_cycle();
     m.rst = 0;
     h->capture.rst = 0;
     evaluate(h->capture);
     h->copy_capture_results();
-    return status(h->run_sync("reset") && h->run_uart("reset"));
+    return status(h->run_sync("reset") && h->run_spi("reset") && h->run_uart("reset"));
 }
 
 // One SPI transfer of `length` bytes; `tx` and `rx` hold `bytes` (the buffer's size).
@@ -389,7 +411,7 @@ EXPORT int nh_spi(void* handle, uint32_t device, uint32_t length, uint32_t divid
     m.spi_divider = divider;
     m.spi_mode3 = mode3;
     bool ok = put(*h, m.spi_tx, tx, bytes, "spi_tx") &&
-              h->request(m.spi_request, m.spi_acknowledge, "SPI transfer") &&
+              h->request(m.spi_request, m.spi_acknowledge, "SPI transfer", Harness::Clocks::SPI) &&
               get(*h, m.spi_rx, rx, bytes, "spi_rx");
     return status(ok);
 }
@@ -450,7 +472,7 @@ EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_
     m.uart_divider = divider;
     m.uart_tx_len = tx_len;
     bool ok = put(*h, m.uart_tx, tx, tx_bytes, "uart_tx") &&
-              h->request(m.uart_request, m.uart_acknowledge, "UART exchange", true) &&
+              h->request(m.uart_request, m.uart_acknowledge, "UART exchange", Harness::Clocks::UART) &&
               get(*h, m.uart_rx, rx, rx_bytes, "uart_rx");
     *rx_len = m.uart_rx_len;
     *line_cycles = m.uart_line_cycles;
