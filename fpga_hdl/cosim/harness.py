@@ -29,9 +29,9 @@ then the system clock runs :data:`SPI_SETTLE_CYCLES` cycles, in which the chips'
 side sees the transfer end (its chip select through their synchronisers, the flow
 chip's take of its motion), before the transfer is acknowledged. What a transfer moves
 is the same, clock for clock on the bus; the system side sees its chip select only after
-the transfer, as it would see a transfer too short for its synchronisers. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while ``pwm_run`` is
-high: the capture must count every tick of every period, so in a closed loop it runs all
-the time. The UART clock (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the
+the transfer, as it would see a transfer too short for its synchronisers. The PWM tick
+clock (``pwm``, ``pwm_tick_hz``) runs while ``pwm_run`` is high: the capture must count
+every tick of every period, so in a closed loop it runs all the time. The UART clock (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the
 autopilot's UART) runs while a UART exchange is requested or under way, or ``rst`` is
 high: a fix the host loaded crosses into the receiver in the exchange's first cycles,
 before its first start bit, so the line times are those of a free-running clock.

@@ -87,8 +87,8 @@ __all__ = [
 
 SOURCE = Path(__file__).with_name("native_harness.cpp")
 #: The harness's clock instances (``CosimHarness.elaborate``: ``m.submodules.sync_clock``,
-#: ``spi_clock``, ``pwm_clock``, ``uart_clock``); the C++ reaches their registers through Verilator's root
-#: members.
+#: ``spi_clock``, ``pwm_clock``, ``uart_clock``); the C++ reaches their registers through
+#: Verilator's root members.
 _SYNC_CLOCK, _SPI_CLOCK = "sync_clock", "spi_clock"
 _PWM_CLOCK, _UART_CLOCK = "pwm_clock", "uart_clock"
 #: SensorTop's PWM results' synchroniser (``SensorTop._capture_results``): the C++ copies
