@@ -18,23 +18,23 @@ Each peripheral takes a *request toggle* and answers with an *acknowledge*: Pyth
 ``<name>_request`` and awaits a change of ``<name>_acknowledge``, two wake-ups per
 transaction however many bits it moves.
 
-Clocks, without Python per cycle: four :data:`GATED_CLOCK_VERILOG` instances, a
-behavioural Verilog clock that *waits* on its enable (no polling, so a stopped clock
-costs nothing). The system clock (``sync``, :data:`HARNESS_SYS_CLK_HZ`) runs while
-a request is pending, a peripheral is busy, a chip still waits to take a sample, or
-``rst`` is high. The SPI controller has a clock of its own at the same rate (``spi_ctrl``,
-as the flight controller's peripheral runs on the MCU's clock): an SPI transfer clocks
-only the controller and the chips' SCLK domains, not every register of the design, and
-then the system clock runs :data:`SPI_SETTLE_CYCLES` cycles, in which the chips' system
-side sees the transfer end (its chip select through their synchronisers, the flow
-chip's take of its motion), before the transfer is acknowledged. What a transfer moves
-is the same, clock for clock on the bus; the system side sees its chip select only after
-the transfer, as it would see a transfer too short for its synchronisers. The PWM tick
-clock (``pwm``, ``pwm_tick_hz``) runs while ``pwm_run`` is high: the capture must count
-every tick of every period, so in a closed loop it runs all the time. The UART clock (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the
-autopilot's UART) runs while a UART exchange is requested or under way, or ``rst`` is
-high: a fix the host loaded crosses into the receiver in the exchange's first cycles,
-before its first start bit, so the line times are those of a free-running clock.
+Clocks, without Python per cycle: four :data:`GATED_CLOCK_VERILOG` instances, a behavioural
+Verilog clock that *waits* on its enable (no polling, so a stopped clock costs nothing). The
+system clock (``sync``, :data:`HARNESS_SYS_CLK_HZ`) runs while a request is pending, a
+peripheral is busy, a chip still waits to take a sample, or ``rst`` is high. The SPI
+controller has a clock of its own at the same rate (``spi_ctrl``, as the flight controller's
+peripheral runs on the MCU's clock): an SPI transfer clocks only the controller and the
+chips' SCLK domains, not every register of the design, and then the system clock runs
+:data:`SPI_SETTLE_CYCLES` cycles, in which the chips' system side sees the transfer end (its
+chip select through their synchronisers, the flow chip's take of its motion), before the
+transfer is acknowledged. What a transfer moves is the same, clock for clock on the bus; the
+system side sees its chip select only after the transfer, as it would see a transfer too
+short for its synchronisers. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while
+``pwm_run`` is high: the capture must count every tick of every period, so in a closed loop
+it runs all the time. The UART clock (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS
+receiver and the autopilot's UART) runs while a UART exchange is requested or under way, or
+``rst`` is high: a fix the host loaded crosses into the receiver in the exchange's first
+cycles, before its first start bit, so the line times are those of a free-running clock.
 Verilator needs ``--timing`` for these delays (``fpga_hdl.cosim.runner`` adds it when a
 design brings behavioural Verilog).
 
