@@ -24,7 +24,7 @@ from functools import partial
 from pathlib import Path
 
 from benchmarks.bare_px4_sim import fly_bare
-from benchmarks.figures import Figure, budget_detail, chips_detail
+from benchmarks.figures import Figure, run_detail
 from rig.autopilots.px4 import PX4_DIR_ENV, Px4Build, find_px4
 from rig.errors import RigError
 from rig.lockstep.loop import RunOptions, run_scenario
@@ -69,8 +69,7 @@ def _case(build_root: Path, sensor_layer: str, imu_hz: int) -> Figure:
             result = run_scenario(scenario_from_dict(document), options)
     except RigError as error:
         return Figure(name, float("nan"), "× real time", detail=f"failed: {error}")
-    detail = "; ".join(filter(None, [budget_detail(result.budget), chips_detail(result)]))
-    return Figure(name, result.real_time_factor, "× real time", detail=detail)
+    return Figure(name, result.real_time_factor, "× real time", detail=run_detail(result))
 
 
 def _median(runs: list[Figure], goal: str = "") -> Figure:

@@ -59,6 +59,11 @@ def chips_detail(result: RunResult) -> str:
     return "chips per frame: " + " · ".join(parts) if parts else ""
 
 
+def run_detail(result: RunResult) -> str:
+    """A flown case's detail: its frame budget, and the compiled chips' share (RTL)."""
+    return "; ".join(filter(None, [budget_detail(result.budget), chips_detail(result)]))
+
+
 def lowest_of(runs: list[Figure], goal: str = "") -> Figure:
     """Repeated runs of one figure as one: the lowest value (a goal counts the low end of
     the spread), the spread and the lowest run's detail."""
