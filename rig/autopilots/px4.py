@@ -22,10 +22,13 @@ every lockstep component (the logger, and each work queue with work queued, EKF2
 must both equal the simulator's IMU rate, and ``IMU_INTEG_RATE`` stops at 1000 Hz. With
 PX4's defaults (400 and 200 Hz) only Gazebo's 250 Hz is answered frame by frame.
 
-PX4 runs on one CPU (:func:`px4_cpu`) when the rig may use two or more. Its modules are
+PX4 flies on one CPU (:func:`px4_cpu`) when the rig may use two or more. Its modules are
 threads that wake each other in a chain every lockstep frame; spread over the cores, each
 wake-up crosses cores and PX4 also preempts the rig on its own core. On one core PX4 spent
-about half the CPU time and PX4 + rig ran 1.5× faster (``make bench``, 2 cores).
+about half the CPU time and PX4 + rig ran 1.5× faster (``make bench``, 2 cores). It is
+held there only once its start-up script has ended (:meth:`Px4Sitl.hold_to_one_cpu`):
+as root its threads are SCHED_FIFO, and one that spins at start-up until another thread
+of its priority has run (seen in ``sensors start``) starves it for good on one CPU.
 
 A real vehicle's parameters (a replay flies PX4 with the log's own, :func:`sitl_parameters`)
 are taken where they describe how the vehicle flies, and never where they describe its
@@ -35,6 +38,7 @@ hardware (calibrations, drivers, ports, outputs) or what SITL and the rig need (
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import json
 import lzma
@@ -487,7 +491,7 @@ class Px4Sitl:
         self.console_path = run_dir / "px4.log"
         self.ulog_path = run_dir / "px4.ulg"
         self._process: subprocess.Popen[bytes] | None = None
-        #: The CPU PX4 was started on (:func:`px4_cpu`); None before :meth:`start` or unpinned.
+        #: The CPU PX4 is held to (:meth:`hold_to_one_cpu`); None before, or with one CPU.
         self.cpu: int | None = None
         # PX4 keeps its state in its work dir: parameters.bson (every parameter a run set,
         # a replay's in-flight ones too), dataman (the mission and the item it was at) and
@@ -527,15 +531,8 @@ class Px4Sitl:
         )
 
     def start(self) -> None:
-        """Start PX4 in its own session on :attr:`cpu`, console to ``px4.log``."""
+        """Start PX4 in its own session, console to ``px4.log``."""
         assert self.build is not None, "a hand-started PX4 is not the rig's to start"
-        cpu = self.cpu = px4_cpu()
-
-        def prepare_child() -> None:  # in the child before exec: every PX4 thread inherits
-            die_with_parent()
-            if cpu is not None:
-                os.sched_setaffinity(0, {cpu})
-
         search_path = f"{self.bin_dir.resolve()}:{os.environ.get('PATH', '')}"
         environment = dict(os.environ, PX4_SYS_AUTOSTART=str(AIRFRAME), PATH=search_path)
         with self.console_path.open("wb") as console:
@@ -544,8 +541,41 @@ class Px4Sitl:
                  "-w", str(self.work_dir.resolve()), str(self.build.etc)],
                 cwd=self.work_dir, env=environment, stdin=subprocess.DEVNULL,
                 stdout=console, stderr=subprocess.STDOUT, start_new_session=True,
-                preexec_fn=prepare_child,
+                preexec_fn=die_with_parent,
             )  # fmt: skip
+
+    def starting(self) -> bool:
+        """Whether PX4's start-up script still runs: PX4 runs it with ``system()``, so until
+        it ends PX4 has a child process (the shell)."""
+        assert self._process is not None, "PX4 was not started"
+        pid = self._process.pid
+        try:
+            return any((task / "children").read_text().strip()
+                       for task in Path(f"/proc/{pid}/task").iterdir())  # fmt: skip
+        except OSError:  # PX4 ended (or a thread did meanwhile): nothing runs for it any more
+            return False
+
+    def hold_to_one_cpu(self) -> int | None:
+        """Hold every thread of PX4 to :func:`px4_cpu`'s CPU (threads it starts later
+        inherit it); that CPU, None with a single CPU or once PX4 has ended."""
+        assert self._process is not None, "PX4 was not started"
+        cpu = px4_cpu()
+        if cpu is None:
+            return None
+        tasks = Path(f"/proc/{self._process.pid}/task")
+        held: set[int] = set()
+        try:
+            # Until no thread is new: one started meanwhile by a thread not yet held would
+            # not inherit the CPU.
+            while new := {int(task.name) for task in tasks.iterdir()} - held:
+                for tid in new:
+                    with contextlib.suppress(ProcessLookupError):  # the thread ended
+                        os.sched_setaffinity(tid, {cpu})
+                held |= new
+        except FileNotFoundError:  # PX4 ended
+            return None
+        self.cpu = cpu
+        return cpu
 
     def exit_description(self) -> str | None:
         """How PX4 ended (naming its console log), None while it runs or when not started."""

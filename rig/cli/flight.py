@@ -141,7 +141,7 @@ def fly(
         f"done: {result.simulated_s:.1f} s simulated in {result.wall_s:.1f} s "
         f"(RTF {result.real_time_factor:.2f}x, {result.frames} frames)\n"
         + (f"speed:         {shortfall}\n" if shortfall else "")
-        + f"autopilot:     {result.autopilot}\n"
+        + f"autopilot:     {result.autopilot}{_restarted(result)}\n"
         f"rig log:       {result.rig_log}\n"
         f"autopilot log: {result.autopilot_log or '(written by the autopilot, e.g. PX4)'}",
         highlight=False,
@@ -152,6 +152,14 @@ def fly(
     except RigError as error:  # the run itself succeeded: say so, keep exit 0
         print(f"rig: warning: no plots: {error}", file=sys.stderr)
     return 0
+
+
+def _restarted(result: RunResult) -> str:
+    """The summary's note of an autopilot started more than once."""
+    if result.autopilot_starts == 1:
+        return ""
+    return (f" (started {result.autopilot_starts} times: it stalled in its start-up before "
+            "the scenario began; rig.ulg says how)")  # fmt: skip
 
 
 def plot_names(paths: list[Path]) -> str:

@@ -37,6 +37,15 @@ class AutopilotRun(Protocol):
     def connect(self, link: SimulatorLink) -> None:
         """Start the autopilot (or wait for it) and accept its simulator connection."""
 
+    def settle(self) -> bool:
+        """Do what waits for the autopilot's start-up to end; True once done (the loop
+        asks again every few frames until then)."""
+
+    def set_aside_start(self, start: int) -> Path | None:
+        """After a stall in its start-up (the autopilot stopped): keep this start's console
+        under a name of its own and say where, so the rig can start it again; None when the
+        rig does not (it did not start this autopilot, or a stall there is a defect)."""
+
     def exit_description(self) -> str | None:
         """Why the autopilot's process ended, None while it runs (or it is not ours)."""
 
@@ -70,6 +79,14 @@ class ReferenceAutopilotRun:
                                          preexec_fn=restore_sigint)  # fmt: skip
         link.accept("the reference autopilot (python -m rig.autopilots.reference)",
                     answers_every_frame=True)  # fmt: skip
+
+    def settle(self) -> bool:
+        """Nothing waits for its start-up."""
+        return True
+
+    def set_aside_start(self, start: int) -> Path | None:
+        """None: the rig's own autopilot starts alike each time; a stall is a defect."""
+        return None
 
     def exit_description(self) -> str | None:
         return None if self._process is None else exit_description(self._process)
@@ -107,8 +124,7 @@ class Px4Run:
         px4, hz = self._px4, self._imu_hz
         if px4.build is not None:
             px4.start()
-            where = "" if px4.cpu is None else f" on CPU {px4.cpu}"
-            self._event(f"started {px4.build.description}{where}: {px4.command()}", "info")
+            self._event(f"started {px4.build.description}: {px4.command()}", "info")
             link.stall_hint = (f"; PX4 {px4.build.tag} was given IMU_GYRO_RATEMAX = "
                                f"IMU_INTEG_RATE = {hz} through {px4.build.hook.value}, see "
                                f"its console {px4.console_path}")  # fmt: skip
@@ -126,6 +142,28 @@ class Px4Run:
         if self._on_waiting is not None:
             self._on_waiting(command)
         link.accept(f"PX4 SITL instance {self._ports.instance}: {command}")
+
+    def settle(self) -> bool:
+        """Once PX4's start-up script has ended (one started by hand: at once), hold PX4 to
+        one CPU (:meth:`~rig.autopilots.px4.Px4Sitl.hold_to_one_cpu`)."""
+        px4 = self._px4
+        if px4.build is None:
+            return True
+        if px4.starting():
+            return False
+        cpu = px4.hold_to_one_cpu()
+        if cpu is not None:
+            self._event(f"PX4's start-up script has ended: PX4 held to CPU {cpu}", "info")
+        return True
+
+    def set_aside_start(self, start: int) -> Path | None:
+        """``px4.log`` becomes ``px4.start-<start>.log`` (a PX4 started by hand: None)."""
+        px4 = self._px4
+        if px4.build is None or not px4.console_path.is_file():
+            return None
+        kept = px4.console_path.with_name(f"px4.start-{start}.log")
+        px4.console_path.replace(kept)
+        return kept
 
     def exit_description(self) -> str | None:
         return self._px4.exit_description()

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -68,7 +68,7 @@ from rig.chips.layer import (
     gps_fix,
 )
 from rig.chips.pwm import Pulse, PwmOutput, throttle_from_capture
-from rig.errors import RigError, ScenarioError
+from rig.errors import AutopilotStalled, RigError, ScenarioError
 from rig.lockstep.autopilots import autopilot_run
 from rig.lockstep.pacing import Pacer
 from rig.logs.rig_log import RigLog
@@ -101,6 +101,8 @@ RANGEFINDER_RATE_HZ = 1e6 / PX4_CYCLE_US
 RANGEFINDER_LIMITS_M = (MIN_RANGE_M, PX4_MAX_DISTANCE_M)
 #: Ground truth is logged at this rate (PX4 SITL logs its groundtruth topics at ~100 Hz).
 TRUTH_LOG_HZ = 250
+#: Starts of an autopilot that stalls in its start-up (PX4's races, :func:`run_scenario`).
+AUTOPILOT_STARTS = 3
 _MOUNTS = {
     "free": Mount.FREE,
     "gimbal_pitch": Mount.GIMBAL_PITCH,
@@ -209,6 +211,9 @@ class RunResult:
     #: What each kind of call into the compiled chips cost over the frames (``rtl`` only):
     #: the chips' part of the budget, by bus transaction and clock.
     chip_costs: tuple[CallCost, ...] = ()
+    #: How many times the autopilot was started: more than once after a stall in its
+    #: start-up (:func:`run_scenario`; ``rig.ulg`` says why).
+    autopilot_starts: int = 1
 
     @property
     def real_time_factor(self) -> float:
@@ -248,7 +253,28 @@ def run_scenario(
     if options.autopilot is Autopilot.PX4:  # before anything starts: no PX4, a rate it refuses
         check_imu_rate(scenario.rates.imu_hz, find_px4(options.px4_dir))
     run_dir = claim_run_dir(options.out_dir or default_run_dir(scenario), options.force)
-    loop = _Loop(scenario, options, run_dir, progress)
+    for start in range(1, AUTOPILOT_STARTS + 1):
+        loop = _Loop(scenario, options, run_dir, progress)
+        try:
+            return replace(_fly(loop), autopilot_starts=start)
+        except AutopilotStalled as error:
+            # PX4's lockstep start-up races now and then (a module's start waits for
+            # simulated time that waits for it): a flight that has not begun is started
+            # over, a stall in flight is reported.
+            if start == AUTOPILOT_STARTS or loop.scenario_began:
+                raise
+            set_aside = loop.autopilot.set_aside_start(start)
+            if set_aside is None:
+                raise
+            note = (f"the autopilot stalled in its start-up, before the scenario sent it "
+                    f"anything, and was started again (its console then: {set_aside.name}): "
+                    f"{error}")  # fmt: skip
+            options = replace(options, notes=(*options.notes, ("warn", note)))
+    raise AssertionError("the last start returns or raises")
+
+
+def _fly(loop: _Loop) -> RunResult:
+    """Run the loop to its end; the error that ended it goes into its log too."""
     try:
         loop.run()
     except RigError as error:
@@ -381,6 +407,13 @@ class _Loop:
             on_waiting=options.on_waiting,
         )
 
+    @property
+    def scenario_began(self) -> bool:
+        """Whether anything of the scenario has reached the autopilot (a command, a
+        set-point, a stick): before that, a run started over is the same run."""
+        ground = getattr(self, "ground", None)  # None: the run stopped before its link
+        return ground is not None and ground.messages_sent > 0
+
     # -- run ---------------------------------------------------------------------------
 
     def run(self) -> None:
@@ -405,6 +438,7 @@ class _Loop:
         state_next_us = self.clock_start_us
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
         poll_every = max(1, self.rates.imu_hz // 100)
+        settled = False
         pending: list[Action] = []
         clock = time.perf_counter
         truth, readings = self._advance(1)
@@ -429,6 +463,7 @@ class _Loop:
                 result = ground.poll(time_s)
                 if result is not None:
                     self._event(result)
+                settled = settled or self.autopilot.settle()
             if link.lockstep:  # commands only once the autopilot keeps pace (determinism)
                 pending.extend(script.due(self.run_us))
                 pending = self._run_actions(pending, time_s, barrier)

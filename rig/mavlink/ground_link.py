@@ -138,6 +138,8 @@ class GroundLink:
     #: The autopilot's latest HEARTBEAT ``custom_mode`` (its flight mode, PX4's encoding).
     custom_mode: int | None = None
     received: dict[str, int] = field(default_factory=dict)
+    #: Messages sent to the autopilot so far.
+    messages_sent: int = 0
 
     def __post_init__(self) -> None:
         self.mav = mavlink.MAVLink(None, GCS_SYSTEM_ID, GCS_COMPONENT_ID)
@@ -530,6 +532,7 @@ class GroundLink:
     def _send(self, messages: Sequence[mavlink.MAVLink_message]) -> None:
         for message in messages:
             self._sock.sendto(message.pack(self.mav), self._target)
+            self.messages_sent += 1
 
     def _receive_matching(self, step: Expect, timeout_s: float) -> mavlink.MAVLink_message | None:
         """Handle what arrives within ``timeout_s``; return the first message ``step`` wants."""

@@ -8,6 +8,7 @@ from the rig's ground truth (``rig.ulg``) and PX4's own ULog (``px4.ulg``).
 """
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -31,6 +32,7 @@ from rig.autopilots.px4 import (
 from rig.errors import RigError
 from rig.lockstep.loop import RunOptions, run_scenario
 from rig.mavlink.sim_messages import ACCEL_FIFO_SCALE_MPS2, GYRO_FIFO_SCALE_RADPS
+from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
 from tests.rig.px4_flights import fly_px4
 
@@ -296,7 +298,8 @@ def _wait_until_flying(rig, out):
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: PX4 is not pinned")
 def test_every_px4_thread_runs_on_the_one_cpu_the_rig_chose(tmp_path, free_instance, px4_dir):
-    """PX4's lockstep chain of threads on one core, not spread over the rig's (bench_px4)."""
+    """PX4's lockstep chain of threads on one core, not spread over the rig's (bench_px4),
+    once its start-up script has ended."""
     out = tmp_path / "run"
     rig = _start_rig_cli(px4_dir, free_instance(), out)
     try:
@@ -314,21 +317,28 @@ def test_every_px4_thread_runs_on_the_one_cpu_the_rig_chose(tmp_path, free_insta
     (cpu,) = set(allowed.values())
     assert int(cpu) in os.sched_getaffinity(0)
     messages = [m.message for m in pyulog.ULog(str(out / "rig.ulg")).logged_messages]
-    assert any(m.startswith("started PX4 ") and f" on CPU {cpu}: " in m for m in messages)
+    assert f"PX4's start-up script has ended: PX4 held to CPU {cpu}" in messages
 
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: PX4 is not pinned")
 def test_two_px4_side_by_side_run_on_different_cpus(tmp_path, free_instance, px4_dir):
     """A second PX4 (a campaign's, a parallel test's) goes beside the first, not onto it:
     onto a CPU with the fewest PX4s held to it, the first counted (and any other test's
-    running meanwhile). Both boot and wait for their simulator, which never comes."""
+    running meanwhile). Both boot and wait for their simulator, which never comes: their
+    start-up scripts wait for it."""
     first = Px4Sitl(find_px4(px4_dir), tmp_path / "a", free_instance(), {})
     try:
         first.start()
+        first.hold_to_one_cpu()
         second = Px4Sitl(find_px4(px4_dir), tmp_path / "b", first.instance + 1, {})
         try:
             taken = Counter(cpus_of_pinned_px4())
             second.start()
+            second.hold_to_one_cpu()
+            deadline = time.monotonic() + 30
+            while not (first.starting() and second.starting()):  # until each runs its rcS
+                assert time.monotonic() < deadline, "a PX4 ran no start-up script"
+                time.sleep(0.05)
             cpus = os.sched_getaffinity(0)
             assert {first.cpu, second.cpu} <= cpus
             assert taken[first.cpu] >= 1
@@ -393,3 +403,58 @@ def test_a_bad_param_for_px4_is_one_line(text):
     with pytest.raises(RigError, match=r"^--param .*: expected NAME=VALUE with a finite number$"):
         parse_assignments((text,))
     assert parse_assignments(("MPC_XY_P=1.5", "SDLOG_MODE=0")) == {"MPC_XY_P": 1.5, "SDLOG_MODE": 0}
+
+
+def _stalling_px4(root: Path, px4_dir: Path, stalls: int) -> Path:
+    """A build whose ``bin/px4`` is the test double (tests/rig/autopilot_double.py), with
+    ``px4_dir``'s parameters: on its first ``stalls`` starts it connects and never
+    answers, as PX4 does when its start-up script hangs, then it answers like PX4."""
+    build = _fake_build(root, rcs=_SIMULATOR)
+    (build / "etc/extras").mkdir()
+    shutil.copy(px4_dir / "etc/extras/parameters.json.xz", build / "etc/extras")
+    double = Path(__file__).with_name("autopilot_double.py")
+    (build / "bin/px4").write_text(
+        "#!/bin/sh\n# TEST DOUBLE standing in for PX4 v1.17.0 (its tag, for find_px4)\n"
+        f'starts={build}/bin/px4.starts; started=$(cat "$starts" 2>/dev/null || echo 0)\n'
+        'echo $((started + 1)) > "$starts"\n'
+        f'behaviour=px4; [ "$started" -lt {stalls} ] && behaviour=hang\n'
+        f"exec {sys.executable} {double} --port $((4560 + $3)) --behaviour $behaviour\n"
+    )
+    return build
+
+
+_START_UP = {"name": "t", "vehicle": "f450_high_precision", "duration_s": 0.5, "seed": 1,
+             "sensor_layer": "tlm"}  # fmt: skip
+
+
+def test_a_px4_that_stalls_in_its_start_up_is_started_again(tmp_path, free_instance, px4_dir):
+    """PX4's lockstep start-up races now and then (a module's start waits for simulated
+    time, which waits for it): before the scenario has sent it anything, the rig starts
+    it again, says so, and keeps the stalled start's console."""
+    build = _stalling_px4(tmp_path / "px4", px4_dir, stalls=1)
+    options = RunOptions(autopilot="px4", px4_dir=build, instance=free_instance(),
+                         out_dir=tmp_path / "run",
+                         timeouts=LinkTimeouts(connect_s=30, first_answer_sim_s=0.3))  # fmt: skip
+    result = run_scenario(scenario_from_dict(_START_UP), options)
+    assert result.autopilot_starts == 2
+    assert result.frames == 500
+    assert (tmp_path / "run/px4.start-1.log").is_file()
+    assert (tmp_path / "run/px4.log").is_file()
+    events = [(m.log_level, m.message) for m in pyulog.ULog(str(result.rig_log)).logged_messages]
+    (note,) = [text for _, text in events if "stalled in its start-up" in text]
+    assert "started again (its console then: px4.start-1.log)" in note
+    assert "sent no HIL_ACTUATOR_CONTROLS in 0.3 s of simulated time" in note
+
+
+def test_a_px4_that_never_gets_through_its_start_up_fails_after_three_starts(
+    tmp_path, free_instance, px4_dir
+):
+    build = _stalling_px4(tmp_path / "px4", px4_dir, stalls=99)
+    options = RunOptions(autopilot="px4", px4_dir=build, instance=free_instance(),
+                         out_dir=tmp_path / "run",
+                         timeouts=LinkTimeouts(connect_s=30, first_answer_sim_s=0.3))  # fmt: skip
+    with pytest.raises(RigError, match=r"sent no HIL_ACTUATOR_CONTROLS in 0\.3 s"):
+        run_scenario(scenario_from_dict(_START_UP), options)
+    assert (build / "bin/px4.starts").read_text().strip() == "3"
+    kept = sorted(path.name for path in (tmp_path / "run").glob("px4*.log"))
+    assert kept == ["px4.log", "px4.start-1.log", "px4.start-2.log"]
