@@ -65,6 +65,7 @@ def fly_bare(build: Px4Build, *, instance: int, imu_hz: int, arm_s: float, simul
             poll_every = max(1, imu_hz // 100)
             actions = [("arm", ground.arm_when_ready()), ("takeoff", ground.takeoff(2.0))]
             wall_start = 0.0
+            held = False  # PX4 on one CPU once its start-up script has ended, as the rig does
             for frame in range(1, last_frame + 1):
                 time_us = frame * frame_us
                 model.advance(throttle, frame_us / 1e6)
@@ -77,6 +78,9 @@ def fly_bare(build: Px4Build, *, instance: int, imu_hz: int, arm_s: float, simul
                     ground.start(*actions.pop(0), time_us / 1e6)
                 if ground.busy or frame % poll_every == 0:
                     ground.poll(time_us / 1e6)  # PX4's acks; a refused command raises
+                    if not held and not px4.starting():
+                        px4.hold_to_one_cpu()
+                        held = True
                 controls = link.answer(time_us)
                 if controls is not None:
                     throttle = np.asarray(controls.motors)

@@ -7,10 +7,10 @@ start-up. ``bypass`` is the same rig with its sensor layer skipped (SI samples s
 into HIL_SENSOR, commanded widths straight to the motors): what the chips cost. The anchor,
 PX4 + the barest simulator that flies it (``benchmarks.bare_px4_sim``), is measured in the
 same run at each rate; the goals are shares of it (:data:`GOAL_SHARES`). Both start PX4
-alike (``Px4Sitl``: held to one CPU). A single short flight's factor moved ±10 % from run
-to run, so each is flown ``REPEATS`` times, the anchor and the rig's cases in turn (a load
-that comes and goes then falls on all of them), and the median is the figure, the range in
-its detail.
+alike (``Px4Sitl``: held to one CPU once its start-up script has ended). A single short
+flight's factor moved ±10 % from run to run, so each is flown ``REPEATS`` times, the
+anchor and the rig's cases in turn (a load that comes and goes then falls on all of them),
+and the median is the figure, the range in its detail.
 Figures only, no pass/fail.
 """
 

@@ -261,9 +261,12 @@ def run_scenario(
             # PX4's lockstep start-up races now and then (a module's start waits for
             # simulated time that waits for it): a flight that has not begun is started
             # over, a stall in flight is reported.
-            if start == AUTOPILOT_STARTS or loop.scenario_began:
-                raise
-            set_aside = loop.autopilot.set_aside_start(start)
+            set_aside = None
+            if start < AUTOPILOT_STARTS and not loop.scenario_began:
+                set_aside = loop.autopilot.set_aside_start(start)
+            if set_aside is None and start > 1:
+                raise AutopilotStalled(f"{error} (start {start}: the earlier ones stalled in "
+                                       "their start-up, rig.ulg says how)") from None  # fmt: skip
             if set_aside is None:
                 raise
             note = (f"the autopilot stalled in its start-up, before the scenario sent it "
