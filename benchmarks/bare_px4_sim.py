@@ -78,9 +78,7 @@ def fly_bare(build: Px4Build, *, instance: int, imu_hz: int, arm_s: float, simul
                     ground.start(*actions.pop(0), time_us / 1e6)
                 if ground.busy or frame % poll_every == 0:
                     ground.poll(time_us / 1e6)  # PX4's acks; a refused command raises
-                    if not held and not px4.starting():
-                        px4.hold_to_one_cpu()
-                        held = True
+                    held = held or px4.settle()
                 controls = link.answer(time_us)
                 if controls is not None:
                     throttle = np.asarray(controls.motors)

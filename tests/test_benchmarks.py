@@ -3,12 +3,16 @@
 answer each other (the benchmarks themselves run in ``make bench``)."""
 
 import json
+from pathlib import Path
 
 import pytest
 
 from benchmarks.__main__ import main, merged_record
-from benchmarks.figures import Figure
+from benchmarks.figures import Figure, chips_detail, lowest_of
 from benchmarks.lockstep_exchange import MODES, exchange_us
+from fpga_hdl.cosim.native import CallCost
+from rig.lockstep.loop import FrameBudget, RunResult
+from rig.mavlink.simulator_link import LinkStats
 
 
 def _record(path, modules):
@@ -80,8 +84,6 @@ def test_the_lockstep_exchange_refuses_an_unknown_mode():
 
 
 def test_repeated_runs_count_the_lowest_and_show_the_spread():
-    from benchmarks.figures import lowest_of
-
     runs = [Figure("RTL", value, "× real time", detail=f"run {value}") for value in (0.9, 0.7, 0.8)]
     figure = lowest_of(runs, "≥ 2×")
     assert (figure.value, figure.goal) == (0.7, "≥ 2×")
@@ -91,13 +93,6 @@ def test_repeated_runs_count_the_lowest_and_show_the_spread():
 
 
 def test_the_chips_budget_is_per_frame_and_most_expensive_first():
-    from pathlib import Path
-
-    from benchmarks.figures import chips_detail
-    from fpga_hdl.cosim.native import CallCost
-    from rig.lockstep.loop import FrameBudget, RunResult
-    from rig.mavlink.simulator_link import LinkStats
-
     costs = (
         CallCost("I2C mag", 50, 7_600, "system", 0.15),
         CallCost("SPI imu", 1000, 249_000, "system", 0.25),

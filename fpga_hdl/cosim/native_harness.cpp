@@ -411,7 +411,8 @@ EXPORT int nh_spi(void* handle, uint32_t device, uint32_t length, uint32_t divid
     m.spi_divider = divider;
     m.spi_mode3 = mode3;
     bool ok = put(*h, m.spi_tx, tx, bytes, "spi_tx") &&
-              h->request(m.spi_request, m.spi_acknowledge, "SPI transfer", Harness::Clocks::SPI) &&
+              h->request(m.spi_request, m.spi_acknowledge, "SPI transfer",
+                         Harness::Clocks::SPI) &&
               get(*h, m.spi_rx, rx, bytes, "spi_rx");
     return status(ok);
 }
@@ -472,7 +473,8 @@ EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_
     m.uart_divider = divider;
     m.uart_tx_len = tx_len;
     bool ok = put(*h, m.uart_tx, tx, tx_bytes, "uart_tx") &&
-              h->request(m.uart_request, m.uart_acknowledge, "UART exchange", Harness::Clocks::UART) &&
+              h->request(m.uart_request, m.uart_acknowledge, "UART exchange",
+                         Harness::Clocks::UART) &&
               get(*h, m.uart_rx, rx, rx_bytes, "uart_rx");
     *rx_len = m.uart_rx_len;
     *line_cycles = m.uart_line_cycles;

@@ -555,6 +555,14 @@ class Px4Sitl:
         except OSError:  # PX4 ended (or a thread did meanwhile): nothing runs for it any more
             return False
 
+    def settle(self) -> bool:
+        """Once PX4's start-up script has ended, hold it to one CPU (:attr:`cpu` says which);
+        True then, False while the script still runs."""
+        if self.starting():
+            return False
+        self.hold_to_one_cpu()
+        return True
+
     def hold_to_one_cpu(self) -> int | None:
         """Hold every thread of PX4 to :func:`px4_cpu`'s CPU (threads it starts later
         inherit it); that CPU, None with a single CPU or once PX4 has ended."""

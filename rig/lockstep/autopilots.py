@@ -145,15 +145,14 @@ class Px4Run:
 
     def settle(self) -> bool:
         """Once PX4's start-up script has ended (one started by hand: at once), hold PX4 to
-        one CPU (:meth:`~rig.autopilots.px4.Px4Sitl.hold_to_one_cpu`)."""
+        one CPU (:meth:`~rig.autopilots.px4.Px4Sitl.settle`)."""
         px4 = self._px4
         if px4.build is None:
             return True
-        if px4.starting():
+        if not px4.settle():
             return False
-        cpu = px4.hold_to_one_cpu()
-        if cpu is not None:
-            self._event(f"PX4's start-up script has ended: PX4 held to CPU {cpu}", "info")
+        if px4.cpu is not None:
+            self._event(f"PX4's start-up script has ended: PX4 held to CPU {px4.cpu}", "info")
         return True
 
     def set_aside_start(self, start: int) -> Path | None:

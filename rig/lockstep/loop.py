@@ -264,11 +264,11 @@ def run_scenario(
             set_aside = None
             if start < AUTOPILOT_STARTS and not loop.scenario_began:
                 set_aside = loop.autopilot.set_aside_start(start)
-            if set_aside is None and start > 1:
+            if set_aside is None:
+                if start == 1:
+                    raise
                 raise AutopilotStalled(f"{error} (start {start}: the earlier ones stalled in "
                                        "their start-up, rig.ulg says how)") from None  # fmt: skip
-            if set_aside is None:
-                raise
             note = (f"the autopilot stalled in its start-up, before the scenario sent it "
                     f"anything, and was started again (its console then: {set_aside.name}): "
                     f"{error}")  # fmt: skip
