@@ -140,6 +140,10 @@ class SensorTop(wiring.Component):
         signal-loss timeout.
     uart_clk_hz : float
         Frequency of the ``uart`` domain (the GPS receiver).
+    pwm_skippable : bool
+        Build the capture core with its simulation ports (``PwmCapture``'s ``skip`` and
+        ``quiet_ticks``, reached as ``capture.skip``): for the compiled co-simulation,
+        never for synthesis.
 
     Attributes
     ----------
@@ -206,6 +210,7 @@ class SensorTop(wiring.Component):
         pwm_tick_hz: float = PWM_TICK_HZ,
         pwm_timeout_s: float = PWM_TIMEOUT_S,
         uart_clk_hz: float = UART_CLK_HZ,
+        pwm_skippable: bool = False,
     ) -> None:
         self.sys_clk_hz = sys_clk_hz
         self.pwm_tick_hz = pwm_tick_hz
@@ -216,7 +221,9 @@ class SensorTop(wiring.Component):
         self.gps = UbloxM8Core(sys_clk_hz=uart_clk_hz)
         self.range = LidarLiteCore(sys_clk_hz=sys_clk_hz)
         self.flow = Pmw3901(sys_clk_hz=sys_clk_hz)
-        self.capture = PwmCapture(tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s)
+        self.capture = PwmCapture(
+            tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s, skippable=pwm_skippable
+        )
         # The synchroniser copies a published result within its stages + 1 system
         # cycles, before the next publication (at most one per tick) replaces it.
         ratio = PWM_RESULT_SYNC_STAGES + 2

@@ -8,12 +8,19 @@ short or stretched by a write, and software writes each width once per frame. A 
 0 keeps a channel low: no pulse at all, as a dropped-out output. The whole generator runs
 on its own clock (one tick per cycle), so the simulator pays ``tick_hz`` cycles per
 second for all eight channels and nothing per pulse edge.
+
+A simulation that runs many ticks at a time may let one edge stand for several
+(``skip``) while nothing but the counter moves: ``quiet_ticks`` says how many, counting
+only once the outputs have held still for ``settle_edges`` edges (the synchronisers of
+the core that samples them), so the reader's pipeline is at rest too.
 """
 
 from __future__ import annotations
 
+import functools
+
 from amaranth.build import Platform
-from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -29,6 +36,8 @@ class PwmGenerator(wiring.Component):
     ----------
     counter_bits : int
         Width of the period and width registers (16 bits: periods up to 65.5 ms at 1 µs).
+    settle_edges : int
+        Edges the outputs must have held still before ``quiet_ticks`` is ever above 0.
 
     Attributes
     ----------
@@ -38,17 +47,27 @@ class PwmGenerator(wiring.Component):
         Pulse width per channel, taken at each period start.
     pwm : Out(PWM)
         ``pulses``: the outputs, one bit per channel.
+    skip : In(counter_bits)
+        Ticks beyond one that the next edge stands for (0: an ordinary edge).
+    quiet_ticks : Out(counter_bits)
+        How many ticks the next edge may stand for with no output changing and no period
+        starting (0: the next edge must be an ordinary one).
     """
 
-    def __init__(self, *, counter_bits: int = 16) -> None:
+    def __init__(self, *, counter_bits: int = 16, settle_edges: int = 0) -> None:
         if not (isinstance(counter_bits, int) and counter_bits >= 2):
             raise ValueError(f"counter_bits must be an integer >= 2, not {counter_bits!r}")
+        if not (isinstance(settle_edges, int) and settle_edges >= 0):
+            raise ValueError(f"settle_edges must be an integer >= 0, not {settle_edges!r}")
         self.counter_bits = counter_bits
+        self.settle_edges = settle_edges
         super().__init__(
             {
                 "period_ticks": In(counter_bits),
                 "width_ticks": In(data.ArrayLayout(counter_bits, PWM_CHANNELS)),
                 "pwm": Out(PWM),
+                "skip": In(counter_bits),
+                "quiet_ticks": Out(counter_bits),
             }
         )
 
@@ -66,6 +85,28 @@ class PwmGenerator(wiring.Component):
         with m.If(~running | (count + 1 >= self.period_ticks)):
             m.d.sync += count.eq(0)
         with m.Else():
-            m.d.sync += count.eq(count + 1)
-        m.d.sync += self.pwm.pulses.eq(Cat(*((count < width) & running for width in widths)))
+            m.d.sync += count.eq(count + 1 + self.skip)
+        pulses = Cat(*((count < width) & running for width in widths))
+        m.d.sync += self.pwm.pulses.eq(pulses)
+        self._quiet(m, count, active, running, pulses)
         return m
+
+    def _quiet(
+        self, m: Module, count: Signal, active: list[Signal], running: Value, pulses: Value
+    ) -> None:
+        """``quiet_ticks``: edges before the next period start or output change, once the
+        outputs have held still for ``settle_edges`` edges (``pulses``: their next value).
+        A high output holds while the count stays below its width, so for
+        ``width - count`` more edges; a low one stays low until the period ends."""
+        outputs = self.pwm.pulses
+        held = Signal(range(self.settle_edges + 1))  # edges since the outputs last changed
+        with m.If(pulses != outputs):
+            m.d.sync += held.eq(0)
+        with m.Elif(held < self.settle_edges):
+            m.d.sync += held.eq(held + 1)
+        limit = (1 << self.counter_bits) - 1
+        left: list[Value] = [self.period_ticks - 1 - count]  # edges before the wrap
+        left += [Mux(outputs[ch], width - count, limit) for ch, width in enumerate(active)]
+        least = functools.reduce(lambda a, b: Mux(a < b, a, b), left)
+        settled = running & (count != 0) & (count < self.period_ticks) & (held == self.settle_edges)
+        m.d.comb += self.quiet_ticks.eq(Mux(settled, least, 0))

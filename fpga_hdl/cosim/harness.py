@@ -31,10 +31,14 @@ transfer is acknowledged. What a transfer moves is the same, clock for clock on 
 system side sees its chip select only after the transfer, as it would see a transfer too
 short for its synchronisers. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while
 ``pwm_run`` is high: the capture must count every tick of every period, so in a closed loop
-it runs all the time. The UART clock (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS
-receiver and the autopilot's UART) runs while a UART exchange is requested or under way, or
-``rst`` is high: a fix the host loaded crosses into the receiver in the exchange's first
-cycles, before its first start bit, so the line times are those of a free-running clock.
+it runs all the time. Under cocotb every tick is an edge; the compiled harness
+(``fpga_hdl.cosim.native``) lets one edge stand for ``1 + pwm_skip`` ticks while
+``pwm_quiet_ticks`` says nothing moves through them but counters (the generator's and the
+capture core's own account, both checked tick for tick in the tests). The UART clock
+(``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the autopilot's UART) runs
+while a UART exchange is requested or under way, or ``rst`` is high: a fix the host loaded
+crosses into the receiver in the exchange's first cycles, before its first start bit, so
+the line times are those of a free-running clock.
 Verilator needs ``--timing`` for these delays (``fpga_hdl.cosim.runner`` adds it when a
 design brings behavioural Verilog).
 
@@ -57,6 +61,7 @@ from amaranth.hdl import (
     DomainRenamer,
     Instance,
     Module,
+    Mux,
     ResetSignal,
     Signal,
 )
@@ -68,6 +73,7 @@ from fpga_hdl.buses.pwm_generator import PwmGenerator
 from fpga_hdl.buses.spi_controller import SpiController
 from fpga_hdl.buses.spi_target import CS_SYNC_STAGES
 from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx
+from fpga_hdl.chips.pwm_capture.core import LATENCY_TICKS, SKIP_BITS
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
 from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, UART_CLK_HZ, SensorTop
 
@@ -417,11 +423,13 @@ class CosimHarness(wiring.Component):
         self.pwm_tick_hz = pwm_tick_hz
         self.uart_clk_hz = uart_clk_hz
         self.top = SensorTop(
-            sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz, uart_clk_hz=uart_clk_hz
-        )
+            sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz, uart_clk_hz=uart_clk_hz,
+            pwm_skippable=True,
+        )  # fmt: skip
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz)
-        self.pwm_generator = PwmGenerator()
+        # Its outputs settle through the capture's synchroniser and result registers.
+        self.pwm_generator = PwmGenerator(settle_edges=LATENCY_TICKS + 1)
         self.uart = UartPeer()
         self.host_writer = HostWriter(self.top.host.map)
         self.host_reader = HostReader(self.top.host.map)
@@ -436,6 +444,7 @@ class CosimHarness(wiring.Component):
         members |= {f"{device}_cs_n": Out(1) for device in SPI_DEVICES}
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
+        members |= {"pwm_skip": In(SKIP_BITS), "pwm_quiet_ticks": Out(SKIP_BITS)}
         members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "pwm_cycles",
                                                "uart_cycles")}  # fmt: skip
         super().__init__(members)
@@ -542,7 +551,7 @@ class CosimHarness(wiring.Component):
         ]
         m.d.sync += self.sync_cycles.eq(self.sync_cycles + 1)
         m.d.spi_ctrl += self.spi_cycles.eq(self.spi_cycles + 1)
-        m.d.pwm_out += self.pwm_cycles.eq(self.pwm_cycles + 1)
+        m.d.pwm_out += self.pwm_cycles.eq(self.pwm_cycles + 1 + self.pwm_skip)
         m.d.uart_peer += self.uart_cycles.eq(self.uart_cycles + 1)
 
         # Host port.
@@ -575,6 +584,16 @@ class CosimHarness(wiring.Component):
             i2c.sda_i.eq(sda),
         ]
         m.d.comb += top.pwm.eq(self.pwm_generator.pwm.pulses)
+        # Advancing the capture clock by event: one edge for 1 + ``pwm_skip`` ticks, as
+        # many as both the generator and the capture core say are quiet.
+        generator_quiet, capture_quiet = self.pwm_generator.quiet_ticks, top.capture.quiet_ticks
+        m.d.comb += [
+            self.pwm_generator.skip.eq(self.pwm_skip),
+            top.capture.skip.eq(self.pwm_skip),
+            self.pwm_quiet_ticks.eq(
+                Mux(generator_quiet < capture_quiet, generator_quiet, capture_quiet)
+            ),
+        ]
         m.d.comb += [top.gps_rx.eq(uart.line_tx), uart.line_rx.eq(top.gps_tx)]
         # Monitor outputs: the pins as a logic analyser on the rig would see them.
         m.d.comb += [

@@ -216,6 +216,7 @@ _SIGNATURES = {
                    ctypes.c_int),
     "nh_pwm_cycles": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
     "nh_pwm_cycles_later": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
+    "nh_pwm_by_event": ([ctypes.c_void_p, ctypes.c_int], ctypes.c_int),
     "nh_uart": ([ctypes.c_void_p, ctypes.c_uint32, ctypes.c_char_p, ctypes.c_size_t,
                  ctypes.c_uint32, _u8p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint32),
                  ctypes.POINTER(ctypes.c_uint32)], ctypes.c_int),
@@ -486,10 +487,15 @@ class NativeHarness:
     """Host port, SPI, I2C and PWM of a compiled :class:`~fpga_hdl.cosim.harness.CosimHarness`.
 
     Builds the library on first use (about half a minute; then cached). ``close`` frees
-    the model; the library stays loaded for the process's other harnesses.
+    the model; the library stays loaded for the process's other harnesses. The capture
+    clock advances by event (one edge for each quiet stretch of ticks, see
+    ``native_harness.cpp``); ``pwm_by_event=False`` clocks every tick, the reference the
+    tests compare it with.
     """
 
-    def __init__(self, *, pwm_tick_hz: float = PWM_TICK_HZ, spi_mode: int = 0) -> None:
+    def __init__(
+        self, *, pwm_tick_hz: float = PWM_TICK_HZ, spi_mode: int = 0, pwm_by_event: bool = True
+    ) -> None:
         gateware = CosimHarness(pwm_tick_hz=pwm_tick_hz)
         self.pwm_tick_hz = pwm_tick_hz
         self._model = _Model(_load(build_native_harness(gateware)))
@@ -500,6 +506,7 @@ class NativeHarness:
         self.i2c = NativeI2cBus(model, gateware.i2c.write_depth, gateware.i2c.read_depth)
         self.pwm = NativePwm(model, gateware.pwm_generator.counter_bits, tick_hz=pwm_tick_hz)
         self.uart = NativeUart(model, gateware.uart.tx_depth, gateware.uart.rx_depth)
+        model.call("nh_pwm_by_event", int(pwm_by_event))
 
     def reset(self) -> None:
         """Reset every clock domain for three capture ticks, as the cocotb harness does;

@@ -25,6 +25,12 @@
 // a worker thread (nh_pwm_cycles_later) while the caller's bus transfers run on `model`;
 // only the calls that touch `capture` wait for it.
 //
+// By event. Where the harness's `pwm_quiet_ticks` says the next capture-clock edges move
+// nothing but counters (no PWM output changes, no period starts, the capture's pipeline
+// at rest, no timeout due), one edge stands for that many ticks (`pwm_skip`, the RTL's own
+// counters add them), so a PWM period costs a few edges around each pulse edge instead of
+// one per tick. nh_pwm_by_event turns it off: the tests compare both, tick for tick.
+//
 // Costs: every call that clocks the design adds its wall time and cycles to a slot
 // (nh_costs): one per SPI device, per I2C address, the host writes, the host reads, the
 // UART exchanges, the capture clock run at once and the capture clock run on the worker
@@ -158,6 +164,7 @@ struct Harness {
     std::condition_variable changed;
     uint64_t queued = 0;  // cycles the worker is to run; 0 when it is idle
     bool quit = false;
+    bool by_event = true;  // capture-clock edges stand for every quiet tick
 
     ~Harness() {
         if (worker.joinable()) {
@@ -179,7 +186,7 @@ struct Harness {
             lock.unlock();
             {
                 const Charge charge{costs[PWM_LATER_SLOT], pwm_cycles};
-                for (uint64_t i = 0; i < count; ++i) pwm_cycle();
+                pwm_ticks(count);
             }
             lock.lock();
             queued = 0;
@@ -222,6 +229,19 @@ struct Harness {
         capture.rootp->PWM_CLOCK = 1;
         evaluate(capture);
         ++pwm_cycles;
+    }
+
+    // `count` ticks of the capture clock, each quiet stretch in one edge (see the top).
+    void pwm_ticks(uint64_t count) {
+        while (count != 0) {
+            const uint64_t quiet = by_event ? capture.pwm_quiet_ticks : 1;
+            const uint64_t ticks = std::clamp<uint64_t>(quiet, 1, count);
+            capture.pwm_skip = static_cast<SData>(ticks - 1);
+            pwm_cycle();
+            pwm_cycles += ticks - 1;
+            count -= ticks;
+        }
+        capture.pwm_skip = 0;
     }
 
     // The results' synchroniser's source side, from `capture` into `model`.
@@ -507,7 +527,15 @@ EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
     const Charge charge{h->costs[PWM_SLOT], h->pwm_cycles};  // the wait included
     h->wait_idle();
     evaluate(h->capture);  // inputs written since the last eval settle before the first edge
-    for (uint64_t i = 0; i < count; ++i) h->pwm_cycle();
+    h->pwm_ticks(count);
+    return 0;
+}
+
+// Whether capture-clock edges stand for every quiet tick (1, the default) or one tick each.
+EXPORT int nh_pwm_by_event(void* handle, int enabled) {
+    auto* h = static_cast<Harness*>(handle);
+    h->wait_idle();
+    h->by_event = enabled != 0;
     return 0;
 }
 

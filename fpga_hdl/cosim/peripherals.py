@@ -282,6 +282,7 @@ class Harness:
         for part in (self.host, self.spi, self.i2c, self.uart):
             part.reset()
         dut.pwm_run.value = 0
+        dut.pwm_skip.value = 0  # every tick an edge: the simulator's clock is exact
         self.pwm.write([0] * CHANNELS, period_ticks=0)
         tick_ps = round(1e12 / self.pwm_tick_hz)
         dut.rst.value = 1

@@ -8,6 +8,7 @@ NACKs included; the rig's layer compares the PWM capture with the TLM frame by f
 """
 
 import asyncio
+import random
 import struct
 import subprocess
 import sys
@@ -16,6 +17,7 @@ import pytest
 
 from fpga_hdl.buses.transactions import UnknownDevice
 from fpga_hdl.buses.uart import divider_for, line_cycles
+from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.driver import (
     GpsFix,
@@ -85,6 +87,42 @@ def test_the_capture_clock_runs_only_when_asked(harness):
     assert captures[0].width_ticks == 100
     assert captures[0].period_ticks == 400
     assert captures[1].timeout  # never a pulse on channel 1
+
+
+def test_the_capture_clock_by_event_equals_every_tick():
+    """One edge per quiet stretch (the default) against one edge per tick: the same results
+    at every read and the same tick count, through pulses, period starts, width changes,
+    widths of 0, 1 and beyond the period, a stopped generator and the 0.1 s timeout."""
+    from fpga_hdl.cosim.native import NativeHarness
+
+    by_event, every_tick = NativeHarness(), NativeHarness(pwm_by_event=False)
+    harnesses = (by_event, every_tick)
+    rng = random.Random(36)
+    reads = timeouts = 0
+    try:
+        for harness in harnesses:
+            harness.reset()
+        for _ in range(1500):
+            if rng.random() < 0.3:
+                period = rng.choice([2500, 2500, 2500, 3000, 20, 5, 2, 0])
+                choices = [0, 1, 2, 3, max(0, period - 1), period, period + 1]
+                widths = [rng.choice([*choices, rng.randint(900, 2100)]) for _ in range(CHANNELS)]
+                for harness in harnesses:
+                    harness.pwm.write(widths, period_ticks=period)
+            ticks = rng.choice([1, 2, 3, 4, 7, 100, 1000, 2499, 4000, 150_000])
+            later = rng.random() < 0.5
+            for harness in harnesses:
+                harness.pwm.cycles(ticks, later=later)
+            captures = by_event.host.pwm_capture()
+            assert captures == every_tick.host.pwm_capture()
+            assert by_event.cycles() == every_tick.cycles()
+            reads += 1
+            timeouts += sum(capture.timeout for capture in captures)
+    finally:
+        for harness in harnesses:
+            harness.close()
+    assert reads == 1500
+    assert timeouts > 0
 
 
 def test_px4s_gps_handshake_is_answered_and_timed_as_the_twin_predicts(harness):

@@ -1,16 +1,17 @@
 """Eight-channel PWM capture: pulse width, period and a timeout flag per channel, in ticks."""
 
+import functools
 import math
 
 from amaranth.build import Platform
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import Module, Mux, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from fpga_hdl.buses.signatures import PWM, PWM_CHANNELS
 
-__all__ = ["CHANNELS", "LATENCY_TICKS", "PwmCapture", "timeout_ticks"]
+__all__ = ["CHANNELS", "LATENCY_TICKS", "SKIP_BITS", "PwmCapture", "timeout_ticks"]
 
 CHANNELS = PWM_CHANNELS
 #: Two flip-flops re-time the asynchronous PWM inputs.
@@ -19,6 +20,9 @@ SYNC_STAGES = 2
 #: results: the synchroniser's second stage, then the result registers (the edge detector
 #: between them is combinational).
 LATENCY_TICKS = SYNC_STAGES
+#: Width of a skippable core's ``skip`` and ``quiet_ticks`` (ticks one edge may stand for).
+SKIP_BITS = 16
+_QUIET_MAX = (1 << SKIP_BITS) - 1
 
 
 def timeout_ticks(tick_hz: float, timeout_s: float) -> int:
@@ -64,22 +68,39 @@ class PwmCapture(wiring.Component):
         Pulse period per channel, in ticks; 0 until two rising edges are seen.
     timeout : Out(8)
         Per channel: no pulse for ``timeout_s`` (or none yet since reset).
+
+    With ``skippable`` (a simulation build: the compiled co-simulation advances the
+    capture clock by event, not tick by tick) the core also has:
+
+    skip : In(SKIP_BITS)
+        Ticks beyond one that the next edge stands for (0: an ordinary edge).
+    quiet_ticks : Out(SKIP_BITS)
+        How many ticks the next edge may stand for: through them the core only counts
+        (no edge in its pipeline, no timeout due), provided its input has held still for
+        the synchroniser's ``SYNC_STAGES`` edges, which only the driver of the pins can
+        know. 0: the next edge must be an ordinary one.
+
+    Without it (synthesis) neither port exists and the design is the plain counter.
     """
 
-    def __init__(self, *, tick_hz: float = 1e6, timeout_s: float = 0.1) -> None:
+    def __init__(
+        self, *, tick_hz: float = 1e6, timeout_s: float = 0.1, skippable: bool = False
+    ) -> None:
         self.timeout_ticks = timeout_ticks(tick_hz, timeout_s)
         self.tick_hz = float(tick_hz)
         self.timeout_s = float(timeout_s)
         self.counter_bits = self.timeout_ticks.bit_length()
+        self.skippable = skippable
         counts = data.ArrayLayout(self.counter_bits, CHANNELS)
-        super().__init__(
-            {
-                "pwm": In(PWM),
-                "width_ticks": Out(counts),
-                "period_ticks": Out(counts),
-                "timeout": Out(CHANNELS, init=(1 << CHANNELS) - 1),
-            }
-        )
+        members = {
+            "pwm": In(PWM),
+            "width_ticks": Out(counts),
+            "period_ticks": Out(counts),
+            "timeout": Out(CHANNELS, init=(1 << CHANNELS) - 1),
+        }
+        if skippable:
+            members |= {"skip": In(SKIP_BITS), "quiet_ticks": Out(SKIP_BITS)}
+        super().__init__(members)
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
@@ -87,6 +108,9 @@ class PwmCapture(wiring.Component):
         m.submodules.sync_pwm = FFSynchronizer(self.pwm.pulses, level, stages=SYNC_STAGES)
         previous = Signal(CHANNELS)
         m.d.sync += previous.eq(level)
+        # The ticks this edge stands for, and per channel how many more are quiet.
+        ticks = 1 + self.skip if self.skippable else 1
+        quiet: list[Value] = []
 
         for ch in range(CHANNELS):
             rise = level[ch] & ~previous[ch]
@@ -98,7 +122,13 @@ class PwmCapture(wiring.Component):
             timeout = self.timeout[ch]
 
             with m.If(since_rise < self.timeout_ticks):
-                m.d.sync += since_rise.eq(since_rise + 1)
+                if self.skippable:  # saturates at the timeout, as tick by tick
+                    counted = since_rise + ticks
+                    m.d.sync += since_rise.eq(
+                        Mux(counted < self.timeout_ticks, counted, self.timeout_ticks)
+                    )
+                else:
+                    m.d.sync += since_rise.eq(since_rise + 1)
             with m.If(rise):
                 m.d.sync += [since_rise.eq(1), armed.eq(1)]
                 with m.If(armed):
@@ -107,4 +137,10 @@ class PwmCapture(wiring.Component):
                 m.d.sync += [armed.eq(0), timeout.eq(1), width.eq(0), period.eq(0)]
             with m.Elif(fall & armed):
                 m.d.sync += [width.eq(since_rise), timeout.eq(0)]
+            # An armed channel times out at the edge that sees the timeout count.
+            left = self.timeout_ticks - since_rise
+            quiet.append(Mux(armed & (left < _QUIET_MAX), left, _QUIET_MAX))
+        if self.skippable:
+            least = functools.reduce(lambda a, b: Mux(a < b, a, b), quiet)
+            m.d.comb += self.quiet_ticks.eq(Mux(level == previous, least, 0))
         return m
