@@ -46,8 +46,8 @@ def budget_detail(budget: FrameBudget) -> str:
 
 
 def chips_detail(result: RunResult) -> str:
-    """The compiled chips' share of a frame by kind of call (µs and clock cycles per frame;
-    the worker thread's capture runs beside the rig, not in its frame): the per-frame
+    """The compiled chips' share of a frame by kind of call (µs and clock cycles per frame,
+    the capture's in ticks, of which it clocks only the edges with work): the per-frame
     budget of the RTL, measured inside the simulator library."""
     frames = max(result.frames, 1)
     parts = [

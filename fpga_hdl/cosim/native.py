@@ -26,13 +26,9 @@ the SPI controller's clock, which only an SPI transfer enables, and the UART clo
 only a UART exchange enables (nothing else runs meanwhile), so
 each transaction sees the same edges as under cocotb, where the design sees no time but
 its clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
-caller asks (:meth:`NativePwm.cycles`), at once or on the library's worker thread while
-the caller goes on. It runs in a second instance of the same Verilated harness: its
-domain and the system domain meet only in the results' synchroniser, so a host-port read
-copies the synchroniser's source side (its published copy and Gray count) from that
-instance into the first and lets it catch up there before it freezes the results. The bus
-transfers therefore run while the capture clock runs; only the PWM writes, the reads and
-the cycle counts wait for it.
+caller asks (:meth:`NativePwm.cycles`), and by event: one edge for each stretch of ticks in
+which nothing but counters move (``native_harness.cpp``), so a 400 Hz PWM period costs a
+few dozen edges.
 
 :class:`NativeHarness` bundles the buses like :class:`fpga_hdl.cosim.peripherals.Harness`
 (whose cocotb classes this mirrors): ``spi`` and ``i2c`` implement the
@@ -91,10 +87,6 @@ SOURCE = Path(__file__).with_name("native_harness.cpp")
 #: Verilator's root members.
 _SYNC_CLOCK, _SPI_CLOCK = "sync_clock", "spi_clock"
 _PWM_CLOCK, _UART_CLOCK = "pwm_clock", "uart_clock"
-#: SensorTop's PWM results' synchroniser (``SensorTop._capture_results``): the C++ copies
-#: its source side, ``held`` and ``gray``, from the capture clock's instance of the
-#: harness into the system clock's.
-_CAPTURE_SYNCHRONISER = ("top", "capture_cdc")
 #: ``cosim_gated_clock`` for this build: the C++ writes 1, the rising edge clears it. The
 #: ports and parameter are the gated clock's; ``enable`` is read by the C++ only.
 NATIVE_CLOCK_VERILOG = """\
@@ -153,8 +145,6 @@ def build_native_harness(harness: CosimHarness, *, build_dir: Path = BUILD_DIR) 
         "PWM_CLOCK": _root_member(_PWM_CLOCK, "clk"),
         "UART_CLOCK": _root_member(_UART_CLOCK, "clk"),
         "UART_ENABLE": _root_member(_UART_CLOCK, "enable"),
-        "CAPTURE_HELD": _root_member(*_CAPTURE_SYNCHRONISER, "held"),
-        "CAPTURE_GRAY": _root_member(*_CAPTURE_SYNCHRONISER, "gray"),
     }
     cflags = " ".join([CXXFLAGS, *(f"-D{name}={value}" for name, value in defines.items())])
     args = [*VERILATOR_ARGS, "-CFLAGS", cflags, "--top-module", HARNESS_TOPLEVEL]
@@ -215,7 +205,6 @@ _SIGNATURES = {
     "nh_pwm_set": ([ctypes.c_void_p, ctypes.c_char_p, ctypes.c_size_t, ctypes.c_uint32],
                    ctypes.c_int),
     "nh_pwm_cycles": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
-    "nh_pwm_cycles_later": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
     "nh_pwm_by_event": ([ctypes.c_void_p, ctypes.c_int], ctypes.c_int),
     "nh_uart": ([ctypes.c_void_p, ctypes.c_uint32, ctypes.c_char_p, ctypes.c_size_t,
                  ctypes.c_uint32, _u8p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint32),
@@ -240,7 +229,6 @@ _OTHER_SLOTS = (
     ("host-port read", "system"),
     ("GPS UART exchange", "UART"),
     ("PWM capture clock", "capture"),
-    ("PWM capture clock, worker thread", "capture"),
 )
 _COST_SLOTS = _I2C_SLOT + 128 + len(_OTHER_SLOTS)
 
@@ -251,8 +239,7 @@ class CallCost:
 
     ``what`` names it (``SPI imu``, ``I2C 0x0e``, ``host-port write`` ...); ``cycles`` are
     of ``clock`` (system, UART or capture); ``seconds`` is wall time, measured inside the
-    library (a host-port read or a capture run at once includes waiting for the worker
-    thread; the worker thread's runs overlap the caller's work).
+    library.
     """
 
     what: str
@@ -283,7 +270,7 @@ class _Model:
 
     def close(self) -> None:
         if self.handle is not None:
-            self.lib.nh_destroy(self.handle)  # waits for a capture run left to its thread
+            self.lib.nh_destroy(self.handle)
             self.handle = None
 
 
@@ -475,12 +462,10 @@ class NativePwm:
         packed = _pack(widths_ticks, self.counter_bits, self._bytes)
         self._model.call("nh_pwm_set", packed, len(packed), period_ticks)
 
-    def cycles(self, count: int, *, later: bool = False) -> None:
-        """Run ``count`` capture-clock cycles (generator and capture core); with ``later``,
-        on the library's worker thread while the caller goes on (bus transfers run
-        meanwhile; the next PWM write, host-port read or cycle count waits for them)."""
+    def cycles(self, count: int) -> None:
+        """Run ``count`` capture-clock ticks (generator and capture core)."""
         if count > 0:
-            self._model.call("nh_pwm_cycles_later" if later else "nh_pwm_cycles", count)
+            self._model.call("nh_pwm_cycles", count)
 
 
 class NativeHarness:

@@ -15,16 +15,6 @@
 // cycles after them), and the UART clock (the GPS receiver's domain and the autopilot's
 // UART), which only a UART exchange enables.
 //
-// Two instances of the harness. `model` runs the system and UART clocks: host port,
-// buses, chips. `capture` runs only the capture clock: the PWM generator, the capture
-// core and the source side of the results' synchroniser (its published copy `held` and
-// Gray change count). The two clock domains meet only in that synchroniser, so a read
-// first copies those two registers from `capture` into `model` (whose own capture clock
-// never runs) and then lets the synchroniser's destination side catch up, as it does in
-// the whole design (HostReader). Since no state is shared, the capture clock can run on
-// a worker thread (nh_pwm_cycles_later) while the caller's bus transfers run on `model`;
-// only the calls that touch `capture` wait for it.
-//
 // By event. Where the harness's `pwm_quiet_ticks` says the next capture-clock edges move
 // nothing but counters (no PWM output changes, no period starts, the capture's pipeline
 // at rest, no timeout due), one edge stands for that many ticks (`pwm_skip`, the RTL's own
@@ -33,21 +23,18 @@
 //
 // Costs: every call that clocks the design adds its wall time and cycles to a slot
 // (nh_costs): one per SPI device, per I2C address, the host writes, the host reads, the
-// UART exchanges, the capture clock run at once and the capture clock run on the worker
-// thread. That is the per-frame budget `make bench` prints, measured where it is spent.
+// UART exchanges and the capture clock. That is the per-frame budget `make bench` prints,
+// measured where it is spent.
 //
 // Errors: every function returns 0 on success and -1 on failure, with the reason in
 // nh_error(). Ports are copied as little-endian bytes, whatever their Verilated type.
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include <mutex>
 #include <string>
-#include <thread>
 
 #include "Vharness.h"
 #include "Vharness___024root.h"
@@ -57,8 +44,7 @@
 // results' synchroniser's source side, given by fpga_hdl.cosim.native as -D flags (their
 // names follow the harness's hierarchy).
 #if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(SPI_CLOCK) || \
-    !defined(SPI_ENABLE) || !defined(PWM_CLOCK) || !defined(UART_CLOCK) || \
-    !defined(UART_ENABLE) || !defined(CAPTURE_HELD) || !defined(CAPTURE_GRAY)
+    !defined(SPI_ENABLE) || !defined(PWM_CLOCK) || !defined(UART_CLOCK) || !defined(UART_ENABLE)
 #error "build through fpga_hdl.cosim.native: the clock and register -D flags are missing"
 #endif
 
@@ -78,8 +64,7 @@ constexpr size_t HOST_WRITE_SLOT = I2C_SLOT + 128;
 constexpr size_t HOST_READ_SLOT = HOST_WRITE_SLOT + 1;
 constexpr size_t UART_SLOT = HOST_READ_SLOT + 1;
 constexpr size_t PWM_SLOT = UART_SLOT + 1;
-constexpr size_t PWM_LATER_SLOT = PWM_SLOT + 1;
-constexpr size_t COST_SLOTS = PWM_LATER_SLOT + 1;
+constexpr size_t COST_SLOTS = PWM_SLOT + 1;
 
 // What one kind of call has cost so far: calls, clock cycles, wall time.
 struct Cost {
@@ -147,69 +132,16 @@ struct Instance {
 };
 
 struct Harness {
-    Instance system_instance;
-    Instance capture_instance;
-    Vharness& model = system_instance.model;     // the system and UART clocks
-    Vharness& capture = capture_instance.model;  // the capture clock (see the top of this file)
+    Instance instance;
+    Vharness& model = instance.model;
     uint64_t sys_cycles = 0;
     uint64_t pwm_cycles = 0;
     uint64_t uart_cycles = 0;
     Cost costs[COST_SLOTS];
     std::string error;
-    // Capture-clock cycles left to a worker thread (nh_pwm_cycles_later). Only one of the
-    // two threads touches `capture` at a time: every call that does first waits until the
-    // worker is idle.
-    std::thread worker;
-    std::mutex mutex;
-    std::condition_variable changed;
-    uint64_t queued = 0;  // cycles the worker is to run; 0 when it is idle
-    bool quit = false;
     bool by_event = true;  // capture-clock edges stand for every quiet tick
 
-    ~Harness() {
-        if (worker.joinable()) {
-            {
-                const std::lock_guard<std::mutex> lock{mutex};
-                quit = true;
-            }
-            changed.notify_all();
-            worker.join();
-        }
-    }
-
-    void work() {
-        std::unique_lock<std::mutex> lock{mutex};
-        while (true) {
-            changed.wait(lock, [this] { return queued != 0 || quit; });
-            if (quit) return;
-            const uint64_t count = queued;
-            lock.unlock();
-            {
-                const Charge charge{costs[PWM_LATER_SLOT], pwm_cycles};
-                pwm_ticks(count);
-            }
-            lock.lock();
-            queued = 0;
-            changed.notify_all();
-        }
-    }
-
-    void wait_idle() {
-        if (!worker.joinable()) return;
-        std::unique_lock<std::mutex> lock{mutex};
-        changed.wait(lock, [this] { return queued == 0; });
-    }
-
-    void run_later(uint64_t count) {
-        wait_idle();
-        if (count == 0) return;
-        if (!worker.joinable()) worker = std::thread{[this] { work(); }};
-        {
-            const std::lock_guard<std::mutex> lock{mutex};
-            queued = count;
-        }
-        changed.notify_all();
-    }
+    Harness() { model.pwm_skip = 0; }
 
     void sync_cycle() {
         model.rootp->SYNC_CLOCK = 1;
@@ -226,28 +158,22 @@ struct Harness {
     }
 
     void pwm_cycle() {
-        capture.rootp->PWM_CLOCK = 1;
-        evaluate(capture);
+        model.rootp->PWM_CLOCK = 1;
+        evaluate(model);
         ++pwm_cycles;
     }
 
     // `count` ticks of the capture clock, each quiet stretch in one edge (see the top).
     void pwm_ticks(uint64_t count) {
         while (count != 0) {
-            const uint64_t quiet = by_event ? capture.pwm_quiet_ticks : 1;
+            const uint64_t quiet = by_event ? model.pwm_quiet_ticks : 1;
             const uint64_t ticks = std::clamp<uint64_t>(quiet, 1, count);
-            capture.pwm_skip = static_cast<SData>(ticks - 1);
+            model.pwm_skip = static_cast<SData>(ticks - 1);
             pwm_cycle();
             pwm_cycles += ticks - 1;
             count -= ticks;
         }
-        capture.pwm_skip = 0;
-    }
-
-    // The results' synchroniser's source side, from `capture` into `model`.
-    void copy_capture_results() {
-        model.rootp->CAPTURE_HELD = capture.rootp->CAPTURE_HELD;
-        model.rootp->CAPTURE_GRAY = capture.rootp->CAPTURE_GRAY;
+        model.pwm_skip = 0;
     }
 
     void uart_cycle() {
@@ -363,7 +289,6 @@ EXPORT void* nh_create() {
 
 EXPORT void nh_destroy(void* handle) {
     auto* harness = static_cast<Harness*>(handle);
-    harness->wait_idle();
     delete harness;
     Verilated::threadContextp(nullptr);  // and the last context: none is left dangling
 }
@@ -373,7 +298,6 @@ EXPORT const char* nh_error(void* handle) { return static_cast<Harness*>(handle)
 EXPORT int nh_cycles(void* handle, uint64_t* sys_cycles, uint64_t* pwm_cycles,
                      uint64_t* uart_cycles) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
     *sys_cycles = h->sys_cycles;
     *pwm_cycles = h->pwm_cycles;
     *uart_cycles = h->uart_cycles;
@@ -387,7 +311,6 @@ EXPORT int nh_costs(void* handle, uint64_t* out, size_t words) {
         return status(h->fail("nh_costs: " + std::to_string(words) + " words for " +
                               std::to_string(COST_SLOTS) + " slots of three"));
     }
-    h->wait_idle();
     for (size_t slot = 0; slot < COST_SLOTS; ++slot) {
         out[3 * slot] = h->costs[slot].calls;
         out[3 * slot + 1] = h->costs[slot].cycles;
@@ -397,25 +320,18 @@ EXPORT int nh_costs(void* handle, uint64_t* out, size_t words) {
 }
 
 // Reset every domain: `rst` high for these cycles of each clock, then the system and
-// UART clocks run until they stop by themselves. (`model`'s capture clock and
-// `capture`'s other clocks never run: each instance resets only the domains it runs.)
+// UART clocks run until they stop by themselves.
 EXPORT int nh_reset(void* handle, uint32_t sys_cycles, uint32_t pwm_cycles,
                     uint32_t uart_cycles) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
     Vharness& m = h->model;
     m.rst = 1;
-    h->capture.rst = 1;
     evaluate(m);
-    evaluate(h->capture);
     for (uint32_t i = 0; i < sys_cycles; ++i) h->sync_cycle();
     for (uint32_t i = 0; i < sys_cycles; ++i) h->spi_cycle();
     for (uint32_t i = 0; i < pwm_cycles; ++i) h->pwm_cycle();
     for (uint32_t i = 0; i < uart_cycles; ++i) h->uart_cycle();
     m.rst = 0;
-    h->capture.rst = 0;
-    evaluate(h->capture);
-    h->copy_capture_results();
     return status(h->run_sync("reset") && h->run_spi("reset") && h->run_uart("reset"));
 }
 
@@ -467,13 +383,10 @@ EXPORT int nh_host_write(void* handle, const uint8_t* words, size_t bytes, uint3
     return status(ok);
 }
 
-// The host reader's burst: every result word, frozen in one cycle (the capture clock's
-// results copied in first).
+// The host reader's burst: every result word, frozen in one cycle.
 EXPORT int nh_host_read(void* handle, uint8_t* words, size_t bytes) {
     auto* h = static_cast<Harness*>(handle);
-    const Charge charge{h->costs[HOST_READ_SLOT], h->sys_cycles};  // the wait included
-    h->wait_idle();
-    h->copy_capture_results();
+    const Charge charge{h->costs[HOST_READ_SLOT], h->sys_cycles};
     Vharness& m = h->model;
     bool ok = h->request(m.read_request, m.read_acknowledge, "host-port read") &&
               get(*h, m.read_words, words, bytes, "read_words");
@@ -504,29 +417,16 @@ EXPORT int nh_uart(void* handle, uint32_t divider, const uint8_t* tx, size_t tx_
 // The PWM generator's inputs: packed widths (ticks) and the period (ticks, 0 stops it).
 EXPORT int nh_pwm_set(void* handle, const uint8_t* widths, size_t bytes, uint32_t period_ticks) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
-    Vharness& m = h->capture;
+    Vharness& m = h->model;
     m.pwm_period_ticks = period_ticks;
     return status(put(*h, m.pwm_width_ticks, widths, bytes, "pwm_width_ticks"));
-}
-
-// `count` cycles of the capture clock on the worker thread; the call returns at once and
-// the next call that touches `capture` waits for them. Python's own threads would need
-// the GIL to start and finish the call, which the rig's thread holds while it works.
-EXPORT int nh_pwm_cycles_later(void* handle, uint64_t count) {
-    auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
-    evaluate(h->capture);  // inputs written since the last eval settle before the first edge
-    h->run_later(count);
-    return 0;
 }
 
 // `count` cycles of the capture clock (the generator's and the capture core's domains).
 EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
     auto* h = static_cast<Harness*>(handle);
-    const Charge charge{h->costs[PWM_SLOT], h->pwm_cycles};  // the wait included
-    h->wait_idle();
-    evaluate(h->capture);  // inputs written since the last eval settle before the first edge
+    const Charge charge{h->costs[PWM_SLOT], h->pwm_cycles};
+    evaluate(h->model);  // inputs written since the last eval settle before the first edge
     h->pwm_ticks(count);
     return 0;
 }
@@ -534,7 +434,6 @@ EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
 // Whether capture-clock edges stand for every quiet tick (1, the default) or one tick each.
 EXPORT int nh_pwm_by_event(void* handle, int enabled) {
     auto* h = static_cast<Harness*>(handle);
-    h->wait_idle();
     h->by_event = enabled != 0;
     return 0;
 }

@@ -25,13 +25,9 @@ results' synchroniser catch up, so the read sees exactly what the cocotb worker'
 just before edge ``now_tick`` sees (its reader latches after that edge)
 (``rig/chips/cosim_worker.py``). The two domains meet only in that synchroniser, so
 where the bus transfers fall between two capture edges changes nothing read. A frame's
-transfers must still fit in its span of time, as they do on the real bus. For the same
-reason the capture clock may run ahead: once a frame is read, the edges up to the next
-frame's read (but not the edge that takes the next PWM period's widths, which come with
-the next frame) run on a worker thread while the rig encodes, sends, logs, steps its
-model and reads the next frame's sensors (the capture clock runs in its own instance of
-the Verilated harness, :mod:`fpga_hdl.cosim.native`), so on a free core they cost the
-loop nothing.
+transfers must still fit in its span of time, as they do on the real bus. The harness
+runs the capture clock by event (:mod:`fpga_hdl.cosim.native`), so a frame's ticks cost a
+few dozen edges, run at once when the frame's pulses are fed.
 """
 
 from __future__ import annotations
@@ -60,13 +56,9 @@ class NativeChips:
     """:class:`rig.chips.layer.ChipHost` over the compiled harness: host port, PWM, capture
     (the first ``motors`` of the core's channels)."""
 
-    def __init__(
-        self, harness: NativeHarness, *, motors: int, pwm_tick_hz: float,
-        frame_us: int | None = None,
-    ) -> None:  # fmt: skip
+    def __init__(self, harness: NativeHarness, *, motors: int, pwm_tick_hz: float) -> None:
         self.harness = harness
         self.motors = motors
-        self.frame_us = frame_us
         self.tick_us = 1e6 / pwm_tick_hz
         self.tick_ps = round(1e12 / pwm_tick_hz)
         self.period_us = 0
@@ -91,11 +83,10 @@ class NativeChips:
     def _ticks(self, time_us: int) -> int:
         return round(time_us / self.tick_us)
 
-    def _run_to(self, tick: int, *, later: bool = False) -> None:
-        """Run the capture clock's edges up to ``tick`` (excluded); ``later``: in the
-        background, while the rig goes on (the next use of the harness waits for them)."""
+    def _run_to(self, tick: int) -> None:
+        """Run the capture clock's edges up to ``tick`` (excluded)."""
         if tick > self._next_edge:
-            self.harness.pwm.cycles(tick - self._next_edge, later=later)
+            self.harness.pwm.cycles(tick - self._next_edge)
             self._next_edge = tick
 
     def _read_tick(self, now_us: int) -> int:
@@ -133,21 +124,8 @@ class NativeChips:
             self._preload(start_us, widths)
             previous_us = start_us
         self._check_bus_time(now_us)
-        now_tick = self._read_tick(now_us)
-        if self._next_edge > now_tick + 1:
-            raise PwmTimingError(
-                f"the frame at {now_us} µs comes before the expected frame time: the capture "
-                f"clock already ran ahead to {self._next_edge * self.tick_us:g} µs (frames "
-                f"every {self.frame_us} µs)"
-            )
-        self._run_to(now_tick + 1)  # every edge up to now_tick's, then the read
+        self._run_to(self._read_tick(now_us) + 1)  # every edge up to now's, then the read
         captures = self.harness.host.pwm_capture()[: self.motors]
-        if self.frame_us is not None:
-            # While the rig does the rest of its frame (and the autopilot computes), run the
-            # capture clock on to the next frame's read, stopping before the edge that takes
-            # the next period's widths: they come with the next frame.
-            latch_tick = self._ticks(self._next_start_us) - 1
-            self._run_to(min(self._read_tick(now_us + self.frame_us) + 1, latch_tick), later=True)
         widths_us = tuple(capture.width_ticks * self.tick_us for capture in captures)
         return widths_us, tuple(capture.timeout for capture in captures)
 
@@ -169,16 +147,10 @@ class NativeSensorLayer(SensorLayer):
     ``motors`` is the vehicle's rotor count: the capture channels read. ``pwm_hz`` is the
     autopilot's PWM rate (its timer period is replayed by the harness's
     PWM generator); ``pwm_tick_hz`` the capture core's tick, a build parameter of the
-    gateware. With ``frame_us`` (the rig's frames come every ``frame_us``), the capture
-    clock runs on towards the next frame on a worker thread once a frame is read, while
-    the rig does the rest of its frame; a frame earlier than that is then an error.
-    Failures are :class:`~rig.errors.CosimError` lines, as the cocotb layer's.
+    gateware. Failures are :class:`~rig.errors.CosimError` lines, as the cocotb layer's.
     """
 
-    def __init__(
-        self, *, motors: int, pwm_hz: int, pwm_tick_hz: float = PWM_TICK_HZ,
-        frame_us: int | None = None,
-    ) -> None:  # fmt: skip
+    def __init__(self, *, motors: int, pwm_hz: int, pwm_tick_hz: float = PWM_TICK_HZ) -> None:
         from fpga_hdl.cosim.native import NativeHarness  # builds or reuses the library
 
         self.pwm_period_us = round(1e6 / pwm_hz)
@@ -186,8 +158,7 @@ class NativeSensorLayer(SensorLayer):
             self.harness = NativeHarness(pwm_tick_hz=pwm_tick_hz)
         except Exception as error:
             raise CosimError(f"the RTL co-simulation could not start: {error}") from error
-        self.chips = NativeChips(self.harness, motors=motors, pwm_tick_hz=pwm_tick_hz,
-                                 frame_us=frame_us)  # fmt: skip
+        self.chips = NativeChips(self.harness, motors=motors, pwm_tick_hz=pwm_tick_hz)
         # The GPS UART runs on its own clock (SensorTop's ``uart`` domain), so its frames,
         # longer than a rig frame, cost none of the frame's system-clock bus time.
         self.engine = SensorEngine(

@@ -714,7 +714,4 @@ def _make_sensor_layer(name: str, rates: Rates, motors: int) -> SensorLayer:
 
     if name == COCOTB_LAYER:  # the same RTL under cocotb (benchmarks and comparisons)
         return RtlSensorLayer(motors=motors, pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)
-    return NativeSensorLayer(
-        motors=motors, pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz,
-        frame_us=rates.frame_us,
-    )  # fmt: skip
+    return NativeSensorLayer(motors=motors, pwm_hz=rates.pwm_hz, pwm_tick_hz=rates.pwm_tick_hz)

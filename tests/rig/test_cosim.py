@@ -180,8 +180,7 @@ def rtl_layer():
 def native_layer():
     from rig.chips.native import NativeSensorLayer  # builds the library once (build/native/)
 
-    # runs ahead, as the rig's
-    layer = _started(NativeSensorLayer(motors=OCTO, pwm_hz=PWM_HZ, frame_us=1000))
+    layer = _started(NativeSensorLayer(motors=OCTO, pwm_hz=PWM_HZ))
     yield layer
     layer.close()
 
@@ -283,8 +282,7 @@ def test_a_coarser_pwm_tick_is_the_same_on_every_layer():
     from rig.chips.rtl import RtlSensorLayer
 
     rtl = _started(RtlSensorLayer(motors=QUAD, pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
-    native = _started(NativeSensorLayer(motors=QUAD, pwm_hz=PWM_HZ, pwm_tick_hz=250e3,
-                                        frame_us=4000))  # fmt: skip
+    native = _started(NativeSensorLayer(motors=QUAD, pwm_hz=PWM_HZ, pwm_tick_hz=250e3))
     tlm = _started(TlmSensorLayer(motors=QUAD, pwm_tick_hz=250e3))
     cocotb_rtl, compiled_rtl = Scoreboard("RTL vs TLM"), Scoreboard("compiled RTL vs TLM")
     try:
@@ -325,23 +323,6 @@ def test_bus_transfers_longer_than_the_frame_are_a_one_line_error():
         with pytest.raises(CosimError, match=r"^the RTL co-simulation failed: PwmTimingError: "
                            r"the frame's bus transfers ran past its time \(1010 µs\)"):  # fmt: skip
             native.frame(ChipFrame(1010, imu, mag=None, baro_d1_d2=None, read_mag=True))
-    finally:
-        native.close()
-
-
-@pytest.mark.cosim
-def test_a_frame_before_the_announced_frame_time_is_a_one_line_error():
-    """With ``frame_us`` the compiled layer's capture clock runs on towards the next frame
-    while the rig works: a frame earlier than announced cannot be read any more."""
-    from rig.chips.native import NativeSensorLayer
-
-    native = _started(NativeSensorLayer(motors=QUAD, pwm_hz=PWM_HZ, frame_us=1000))
-    try:
-        imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)
-        native.frame(ChipFrame(1000, imu, mag=None, baro_d1_d2=None, read_mag=False))
-        early = r"PwmTimingError: the frame at 1500 µs comes before the expected frame time"
-        with pytest.raises(CosimError, match=rf"^the RTL co-simulation failed: {early}"):
-            native.frame(ChipFrame(1500, imu, mag=None, baro_d1_d2=None, read_mag=False))
     finally:
         native.close()
 
