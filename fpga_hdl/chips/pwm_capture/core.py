@@ -137,9 +137,9 @@ class PwmCapture(wiring.Component):
                 m.d.sync += [armed.eq(0), timeout.eq(1), width.eq(0), period.eq(0)]
             with m.Elif(fall & armed):
                 m.d.sync += [width.eq(since_rise), timeout.eq(0)]
-            # An armed channel times out at the edge that sees the timeout count.
-            left = self.timeout_ticks - since_rise
-            quiet.append(Mux(armed & (left < _QUIET_MAX), left, _QUIET_MAX))
+            if self.skippable:  # an armed channel times out at the edge seeing the count
+                left = self.timeout_ticks - since_rise
+                quiet.append(Mux(armed & (left < _QUIET_MAX), left, _QUIET_MAX))
         if self.skippable:
             least = functools.reduce(lambda a, b: Mux(a < b, a, b), quiet)
             m.d.comb += self.quiet_ticks.eq(Mux(level == previous, least, 0))
