@@ -435,8 +435,13 @@ class _Loop:
         self.autopilot.connect(link)
         self.log.event(self.time_us, f"autopilot connected on {link.endpoint}")
         frames_total = round(self.duration_s * 1e6) // self.frame_us
-        self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
         costs_before = {cost.what: cost for cost in self.layer.costs()}
+        # The first frame's model step and sensor reads come before the clock starts: on a
+        # fresh clone they compile the model's numba kernels (seconds), which a paced run
+        # would otherwise spend behind the wall clock.
+        truth, readings = self._advance(1)
+        self._sense(1, readings)
+        self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
         pacer = Pacer(self.options.speed)
         state_next_us = self.clock_start_us
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)
@@ -444,8 +449,6 @@ class _Loop:
         settled = False
         pending: list[Action] = []
         clock = time.perf_counter
-        truth, readings = self._advance(1)
-        self._sense(1, readings)
         for frame in range(1, frames_total + 1):
             started = clock()
             self.run_us = frame * self.frame_us

@@ -10,6 +10,7 @@ known frame.
 
 from __future__ import annotations
 
+import math
 import select
 import socket
 import sys
@@ -140,10 +141,13 @@ def warm_up() -> None:
     """Compile the flight controller's numba kernels before talking to the simulator.
 
     PX4 boots before it connects; a cold numba cache costs seconds of compiling, which the
-    rig would spend freewheeling frames unanswered. A throwaway controller flies a few
-    frames of a vehicle at rest, disarmed and then armed, so every compiled path runs once.
+    rig would spend freewheeling frames unanswered, or (paced) behind the wall clock. A
+    throwaway controller flies frames of a vehicle at rest: disarmed, then armed and told
+    to take off, so every compiled path runs once.
     """
-    controller = FlightController(Parameters())
+    params = Parameters()
+    params.set("COM_SPOOLUP_TIME", 0.0)  # straight to the climb: the control paths run at once
+    controller = FlightController(params)
     at_home = GpsFix(
         DEFAULT_HOME_LAT_DEG, DEFAULT_HOME_LON_DEG, DEFAULT_HOME_ALT_AMSL_M, (0.0, 0.0, 0.0),
         eph_m=0.5, epv_m=0.8, fix_type=3, satellites_used=10,
@@ -156,6 +160,7 @@ def warm_up() -> None:
     for k in range(1, 60):
         if k == 30:
             controller.arm(force=True)
+            controller.takeoff(math.nan)
         controller.update(frame, k * 4000)
 
 
