@@ -40,9 +40,8 @@
 #include "Vharness___024root.h"
 #include "verilated.h"
 
-// The root members of the three clocks' registers, the gated ones' enables and the
-// results' synchroniser's source side, given by fpga_hdl.cosim.native as -D flags (their
-// names follow the harness's hierarchy).
+// The root members of the clocks' registers and the gated ones' enables, given by
+// fpga_hdl.cosim.native as -D flags (their names follow the harness's hierarchy).
 #if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(SPI_CLOCK) || \
     !defined(SPI_ENABLE) || !defined(PWM_CLOCK) || !defined(UART_CLOCK) || !defined(UART_ENABLE)
 #error "build through fpga_hdl.cosim.native: the clock and register -D flags are missing"
