@@ -98,7 +98,7 @@ def test_the_capture_clock_by_event_equals_every_tick():
     by_event, every_tick = NativeHarness(), NativeHarness(pwm_by_event=False)
     harnesses = (by_event, every_tick)
     rng = random.Random(36)
-    reads = timeouts = 0
+    timeouts = 0
     try:
         for harness in harnesses:
             harness.reset()
@@ -115,13 +115,11 @@ def test_the_capture_clock_by_event_equals_every_tick():
             captures = by_event.host.pwm_capture()
             assert captures == every_tick.host.pwm_capture()
             assert by_event.cycles() == every_tick.cycles()
-            reads += 1
             timeouts += sum(capture.timeout for capture in captures)
     finally:
         for harness in harnesses:
             harness.close()
-    assert reads == 1500
-    assert timeouts > 0
+    assert timeouts > 0  # the programs reached the capture's timeout
 
 
 def test_px4s_gps_handshake_is_answered_and_timed_as_the_twin_predicts(harness):
