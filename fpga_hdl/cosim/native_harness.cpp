@@ -107,11 +107,27 @@ class Charge {
 // initial blocks) still goes through the model. (An internal name: a Verilator that
 // renames it fails to load the library with "undefined symbol", it cannot run wrong.)
 void Vharness___024root___eval(Vharness___024root* vlSelf);
+// Its two scheduling phases after the input-combinational one: triggers, then the
+// non-blocking assignments and the logic they feed, repeated until nothing triggers.
+bool Vharness___024root___eval_phase__act(Vharness___024root* vlSelf);
+bool Vharness___024root___eval_phase__nba(Vharness___024root* vlSelf);
 
 namespace {
 
-// One evaluation of `model`: a clock edge set by the caller, or inputs settling.
+// One evaluation of `model`: inputs written by the caller settle, or a clock edge.
 void evaluate(Vharness& model) { Vharness___024root___eval(model.rootp); }
+
+// A clock edge with every input as the last `evaluate` saw it. `eval()` begins with the
+// input-combinational phase, which recomputes the logic of the ports (logic that reads
+// registers too is recomputed after the edge as well): with the ports unchanged it moves
+// nothing, so a cycle skips it. That is 15 % of the compiled frame, measured (the system,
+// SPI and UART clocks; the capture clock's edges change `pwm_skip`, a port, and evaluate).
+void clock_edge(Vharness& model) {
+    do {
+        while (Vharness___024root___eval_phase__act(model.rootp)) {
+        }
+    } while (Vharness___024root___eval_phase__nba(model.rootp));
+}
 
 // One Verilated harness with its own context.
 struct Instance {
@@ -144,7 +160,7 @@ struct Harness {
 
     void sync_cycle() {
         model.rootp->SYNC_CLOCK = 1;
-        evaluate(model);
+        clock_edge(model);
         ++sys_cycles;
     }
 
@@ -152,7 +168,7 @@ struct Harness {
     // cycles (bus time).
     void spi_cycle() {
         model.rootp->SPI_CLOCK = 1;
-        evaluate(model);
+        clock_edge(model);
         ++sys_cycles;
     }
 
@@ -177,7 +193,7 @@ struct Harness {
 
     void uart_cycle() {
         model.rootp->UART_CLOCK = 1;
-        evaluate(model);
+        clock_edge(model);
         ++uart_cycles;
     }
 
