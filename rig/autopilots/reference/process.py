@@ -56,6 +56,14 @@ IDLE_HEARTBEAT_S = 1.0
 SIM_SILENCE_NOTE_S = 5.0
 
 
+# The flags as plain ints, as the rig keeps them (rig.mavlink.sim_messages): an IntFlag
+# operation costs about a microsecond, and these run every frame.
+_ACCEL_FIELDS, _GYRO_FIELDS = int(HilSensorFields.ACCEL), int(HilSensorFields.GYRO)
+_MAG_FIELDS, _BARO_FIELDS = int(HilSensorFields.MAG), int(HilSensorFields.BARO)
+_MODE_DISARMED = int(ActuatorMode.CUSTOM_MODE_ENABLED)
+_MODE_ARMED = int(ActuatorMode.CUSTOM_MODE_ENABLED | ActuatorMode.SAFETY_ARMED)
+
+
 def sensor_frame(
     message: mavlink.MAVLink_message,
     gps: GpsFix | None,
@@ -65,17 +73,17 @@ def sensor_frame(
     """HIL_SENSOR (SI units after PX4's conversions: hPa → Pa) → :class:`SensorFrame`."""
     fields = message.fields_updated
 
-    def has(group: HilSensorFields) -> bool:
+    def has(group: int) -> bool:
         return fields & group == group
 
-    pressure = message.abs_pressure * 100.0 if has(HilSensorFields.BARO) else None
+    pressure = message.abs_pressure * 100.0 if has(_BARO_FIELDS) else None
     return SensorFrame(
         accel_mps2=np.array([message.xacc, message.yacc, message.zacc])
-        if has(HilSensorFields.ACCEL) else None,
+        if has(_ACCEL_FIELDS) else None,
         gyro_radps=np.array([message.xgyro, message.ygyro, message.zgyro])
-        if has(HilSensorFields.GYRO) else None,
+        if has(_GYRO_FIELDS) else None,
         mag_gauss=np.array([message.xmag, message.ymag, message.zmag])
-        if has(HilSensorFields.MAG) else None,
+        if has(_MAG_FIELDS) else None,
         baro_pressure_pa=pressure,
         baro_temperature_degc=message.temperature if pressure is not None else None,
         gps=gps,
@@ -268,12 +276,10 @@ class Autopilot:
             frame = sensor_frame(message, self._gps, self._range, self._flow)
             self._gps = self._range = self._flow = None
             controls = self.fc.update(frame, message.time_usec)
-            mode = ActuatorMode.CUSTOM_MODE_ENABLED
-            if controls.armed:
-                mode |= ActuatorMode.SAFETY_ARMED
+            mode = _MODE_ARMED if controls.armed else _MODE_DISARMED
             outputs = [*controls.motors, *[0.0] * (_ACTUATOR_OUTPUTS - len(controls.motors))]
             self._send_sim(mavlink.MAVLink_hil_actuator_controls_message(
-                message.time_usec, outputs, int(mode), LOCKSTEP_FLAG))  # fmt: skip
+                message.time_usec, outputs, mode, LOCKSTEP_FLAG))  # fmt: skip
             self.ground.stream(message.time_usec)
         elif kind == "HIL_GPS":
             self._gps = gps_fix(message)
