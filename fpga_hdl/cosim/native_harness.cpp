@@ -120,9 +120,9 @@ void evaluate(Vharness& model) { Vharness___024root___eval(model.rootp); }
 // A clock edge with every input as the last `evaluate` saw it. `eval()` begins with the
 // input-combinational phase, which recomputes the logic of the ports (logic that reads
 // registers too is recomputed after the edge as well): with the ports unchanged it moves
-// nothing, so a cycle skips it: a third of a cycle's instructions, 15 % of the compiled
-// frame's time, measured (the system, SPI and UART clocks; the capture clock's edges
-// change `pwm_skip`, a port, so they evaluate).
+// nothing, so a cycle skips it: 16 % of the compiled frame's instructions and 15 % of its
+// time, measured (the system, SPI and UART clocks; the capture clock's edges change
+// `pwm_skip`, a port, so they evaluate).
 void clock_edge(Vharness& model) {
     do {
         while (Vharness___024root___eval_phase__act(model.rootp)) {
