@@ -18,7 +18,15 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from rig.errors import AutopilotProtocolError
-from rig.mavlink.px4_api import LOCKSTEP_FLAG, ActuatorMode, HilSensorFields, mavlink
+from rig.mavlink.px4_api import (
+    ACCEL_FIELDS,
+    BARO_FIELDS,
+    GYRO_FIELDS,
+    LOCKSTEP_FLAG,
+    MAG_FIELDS,
+    SAFETY_ARMED,
+    mavlink,
+)
 
 #: PX4's CONSTANTS_ONE_G (m/s²); its simulated IMU 0 is a FIFO of int16 counts.
 STANDARD_GRAVITY_MPS2 = 9.80665
@@ -33,11 +41,6 @@ COG_UNKNOWN = 65535
 COG_MIN_SPEED_MPS = 0.5
 #: ISA sea-level pressure and the troposphere exponent for ``pressure_alt`` (ICAO Doc 7488).
 _ISA_P0_PA, _ISA_T0_K, _ISA_LAPSE_KPM, _ISA_EXPONENT = 101325.0, 288.15, 0.0065, 0.190263
-# The flags as plain ints: an IntFlag operation costs about a microsecond, every frame.
-_IMU_FIELDS = int(HilSensorFields.ACCEL | HilSensorFields.GYRO)
-_MAG_FIELDS = int(HilSensorFields.MAG)
-_BARO_FIELDS = int(HilSensorFields.BARO)
-_SAFETY_ARMED = int(ActuatorMode.SAFETY_ARMED)
 #: PX4's int16 FIFO range in SI units: (low, high) for accel (m/s²) and gyro (rad/s).
 _ACCEL_LIMITS = (_INT16_MIN * ACCEL_FIFO_SCALE_MPS2, _INT16_MAX * ACCEL_FIFO_SCALE_MPS2)
 _GYRO_LIMITS = (_INT16_MIN * GYRO_FIFO_SCALE_RADPS, _INT16_MAX * GYRO_FIFO_SCALE_RADPS)
@@ -84,7 +87,7 @@ def hil_sensor(
         raise ValueError(
             f"HIL_SENSOR time_usec must be > 0 (PX4 sleeps in real time), got {time_us}"
         )
-    fields = _IMU_FIELDS
+    fields = ACCEL_FIELDS | GYRO_FIELDS
     accel: tuple[float, ...]
     gyro: tuple[float, ...]
     if imu_id == 0:
@@ -95,11 +98,11 @@ def hil_sensor(
         gyro = tuple(map(float, gyro_radps))
     mag: tuple[float, ...] = (0.0, 0.0, 0.0)
     if mag_gauss is not None:
-        fields |= _MAG_FIELDS
+        fields |= MAG_FIELDS
         mag = tuple(map(float, mag_gauss))
     pressure_hpa = altitude_m = temperature_degc = 0.0
     if baro is not None:
-        fields |= _BARO_FIELDS
+        fields |= BARO_FIELDS
         pressure_pa, temperature_degc = baro
         pressure_hpa = pressure_pa / 100.0
         altitude_m = pressure_altitude_m(pressure_pa)
@@ -302,7 +305,7 @@ def _actuator_controls(time_usec: int, controls: Sequence[float], mode: int, fla
             f"HIL_ACTUATOR_CONTROLS at time_usec={time_usec} has non-finite motor "
             f"commands {list(motors)}"
         )
-    armed = bool(mode & _SAFETY_ARMED)
+    armed = bool(mode & SAFETY_ARMED)
     return ActuatorControls(
         time_us=int(time_usec),
         motors=tuple([min(max(c, 0.0), 1.0) for c in motors]) if armed else (0.0,) * motor_count,

@@ -31,12 +31,16 @@ from rig.autopilots.reference.sensors import (
     SensorFrame,
 )
 from rig.mavlink.px4_api import (
+    ACCEL_FIELDS,
+    BARO_FIELDS,
+    CUSTOM_MODE_ENABLED,
     DEFAULT_HOME_ALT_AMSL_M,
     DEFAULT_HOME_LAT_DEG,
     DEFAULT_HOME_LON_DEG,
+    GYRO_FIELDS,
     LOCKSTEP_FLAG,
-    ActuatorMode,
-    HilSensorFields,
+    MAG_FIELDS,
+    SAFETY_ARMED,
     Ports,
     mavlink,
 )
@@ -56,14 +60,6 @@ IDLE_HEARTBEAT_S = 1.0
 SIM_SILENCE_NOTE_S = 5.0
 
 
-# The flags as plain ints, as the rig keeps them (rig.mavlink.sim_messages): an IntFlag
-# operation costs about a microsecond, and these run every frame.
-_ACCEL_FIELDS, _GYRO_FIELDS = int(HilSensorFields.ACCEL), int(HilSensorFields.GYRO)
-_MAG_FIELDS, _BARO_FIELDS = int(HilSensorFields.MAG), int(HilSensorFields.BARO)
-_MODE_DISARMED = int(ActuatorMode.CUSTOM_MODE_ENABLED)
-_MODE_ARMED = int(ActuatorMode.CUSTOM_MODE_ENABLED | ActuatorMode.SAFETY_ARMED)
-
-
 def sensor_frame(
     message: mavlink.MAVLink_message,
     gps: GpsFix | None,
@@ -76,14 +72,14 @@ def sensor_frame(
     def has(group: int) -> bool:
         return fields & group == group
 
-    pressure = message.abs_pressure * 100.0 if has(_BARO_FIELDS) else None
+    pressure = message.abs_pressure * 100.0 if has(BARO_FIELDS) else None
     return SensorFrame(
         accel_mps2=np.array([message.xacc, message.yacc, message.zacc])
-        if has(_ACCEL_FIELDS) else None,
+        if has(ACCEL_FIELDS) else None,
         gyro_radps=np.array([message.xgyro, message.ygyro, message.zgyro])
-        if has(_GYRO_FIELDS) else None,
+        if has(GYRO_FIELDS) else None,
         mag_gauss=np.array([message.xmag, message.ymag, message.zmag])
-        if has(_MAG_FIELDS) else None,
+        if has(MAG_FIELDS) else None,
         baro_pressure_pa=pressure,
         baro_temperature_degc=message.temperature if pressure is not None else None,
         gps=gps,
@@ -276,7 +272,7 @@ class Autopilot:
             frame = sensor_frame(message, self._gps, self._range, self._flow)
             self._gps = self._range = self._flow = None
             controls = self.fc.update(frame, message.time_usec)
-            mode = _MODE_ARMED if controls.armed else _MODE_DISARMED
+            mode = CUSTOM_MODE_ENABLED | (SAFETY_ARMED if controls.armed else 0)
             outputs = [*controls.motors, *[0.0] * (_ACTUATOR_OUTPUTS - len(controls.motors))]
             self._send_sim(mavlink.MAVLink_hil_actuator_controls_message(
                 message.time_usec, outputs, mode, LOCKSTEP_FLAG))  # fmt: skip
