@@ -3,12 +3,21 @@ garbage between frames (what the real rig never does; everything else is flown t
 rig in ``test_end_to_end.py``)."""
 
 import math
+import select
+import socket
+import threading
 import time
 
 import numpy as np
 import pytest
 
-from rig.autopilots.reference.process import SIM_SILENCE_NOTE_S, gps_fix, sensor_frame
+from rig.autopilots.reference import process
+from rig.autopilots.reference.process import (
+    SIM_SILENCE_NOTE_S,
+    gps_fix,
+    sensor_frame,
+    wait_readable,
+)
 from rig.mavlink.px4_api import Ports, mavlink
 from rig.mavlink.sim_messages import hil_gps, hil_sensor
 from tests.rig.autopilot.gcs_client import GcsClient
@@ -91,3 +100,42 @@ def test_a_silent_simulator_is_named_once_and_waited_for(tmp_path, free_instance
         f"{SIM_SILENCE_NOTE_S:g} s of wall time; the clock stands at t=1.000 s (lockstep), "
         "waiting"
     ]
+
+
+def test_waiting_for_a_frame_polls_then_sleeps(monkeypatch):
+    """With a poll window, a frame that comes within it is found by ``select`` calls that do
+    not sleep; without one, or once the window has passed, ``select`` sleeps; nothing
+    coming within the timeout gives an empty list."""
+    timeouts: list[float] = []
+    real_select = select.select
+
+    def recording_select(r, w, x, timeout):
+        timeouts.append(timeout)
+        return real_select(r, w, x, timeout)
+
+    monkeypatch.setattr(process.select, "select", recording_select)
+    rig_end, autopilot_end = socket.socketpair()
+    try:
+        later = threading.Timer(0.02, rig_end.send, (b"frame",))
+        later.start()
+        assert wait_readable([autopilot_end], 0.5, 1.0) == [autopilot_end]
+        later.join()
+        assert len(timeouts) > 1
+        assert set(timeouts) == {0}
+        autopilot_end.recv(16)
+
+        timeouts.clear()
+        later = threading.Timer(0.02, rig_end.send, (b"frame",))
+        later.start()
+        assert wait_readable([autopilot_end], 0.0, 1.0) == [autopilot_end]
+        later.join()
+        assert timeouts == [1.0]
+        autopilot_end.recv(16)
+
+        timeouts.clear()
+        assert wait_readable([autopilot_end], 0.005, 0.01) == []
+        assert timeouts[-1] == 0.01
+        assert set(timeouts[:-1]) == {0}
+    finally:
+        rig_end.close()
+        autopilot_end.close()
