@@ -70,7 +70,9 @@ class VehicleTruth:
     @property
     def time_us(self) -> int:
         """Simulated time in whole µs (exact at frame ends, which fall on whole µs)."""
-        return round(self._state[dyn.X_TIME_US])
+        # item(): Python's round of a float takes a tenth of numpy's round of a float64,
+        # and the sensor models ask for the time several times a frame.
+        return round(self._state.item(dyn.X_TIME_US))
 
     @property
     def time_s(self) -> float:
