@@ -9,6 +9,7 @@ the models.
 
 import asyncio
 
+import numpy as np
 import pytest
 
 from fpga_hdl.buses.transactions import TlmI2cBus
@@ -105,6 +106,22 @@ def test_mpu6000_from_si_closed_form_rounding_and_saturation():
     # 1 g = 16384 LSB; 2.5 LSB rounds to even (2); -40 g saturates the 20-bit sample (±32 g);
     # 1 rad/s = 57.2958 °/s × 131 = 7505.75 → 7506; -1000 rad/s saturates; 1 °C = 340 LSB.
     assert sample == mpu.Mpu6000Sample(16384, 2, -(1 << 19), 340, 7506, -(1 << 19), 0)
+
+
+def test_mpu6000_from_si_matches_numpy_over_the_whole_range():
+    """Scalar quantisation against numpy's vectorised round-half-even and clip, for values
+    across and beyond both full scales."""
+    rng = np.random.default_rng(7)
+    accel = rng.uniform(-40, 40, (500, 3)) * mpu.STANDARD_GRAVITY_MPS2
+    gyro = rng.uniform(-50, 50, (500, 3))
+    limit = 1 << 19
+    want_accel = np.clip(np.round(accel / mpu.STANDARD_GRAVITY_MPS2 * mpu.ACCEL_LSB_PER_G_FINEST),
+                         -limit, limit - 1)  # fmt: skip
+    want_gyro = np.clip(np.round(np.degrees(gyro) * mpu.GYRO_LSB_PER_DPS_FINEST), -limit, limit - 1)
+    for a, g, wa, wg in zip(accel, gyro, want_accel, want_gyro, strict=True):
+        sample = mpu.Mpu6000Sample.from_si(a, g, 25.0)
+        assert (sample.accel_x, sample.accel_y, sample.accel_z) == tuple(wa)
+        assert (sample.gyro_x, sample.gyro_y, sample.gyro_z) == tuple(wg)
 
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf")])
