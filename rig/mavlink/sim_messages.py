@@ -1,8 +1,9 @@
 """SI values → the MAVLink messages of PX4's simulator API, and actuator controls → SI.
 
 One encoder per message the rig sends (HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION,
-DISTANCE_SENSOR) and one
-decoder for what it receives (HIL_ACTUATOR_CONTROLS). Units, masks and ranges follow
+DISTANCE_SENSOR) and one decoder for what it receives (HIL_ACTUATOR_CONTROLS); the
+messages of every lockstep frame also decode without pymavlink's parser when a read holds
+just one (the rig's answer, the reference autopilot's HIL_SENSOR). Units, masks and ranges follow
 PX4-Autopilot ``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``
 (``update_sensors``, ``handle_message_hil_gps``, ``publish_distance_topic``,
 ``actuator_controls_from_outputs``) and
@@ -265,36 +266,60 @@ def decode_actuator_controls(
 
 def actuator_controls_from_frame(frame: bytes, motor_count: int) -> ActuatorControls | None:
     """:func:`decode_actuator_controls` straight from ``frame`` when it is exactly one
-    unsigned MAVLink 2 HIL_ACTUATOR_CONTROLS with a good checksum; None for anything else
-    (the caller then hands it to pymavlink's parser, which also reports what is bad).
+    HIL_ACTUATOR_CONTROLS (:func:`single_frame_fields`); None for anything else.
 
-    The one message the rig receives every frame, unpacked by hand: in the PX4 loop at
-    250 Hz reading an answer took 24 µs through pymavlink's parser (its long path is cold
-    by the time the answer comes; 7 µs when hot) and takes 11 µs so (4 when hot).
-    The layout, the checksum and its CRC_EXTRA come from pymavlink's own definitions; the
-    tests check equality with its decoder.
+    The one message the rig receives every frame: in the PX4 loop at 250 Hz reading an
+    answer took 24 µs through pymavlink's parser (its long path is cold by the time the
+    answer comes; 7 µs when hot) and takes 11 µs so (4 when hot).
     """
+    fields = single_frame_fields(frame, _ACTUATOR)
+    if fields is None:
+        return None
+    time_usec, flags, *rest = fields  # wire order: time_usec, flags, controls[16], mode
+    return _actuator_controls(time_usec, rest[:-1], rest[-1], flags, motor_count)
+
+
+def hil_sensor_from_frame(frame: bytes) -> mavlink.MAVLink_hil_sensor_message | None:
+    """pymavlink's HIL_SENSOR from ``frame`` when it is exactly one
+    (:func:`single_frame_fields`); None for anything else.
+
+    The message the reference autopilot receives every frame, alone in most reads: through
+    pymavlink's parser it took about a fifth of the autopilot's frame.
+    """
+    fields = single_frame_fields(frame, _SENSOR)
+    return None if fields is None else _SENSOR(*fields)  # wire order is HIL_SENSOR's own
+
+
+def single_frame_fields(
+    frame: bytes, message: type[mavlink.MAVLink_message]
+) -> tuple[int | float, ...] | None:
+    """The payload fields of ``frame``, in wire order, when it is exactly one unsigned
+    MAVLink 2 frame of ``message`` with a good checksum; None for anything else (the caller
+    then hands it to pymavlink's parser, which also reports what is bad).
+
+    Unpacked by hand for the messages of every lockstep frame, whose reads are mostly one
+    frame each. The layout, the checksum and its CRC_EXTRA come from pymavlink's own
+    definitions; the tests check equality with its decoder.
+    """
+    unpacker: struct.Struct = message.unpacker
     length = len(frame) - _HEADER_BYTES - 2
-    if not (0 < length <= _ACTUATOR_PAYLOAD.size and frame[0] == mavlink.PROTOCOL_MARKER_V2
+    if not (0 < length <= unpacker.size and frame[0] == mavlink.PROTOCOL_MARKER_V2
             and frame[1] == length and frame[2] == 0
-            and frame[7:10] == _ACTUATOR_MSGID):  # fmt: skip
+            and int.from_bytes(frame[7:10], "little") == message.id):  # fmt: skip
         return None  # not one whole unsigned frame of this message
     checksum = mavlink.x25crc(frame[1 : _HEADER_BYTES + length])
-    checksum.accumulate(_ACTUATOR_CRC_EXTRA)
+    checksum.accumulate(bytes((message.crc_extra,)))
     if checksum.crc != int.from_bytes(frame[-2:], "little"):
         return None
     # MAVLink 2 drops a payload's trailing zero bytes: put them back.
-    payload = frame[_HEADER_BYTES : _HEADER_BYTES + length].ljust(_ACTUATOR_PAYLOAD.size, b"\0")
-    time_usec, flags, *rest = _ACTUATOR_PAYLOAD.unpack(payload)
-    return _actuator_controls(time_usec, rest[:-1], rest[-1], flags, motor_count)
+    payload = frame[_HEADER_BYTES : _HEADER_BYTES + length].ljust(unpacker.size, b"\0")
+    fields: tuple[int | float, ...] = unpacker.unpack(payload)
+    return fields
 
 
 _HEADER_BYTES = 10  # STX, length, incompat and compat flags, sequence, system, component, id
 _ACTUATOR = mavlink.MAVLink_hil_actuator_controls_message
-_ACTUATOR_MSGID = _ACTUATOR.id.to_bytes(3, "little")
-_ACTUATOR_CRC_EXTRA = bytes([_ACTUATOR.crc_extra])
-#: The payload in wire order (pymavlink's): time_usec, flags, controls[16], mode.
-_ACTUATOR_PAYLOAD: struct.Struct = _ACTUATOR.unpacker
+_SENSOR = mavlink.MAVLink_hil_sensor_message
 
 
 def _actuator_controls(time_usec: int, controls: Sequence[float], mode: int, flags: int,

@@ -20,6 +20,7 @@ from rig.mavlink.sim_messages import (
     decode_actuator_controls,
     hil_gps,
     hil_sensor,
+    hil_sensor_from_frame,
     hil_state_quaternion,
     pressure_altitude_m,
 )
@@ -193,10 +194,10 @@ def test_a_hexa_or_octo_gets_a_motor_per_output_from_the_first(motors):
         assert decode_actuator_controls(message, motors).motors == pytest.approx(expected)
 
 
-def _actuator_frame(controls, mode, flags, time_us, seq=0):
+def _actuator_frame(controls, mode, flags, time_us, seq=0, **packing):
     mav = mavlink.MAVLink(None, 1, 1)
     mav.seq = seq
-    return mav.hil_actuator_controls_encode(time_us, controls, mode, flags).pack(mav)
+    return mav.hil_actuator_controls_encode(time_us, controls, mode, flags).pack(mav, **packing)
 
 
 def test_actuator_controls_from_a_frame_equal_pymavlinks_decoding():
@@ -218,12 +219,55 @@ def test_actuator_controls_from_a_frame_equal_pymavlinks_decoding():
         assert fast == decode_actuator_controls(parsed, motors)
 
 
+def test_hil_sensor_from_a_frame_equals_pymavlinks_decoding():
+    """The reference autopilot's fast path for HIL_SENSOR against pymavlink's parser: the
+    frames the rig sends (IMU only, with mag and baro, another IMU's id), and a frame whose
+    trailing zeros MAVLink 2 dropped (a zero id and zero groups)."""
+    rng = np.random.default_rng(11)
+    mav = mavlink.MAVLink(None, 1, 51)
+    frames = [mav.hil_sensor_encode(1, *[0.0] * 13, 0, 0).pack(mav)]
+    for k in range(300):
+        groups = {"mag_gauss": tuple(rng.normal(0, 0.5, 3))} if k % 3 else {}
+        if k % 5 == 0:
+            groups["baro"] = (float(rng.uniform(80e3, 101e3)), float(rng.uniform(-10, 40)))
+        time_us = int(rng.integers(1, 2**40))
+        imu = {"accel_mps2": rng.normal(0, 9, 3), "gyro_radps": rng.normal(0, 2, 3)}
+        message = hil_sensor(mav, time_us, **imu, imu_id=k % 3 // 2, **groups)
+        frames.append(message.pack(mav))
+    assert len(frames[0]) < 10 + mavlink.MAVLink_hil_sensor_message.unpacker.size + 2
+    for frame in frames:
+        (parsed,) = mavlink.MAVLink(None, 255, 0).parse_buffer(frame)
+        fast = hil_sensor_from_frame(frame)
+        assert fast is not None
+        assert fast.to_dict() == parsed.to_dict()
+
+
+def _sensor_frame(time_us, **packing):
+    mav = mavlink.MAVLink(None, 1, 1)
+    message = hil_sensor(mav, time_us, accel_mps2=(0.1, 0.2, -9.8), gyro_radps=(0.0, 0.1, 0.2))
+    return message.pack(mav, **packing)
+
+
+#: Each message with a single-frame fast path: a good frame (packing options in) and the
+#: fast path's decoding (None: left to pymavlink).
+FAST_PATHS = {
+    "HIL_ACTUATOR_CONTROLS": (
+        lambda **packing: _actuator_frame([0.5] * 4 + [0.0] * 12, 129, 1, 4000, **packing),
+        lambda frame: actuator_controls_from_frame(frame, 4),
+    ),
+    "HIL_SENSOR": (lambda **packing: _sensor_frame(4000, **packing), hil_sensor_from_frame),
+}
+
+
+@pytest.mark.parametrize("kind", FAST_PATHS)
 @pytest.mark.parametrize(
     "damage",
     ["crc", "truncated", "two frames", "signed", "other message", "mavlink 1", "empty"],
 )
-def test_anything_but_one_good_actuator_frame_is_left_to_pymavlink(damage):
-    frame = bytearray(_actuator_frame([0.5] * 4 + [0.0] * 12, 129, 1, 4000))
+def test_anything_but_one_good_frame_is_left_to_pymavlink(kind, damage):
+    good, fast_path = FAST_PATHS[kind]
+    frame = bytearray(good())
+    assert fast_path(bytes(frame)) is not None
     if damage == "crc":
         frame[20] ^= 0x01
     elif damage == "truncated":
@@ -236,12 +280,10 @@ def test_anything_but_one_good_actuator_frame_is_left_to_pymavlink(damage):
         mav = mavlink.MAVLink(None, 1, 1)
         frame = bytearray(mav.heartbeat_encode(6, 8, 0, 0, 0).pack(mav))
     elif damage == "mavlink 1":
-        mav = mavlink.MAVLink(None, 1, 1)
-        message = mav.hil_actuator_controls_encode(4000, [0.5] * 16, 129, 1)
-        frame = bytearray(message.pack(mav, force_mavlink1=True))
+        frame = bytearray(good(force_mavlink1=True))
     else:
         frame = bytearray()
-    assert actuator_controls_from_frame(bytes(frame), 4) is None
+    assert fast_path(bytes(frame)) is None
 
 
 def test_a_non_finite_motor_in_a_good_frame_is_rejected_on_the_fast_path_too():

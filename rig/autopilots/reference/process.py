@@ -44,6 +44,7 @@ from rig.mavlink.px4_api import (
     Ports,
     mavlink,
 )
+from rig.mavlink.sim_messages import hil_sensor_from_frame
 
 #: PX4 asks the simulator for ground truth every 5000 µs (PX4_SIM_CONTRACT.md).
 GROUND_TRUTH_INTERVAL_US = 5000
@@ -265,7 +266,9 @@ class Autopilot:
                 data = sim.recv(65536)
                 if not data:
                     return f"the simulator closed the link at t={self.fc.time_us / 1e6:.3f} s"
-                for message in self.sim_mav.parse_buffer(data) or []:
+                sensor = hil_sensor_from_frame(data) if self.sim_mav.buf_len() == 0 else None
+                messages = [sensor] if sensor else self.sim_mav.parse_buffer(data) or []
+                for message in messages:
                     self._handle_sim(message)
 
     def close(self) -> None:
