@@ -17,6 +17,7 @@ import math
 import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from rig.errors import AutopilotProtocolError
 from rig.mavlink.px4_api import (
@@ -292,7 +293,7 @@ def hil_sensor_from_frame(frame: bytes) -> mavlink.MAVLink_hil_sensor_message | 
 
 def single_frame_fields(
     frame: bytes, message: type[mavlink.MAVLink_message]
-) -> tuple[int | float, ...] | None:
+) -> tuple[Any, ...] | None:
     """The payload fields of ``frame``, in wire order, when it is exactly one unsigned
     MAVLink 2 frame of ``message`` with a good checksum; None for anything else (the caller
     then hands it to pymavlink's parser, which also reports what is bad).
@@ -313,8 +314,7 @@ def single_frame_fields(
         return None
     # MAVLink 2 drops a payload's trailing zero bytes: put them back.
     payload = frame[_HEADER_BYTES : _HEADER_BYTES + length].ljust(unpacker.size, b"\0")
-    fields: tuple[int | float, ...] = unpacker.unpack(payload)
-    return fields
+    return unpacker.unpack(payload)
 
 
 _HEADER_BYTES = 10  # STX, length, incompat and compat flags, sequence, system, component, id
