@@ -3,8 +3,8 @@
 One encoder per message the rig sends (HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION,
 DISTANCE_SENSOR) and one decoder for what it receives (HIL_ACTUATOR_CONTROLS); the
 messages of every lockstep frame also decode without pymavlink's parser when a read holds
-just one (the rig's answer, the reference autopilot's HIL_SENSOR). Units, masks and ranges follow
-PX4-Autopilot ``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``
+just one (the rig's answer, the reference autopilot's HIL_SENSOR). Units, masks and
+ranges follow PX4-Autopilot ``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``
 (``update_sensors``, ``handle_message_hil_gps``, ``publish_distance_topic``,
 ``actuator_controls_from_outputs``) and
 ``shared/PX4_SIM_CONTRACT.md``. Pure functions: no sockets, so the protocol tests can check
@@ -285,7 +285,7 @@ def hil_sensor_from_frame(frame: bytes) -> mavlink.MAVLink_hil_sensor_message | 
     (:func:`single_frame_fields`); None for anything else.
 
     The message the reference autopilot receives every frame, alone in most reads: through
-    pymavlink's parser it took about a fifth of the autopilot's frame.
+    pymavlink's parser it took about 15 % of the autopilot's time per frame.
     """
     fields = single_frame_fields(frame, _SENSOR)
     return None if fields is None else _SENSOR(*fields)  # wire order is HIL_SENSOR's own

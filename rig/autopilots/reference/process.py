@@ -267,7 +267,7 @@ class Autopilot:
                 if not data:
                     return f"the simulator closed the link at t={self.fc.time_us / 1e6:.3f} s"
                 sensor = hil_sensor_from_frame(data) if self.sim_mav.buf_len() == 0 else None
-                messages = [sensor] if sensor else self.sim_mav.parse_buffer(data) or []
+                messages = [sensor] if sensor is not None else self.sim_mav.parse_buffer(data) or []
                 for message in messages:
                     self._handle_sim(message)
 
