@@ -1,8 +1,8 @@
 """PX4's simulator MAVLink API and SITL port plan: the facts both sides of the link share.
 
 One place for what PX4's ``simulator_mavlink`` module expects (PX4-Autopilot
-``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``; observed facts in
-``shared/PX4_SIM_CONTRACT.md``), so the rig, the reference autopilot and the tests cannot
+``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``, and what PX4 SITL v1.14
+and v1.17 were seen to do), so the rig, the reference autopilot and the tests cannot
 drift apart. MAVLink 2 is required (``HIL_SENSOR.id`` is an extension field).
 """
 

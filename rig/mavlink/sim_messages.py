@@ -6,8 +6,7 @@ messages of every lockstep frame also decode without pymavlink's parser when a r
 just one (the rig's answer, the reference autopilot's HIL_SENSOR). Units, masks and
 ranges follow PX4-Autopilot ``src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp``
 (``update_sensors``, ``handle_message_hil_gps``, ``publish_distance_topic``,
-``actuator_controls_from_outputs``) and
-``shared/PX4_SIM_CONTRACT.md``. Pure functions: no sockets, so the protocol tests can check
+``actuator_controls_from_outputs``). Pure functions: no sockets, so the protocol tests can check
 every field against pymavlink's message definitions.
 """
 
@@ -54,8 +53,8 @@ def _int16_limited(
     """Clamp to what PX4's int16 FIFO can hold, so a saturated sensor reads full scale.
 
     PX4 divides by its FIFO scale and stores int16 without a range check: an out-of-range
-    value would wrap to the opposite sign (PX4_SIM_CONTRACT.md, "clamp to range or it
-    wraps").
+    value would wrap to the opposite sign (``SimulatorMavlink::update_sensors``: IMU 0 is a
+    simulated FIFO, accel g/2048 per count, gyro 2000/32768 °/s per count).
     """
     low, high = limits
     x, y, z = values

@@ -2,8 +2,8 @@
 
 The rig listens on TCP 127.0.0.1:4560+i and the autopilot connects, as PX4's
 ``simulator_mavlink`` does (PX4-Autopilot ``src/modules/simulation/simulator_mavlink/``).
-Lockstep follows Gazebo-classic's loop, which PX4 was seen to run with
-(``shared/PX4_SIM_CONTRACT.md``): sensor frames freewheel until the first
+Lockstep follows Gazebo-classic's loop, which PX4 SITL (v1.14 and v1.17) was seen to run
+with: sensor frames freewheel until the first
 HIL_ACTUATOR_CONTROLS has ever arrived; from then on every frame waits for the answer
 stamped with its own ``time_usec``. Stale answers (to frames sent while freewheeling) are
 consumed on the way, so once lockstep is established the autopilot is never behind.

@@ -44,12 +44,13 @@ def _p(
 
 
 _INF = math.inf
-# Rotor geometry of PX4 SITL airframe 10016 (quad X, front = +x, right = +y): the motor
-# table in shared/PX4_SIM_CONTRACT.md; CA_ROTORi_KM > 0 for CCW rotors (PX4 control_allocator
-# module docs: "positive for CCW rotation"), 0.05 is PX4's default magnitude. Rotors past
-# the fourth have PX4's defaults (at the centre, KM 0.05) until an airframe places them.
-_ROTORS = ((0.15, 0.245, 0.05), (-0.15, -0.19, 0.05), (0.15, -0.245, -0.05), (-0.15, 0.19, -0.05),
-           *((0.0, 0.0, 0.05),) * (MAX_ROTORS - 4))  # fmt: skip
+# Rotor geometry of PX4 SITL airframe 10016 (quad X, front = +x, right = +y), as its
+# airframe file sets it (PX4-Autopilot ``ROMFS/px4fmu_common/init.d-posix/airframes/
+# 10016_none_iris``, the same in v1.14 and v1.17); CA_ROTORi_KM > 0 for CCW rotors (PX4
+# control_allocator module docs: "positive for CCW rotation"). Rotors past the fourth have
+# PX4's defaults (at the centre, KM 0.05) until an airframe places them.
+_ROTORS = ((0.1515, 0.245, 0.05), (-0.1515, -0.1875, 0.05), (0.1515, -0.245, -0.05),
+           (-0.1515, 0.1875, -0.05), *((0.0, 0.0, 0.05),) * (MAX_ROTORS - 4))  # fmt: skip
 
 PARAMETERS: tuple[ParamSpec, ...] = (
     # src/modules/mc_rate_control/mc_rate_control_params.yaml

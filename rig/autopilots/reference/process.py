@@ -47,7 +47,8 @@ from rig.mavlink.px4_api import (
 )
 from rig.mavlink.sim_messages import hil_sensor_from_frame
 
-#: PX4 asks the simulator for ground truth every 5000 µs (PX4_SIM_CONTRACT.md).
+#: PX4 asks the simulator for ground truth every 5000 µs
+#: (``SimulatorMavlink::request_hil_state_quaternion``).
 GROUND_TRUTH_INTERVAL_US = 5000
 #: Wall-clock pause between connection attempts (PX4 retries about every 0.5 ms; a little
 #: slower here costs nothing and spares the CPU).

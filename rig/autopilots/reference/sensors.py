@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-#: PX4 marks a sensor stale after this many identical samples (PX4_SIM_CONTRACT.md).
+#: PX4 marks a sensor stale after this many identical samples (``DataValidator``'s
+#: ``VALUE_EQUAL_COUNT_DEFAULT``, PX4-Autopilot ``src/modules/sensors/data_validator/``).
 STALE_IDENTICAL_SAMPLES = 100
 
 
