@@ -1,8 +1,8 @@
 """The normalized credibility indices of Dai, Ke, Quan and Cai, section 3, as pure functions.
 
-Equation labels refer to the paper's (*Simulation Credibility Assessment Methodology with
-FPGA-based Hardware-in-the-loop Platform*; e.g. eq. (NormIndex)). Everything
-here is arithmetic on errors and thresholds: it reads no logs and draws nothing, so the
+Equation labels are the paper's (*Simulation Credibility Assessment Methodology with
+FPGA-based Hardware-in-the-loop Platform*), e.g. eq. (NormIndex). Everything here is
+arithmetic on errors and thresholds: it reads no logs and draws nothing, so the
 paper's own tables can be recomputed with it (``credibility.paper``) and every number the
 report shows comes from one place.
 """
