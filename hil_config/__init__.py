@@ -56,14 +56,16 @@ def table(cls: type[T] | None = None, *, kw_only: bool = False) -> Any:
 
     def make(cls: type[T]) -> type[T]:
         made = dataclasses.dataclass(frozen=True, kw_only=kw_only)(cls)
-        comments = {
-            name: text
-            for klass in reversed(made.__mro__)
-            if dataclasses.is_dataclass(klass)
-            for name, text in _field_comments(klass).items()
-        }
 
         def describe(schema: dict[str, Any]) -> None:
+            # Read only when a schema is made: finding a class's source parses its whole
+            # module, which cost every process that imports the tables half a second.
+            comments = {
+                name: text
+                for klass in reversed(made.__mro__)
+                if dataclasses.is_dataclass(klass)
+                for name, text in _field_comments(klass).items()
+            }
             for name, prop in schema.get("properties", {}).items():
                 if name in comments:
                     prop.setdefault("description", comments[name])

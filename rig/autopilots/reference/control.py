@@ -19,7 +19,6 @@ import math
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
-from scipy import signal
 
 from quad_model import frames
 from quad_model.frames import STANDARD_GRAVITY_MPS2, cross3, quat_from_dcm
@@ -43,7 +42,7 @@ _I_FADE_RATE_RADPS = math.radians(400.0)
 class LowPass2p:
     """Second-order Butterworth low-pass on a 3-vector, PX4's ``LowPassFilter2p``.
 
-    Designed with :func:`scipy.signal.butter`; run by hand one sample at a time (transposed
+    Designed by :func:`butterworth2` and run by hand one sample at a time (transposed
     direct form II), because ``lfilter`` per 3-sample call costs more than the whole loop.
     A cutoff of 0 or at/above Nyquist passes the signal through, as in PX4.
     """
@@ -51,7 +50,7 @@ class LowPass2p:
     def __init__(self, sample_rate_hz: float, cutoff_hz: float) -> None:
         self.enabled = 0.0 < cutoff_hz < 0.5 * sample_rate_hz
         if self.enabled:
-            self.b, self.a = signal.butter(2, cutoff_hz, fs=sample_rate_hz)
+            self.b, self.a = butterworth2(cutoff_hz, sample_rate_hz)
         self._state = np.zeros((2, 3))  # z1, z2
         self._started = False
 
@@ -70,6 +69,25 @@ class LowPass2p:
         if not self._started:
             return self.reset(x)
         return _lowpass_step(self.b, self.a, self._state, np.asarray(x, dtype=float))
+
+
+def butterworth2(
+    cutoff_hz: float, sample_rate_hz: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(b, a)`` of the digital second-order Butterworth low-pass: the analogue prototype
+    through the bilinear transform, prewarped so the -3 dB point lands on ``cutoff_hz``.
+
+    What ``scipy.signal.butter(2, cutoff_hz, fs=sample_rate_hz)`` returns (a test compares
+    them), in closed form because importing ``scipy.signal`` costs about a second at every
+    autopilot start, for one design of three coefficients.
+    """
+    w = math.tan(math.pi * cutoff_hz / sample_rate_hz)  # the prewarped analogue cutoff
+    w2, damping = w * w, math.sqrt(2.0) * w
+    norm = 1.0 + damping + w2
+    b0 = w2 / norm
+    b = np.array([b0, 2.0 * b0, b0])
+    a = np.array([1.0, 2.0 * (w2 - 1.0) / norm, (1.0 - damping + w2) / norm])
+    return b, a
 
 
 @njit(cache=True)

@@ -16,6 +16,7 @@ from rig.autopilots.reference.control import (
     LowPass2p,
     PositionController,
     RateController,
+    butterworth2,
     thrust_to_attitude,
 )
 from rig.autopilots.reference.params import Parameters
@@ -162,6 +163,21 @@ def test_butterworth_filter_matches_scipy():
     zi = signal.lfilter_zi(b, a)[:, None] * x[0]
     reference, _ = signal.lfilter(b, a, x, axis=0, zi=zi)
     assert ours == pytest.approx(reference, abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("sample_rate_hz", "cutoff_hz"), [(1000.0, 30.0), (250.0, 40.0), (400.0, 1.0), (1000.0, 499.0)]
+)
+def test_butterworth_design_is_scipys_with_unit_dc_gain_and_minus_3_db_at_the_cutoff(
+    sample_rate_hz, cutoff_hz
+):
+    b, a = butterworth2(cutoff_hz, sample_rate_hz)
+    b_scipy, a_scipy = signal.butter(2, cutoff_hz, fs=sample_rate_hz)
+    assert b == pytest.approx(b_scipy, rel=1e-12, abs=1e-15)
+    assert a == pytest.approx(a_scipy, rel=1e-12, abs=1e-15)
+    _, (dc, at_cutoff) = signal.freqz(b, a, worN=[0.0, cutoff_hz], fs=sample_rate_hz)
+    assert abs(dc) == pytest.approx(1.0, abs=1e-12)
+    assert abs(at_cutoff) == pytest.approx(math.sqrt(0.5), abs=1e-9)  # prewarped: exact
 
 
 def test_rate_loop_on_a_known_inertia_reaches_the_setpoint():
