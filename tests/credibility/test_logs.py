@@ -18,7 +18,7 @@ def test_x500_log_loads_with_its_corruption_warning_as_one_line(x500_log, capsys
     assert "no subscription found for message id 32812" in log.warnings[0]
     assert "\n" not in log.warnings[0]
     pitch = log.signal(SignalSpec("vehicle_attitude.q.pitch", convert="rad->deg"))
-    # SOURCES.md: attitude range pitch −22.7 … +13.2°
+    # data/flight_logs/README.md: attitude range pitch −22.7 … +13.2°
     assert pitch.values.min() == pytest.approx(-22.7, abs=1.0)
     assert pitch.values.max() == pytest.approx(13.2, abs=1.0)
 
@@ -28,7 +28,7 @@ def test_multi_instance_topics_and_hover_noise(quad4001_log):
     accel0 = log.signal(SignalSpec("sensor_accel.0.x"))
     accel1 = log.signal(SignalSpec("sensor_accel.1.x"))
     assert not np.array_equal(accel0.values, accel1.values)
-    # SOURCES.md: motors stopped, gyro σ = 0.0031 / 0.0037 rad/s (x / y), 104.9–108.9 s
+    # the logs' README: motors stopped, gyro σ = 0.0031 / 0.0037 rad/s (x / y), 104.9–108.9 s
     for axis, sigma in ((0, 0.0031), (1, 0.0037)):
         gyro = log.signal(SignalSpec(f"sensor_combined.gyro_rad[{axis}]"))
         assert window(gyro, (105.0, 108.9), 0.1).values.std() == pytest.approx(sigma, rel=0.1)

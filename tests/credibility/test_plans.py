@@ -32,12 +32,12 @@ def test_paper_plans_score_a_log_against_itself_as_one(name):
 def test_repeatability_example_on_the_real_log():
     result = assess(load_plan(PLANS / "quad4001_repeatability.toml"))
     by_name = {r.test.name: r for r in result.results}
-    # SOURCES.md: gyro x σ = 0.0031 rad/s with the motors stopped
+    # data/flight_logs/README.md: gyro x σ = 0.0031 rad/s with the motors stopped
     assert by_name["gyro_x_sigma_stopped"].rows[0].p_e == pytest.approx(0.0031, rel=0.1)
     # The rate setpoint leads the measured roll rate by a few tens of milliseconds.
     tracking = by_name["roll_rate_tracking"].rows[0]
     assert -0.15 < tracking.alignment_shift_s < -0.02
-    # SOURCES.md: roll rate_sp → rate coherence > 0.8 at about 1–3.3 Hz in this hover.
+    # the logs' README: roll rate_sp → rate coherence > 0.8 at about 1–3.3 Hz in this hover.
     roll = by_name["roll_rate_response"]
     in_band = (roll.real.freqs_hz > 1.0) & (roll.real.freqs_hz < 3.3)
     assert roll.real.coherence[in_band].min() > 0.7
@@ -77,12 +77,12 @@ def test_x500_validation_scores_the_real_flight_against_itself_as_one():
             assert row.eta == pytest.approx(1.0, abs=1e-12), test_result.test.name
     assert result.eta_all == pytest.approx(1.0, abs=1e-12)
     by_name = {r.test.name: r for r in result.results}
-    # SOURCES.md, X500 armed at idle: gyro σ ≈ 0.0106/0.0070/0.0090 rad/s (its window
+    # the logs' README, X500 armed at idle: gyro σ ≈ 0.0106/0.0070/0.0090 rad/s (its window
     # starts before sensor_combined does; ours is the logged part of it).
     for axis, sigma in zip("xyz", (0.0106, 0.0070, 0.0090), strict=True):
         p_e = by_name[f"gyro_{axis}_sigma_idle"].rows[0].p_e
         assert p_e == pytest.approx(sigma, rel=0.15)
-    # SOURCES.md: rate_sp → rate coherence 0.91 (pitch) over 0.2–1 Hz in 455–481.5 s.
+    # the logs' README: rate_sp → rate coherence 0.91 (pitch) over 0.2–1 Hz in 455–481.5 s.
     pitch = by_name["pitch_rate_response"]
     below_1hz = pitch.real.freqs_hz < 1.0
     assert pitch.real.coherence[below_1hz].mean() > 0.8
@@ -151,14 +151,14 @@ def test_x500_pitch_bench_recovers_a_known_loop_from_the_scenario_sweep(tmp_path
 
 def test_quad4001_validation_scores_the_real_hover_against_itself_as_one():
     """Every test of the 8S quad's study resolves on the real log (its signals, its
-    segments, the 200 Hz averaging), identical logs give η = 1, the real σ are SOURCES.md's,
+    segments, the 200 Hz averaging), identical logs give η = 1, the real σ are the logs' README's,
     and the plan names what the log cannot score (no GNSS, the pilot's height, yaw)."""
     result = assess(_real_for_every_role("quad4001_validation"))
     assert not result.not_scored
     assert result.eta_all == pytest.approx(1.0, abs=1e-12)
     assert set(result.means) == {"performance", "time", "frequency"}
     by_name = {r.test.name: r.rows[0] for r in result.results}
-    # SOURCES.md, motors stopped: gyro σ 0.0031/0.0037/0.0036 rad/s, accel 0.017/0.019/0.020
+    # the logs' README, motors stopped: gyro σ 0.0031/0.0037/0.0036 rad/s, accel 0.017/0.019/0.020
     rest = zip("xyz", (0.0031, 0.0037, 0.0036), (0.017, 0.019, 0.020), strict=True)
     for axis, gyro, accel in rest:
         assert by_name[f"gyro_{axis}_sigma_rest"].p_e == pytest.approx(gyro, rel=0.1)

@@ -22,7 +22,7 @@ from quad_model.vehicle import load_vehicle
 #: the rig's autopilot logs the mean of this many samples of its 1 kHz IMU.
 SAMPLES_PER_INTEGRATION = 5
 IMU_RATE_HZ = 1000.0
-#: SOURCES.md windows: steady hover and armed idle on the ground.
+#: data/flight_logs/README.md windows: steady hover and armed idle on the ground.
 HOVER_S, IDLE_S = (420.0, 436.0), (407.5, 410.5)
 #: Above this the high-pass keeps vibration and drops the flight's own motion.
 HIGHPASS_HZ = 5.0

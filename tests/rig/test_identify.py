@@ -46,7 +46,7 @@ FLIGHT_LOGS = Path(__file__).resolve().parents[2] / "data" / "flight_logs"
 #: motor, so a recovered value cannot be the bundled file's by coincidence.
 TRUE_INERTIA_KGM2 = (0.030, 0.025, 0.045)
 TRUE_MOTOR_TAU_S = 0.03
-#: The manual-flight window of the real log (SOURCES.md: roll ramp-step, pitch doublet).
+#: The manual-flight window of the real log (the logs' README: roll ramp-step, pitch doublet).
 REAL_WINDOW_S = (455.0, 481.5)
 #: PX4's logger rates for SDLOG_PROFILE default: rate-loop topics 50 Hz, the rest 10/5 Hz.
 FAST_TOPICS = ("vehicle_torque_setpoint", "vehicle_angular_velocity", "vehicle_rates_setpoint",
@@ -239,7 +239,7 @@ def test_real_log_hover_reads_the_motor_outputs_through_the_logs_pwm_range(real_
     assert hover.throttle.value == pytest.approx(0.1 + 0.8 * np.mean(hover.motor_command))
     # PX4's own hover-thrust estimator agrees with the logged command within 2.5 %
     assert hover.px4_hover_thrust == pytest.approx(hover.thrust_setpoint, rel=0.025)
-    assert any(a <= 420.0 and b >= 423.0 for a, b in hover.windows_s)  # SOURCES: 419-437.9
+    assert any(a <= 420.0 and b >= 423.0 for a, b in hover.windows_s)  # README: 419-437.9
 
 
 def test_x500_vehicle_file_holds_what_rig_identify_prints(real_identification):
@@ -559,8 +559,8 @@ def quad4001_identification():
 def test_a_log_without_gnss_finds_its_hover_from_vz_and_the_thrust(quad4001_identification):
     """The 8S quad flew without GNSS: PX4 flags vx, vy invalid (they drift to 19 m/s), so only
     vz screens the hover; and the land detector calls the slow spin-up airborne at 110.1 s
-    while the thrust set-point is still 0.2-0.55 (SOURCES.md: lift-off about 113-115 s), so
-    the thrust must be near its airborne median too. The hover then reads as SOURCES.md
+    while the thrust set-point is still 0.2-0.55 (the logs' README: lift-off about 113-115 s), so
+    the thrust must be near its airborne median too. The hover then reads as the logs' README
     has it: thrust set-point about 0.66, motors 1-2 about 0.75 and 3-4 about 0.57."""
     result, _ = quad4001_identification
     hover = result.hover

@@ -238,7 +238,7 @@ def test_the_mission_is_uploaded_as_it_was_flown(plan):
     # the first leg, north-east: 0.000262° of longitude east of home at the real site's
     # 41.9° N is 21.7 m (at the moved home's 51.9° N it would be 18.0 m)
     assert offsets[1] == pytest.approx((8.95, 21.7), abs=0.1)
-    assert max(math.hypot(*o) for o in offsets) < 50.0  # SOURCES.md's legs, ~40 m
+    assert max(math.hypot(*o) for o in offsets) < 50.0  # the mission's legs, ~40 m
     assert all(math.isnan(i.param4) and i.param2 == 0.0 for i in plan.pilot.mission)
     assert plan.pilot.mission_notes == (
         "the log's mission had 5 items; 4 became current and could be uploaded (the log holds "

@@ -1,8 +1,9 @@
 """``rig replay``: a real PX4 flight's own setpoints flown through the rig.
 
-The plan is checked against the real X500 log's facts (SOURCES.md, and the log itself where
-SOURCES rounds); the flights are short spans of that log: the take-off (velocity drive), a
-one-second rates window and a one-second attitude window during the climb.
+The plan is checked against the real X500 log's facts (its timeline in
+data/flight_logs/README.md, and the log itself where that rounds); the flights are short
+spans of that log: the take-off (velocity drive), a one-second rates window and a
+one-second attitude window during the climb.
 """
 
 import json
@@ -28,10 +29,10 @@ from tests.instances import free_test_instance
 #: The X500 log's first timestamp (a stale config_overrides sample the logger wrote first).
 X500_FIRST_S = 407.404345
 #: PX4 logs from arming (SDLOG_MODE 0): "Armed by RC switch" at 408.889 s and
-#: vehicle_status.armed_time = 408.889359 s. SOURCES.md rounds the armed span to "407.4",
+#: vehicle_status.armed_time = 408.889359 s. The README's timeline rounds the armed span to "407.4",
 #: the log's first timestamp.
 X500_ARMED_S = 408.889359
-#: The climb window: vz_sp = -1.5 m/s from 413.8 to 417.2 s, airborne (SOURCES.md: 413-419).
+#: The climb window: vz_sp = -1.5 m/s from 413.8 to 417.2 s, airborne (README: 413-419).
 CLIMB_WINDOW_S = (415.0, 416.0)
 
 
@@ -82,10 +83,10 @@ def test_plan_reads_the_x500_configuration_from_its_log(x500_path):
     assert plan.skipped == ()
     assert plan.unknown_parameter_count > 900
     assert plan.start_s == pytest.approx(X500_FIRST_S, abs=1e-6)
-    assert plan.end_s == pytest.approx(504.1, abs=0.05)  # SOURCES.md: log ends at 504.1
+    assert plan.end_s == pytest.approx(504.1, abs=0.05)  # README: log ends at 504.1
     assert plan.real_arm_s == pytest.approx(X500_ARMED_S, abs=1e-3)
     assert plan.arm_s == plan.real_arm_s  # 1.5 s after the start: the autopilot is ready
-    assert plan.disarm_s == pytest.approx(503.1, abs=0.05)  # SOURCES.md: disarmed at 503.1
+    assert plan.disarm_s == pytest.approx(503.1, abs=0.05)  # README: disarmed at 503.1
     # heading 1.716 rad at the start; EKF2's in-flight alignment at 415.14 s, 2 s after the
     # take-off, moved it by +0.1554 rad: the vehicle starts at the corrected heading
     ((reset_s, delta),) = plan.heading_resets
@@ -108,10 +109,10 @@ def test_plan_reads_the_x500_configuration_from_its_log(x500_path):
     track = plan.tracks["velocity"]
     times_s = plan.start_s + np.array(track.times_s)
     vz = np.array(track.values)[:, 2]
-    assert times_s[np.argmax(vz <= -1.0)] == pytest.approx(413.0, abs=0.5)  # SOURCES: 413
+    assert times_s[np.argmax(vz <= -1.0)] == pytest.approx(413.0, abs=0.5)  # README: 413
     assert vz[0] == 0.0  # NaN before take-off: held at rest
     assert [c.action for c in plan.commands] == ["arm", "track", "disarm"]
-    # the log's one bit-rotted message (SOURCES.md) is reported, not swallowed
+    # the log's one bit-rotted message (README) is reported, not swallowed
     (warning,) = plan.log_warnings
     assert "no subscription found for message id 32812" in warning
     assert ("warn", f"replay: {warning}") in plan.notes
@@ -370,7 +371,7 @@ def test_replay_runs_on_the_real_logs_clock_and_takes_off_with_it(takeoff, real_
     sim_liftoff_s = truth_s[np.argmax(truth["vz"] < -0.3)]
     real = real_log.get_dataset("vehicle_local_position").data
     real_liftoff_s = real["timestamp"][np.argmax(real["vz"] < -0.3)] / 1e6
-    assert real_liftoff_s == pytest.approx(413.0, abs=0.5)  # SOURCES.md: the climb from 413
+    assert real_liftoff_s == pytest.approx(413.0, abs=0.5)  # README: the climb from 413
     assert sim_liftoff_s == pytest.approx(real_liftoff_s, abs=1.0)
     # the climb tracks the real vz_sp step (−1.5 m/s from 413.5 to 417.2 s; the log's vz_sp
     # already holds PX4's smooth-takeoff ramp). The autopilot assumes MPC_THR_HOVER = 0.5
@@ -412,7 +413,7 @@ def test_armed_motors_idle_and_the_hover_thrust_matches_the_real_one(takeoff, re
 
 def test_autopilot_logs_topics_at_least_at_the_real_rates(takeoff):
     _, _, autopilot = takeoff
-    # SOURCES.md rates of the real X500 log (Hz)
+    # data/flight_logs/README.md rates of the real X500 log (Hz)
     real_hz = {"vehicle_rates_setpoint": 49.8, "vehicle_attitude_setpoint": 19.9,
                "vehicle_local_position_setpoint": 10, "vehicle_torque_setpoint": 49.8,
                "vehicle_thrust_setpoint": 49.8, "actuator_motors": 10,

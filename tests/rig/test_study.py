@@ -148,7 +148,7 @@ def test_the_8s_quads_ground_spin_vibrates_between_rest_and_hover(quad_rest_and_
 
 
 def test_the_x8s_raw_imu_is_scored_against_its_model(auriol_log, tmp_path, capsys):
-    """`rig identify --raw-imu` unpacks the X8's FIFO (SOURCES.md at rest: gyro σ
+    """`rig identify --raw-imu` unpacks the X8's FIFO (data/flight_logs/README.md at rest: gyro σ
     0.007/0.010/0.005 rad/s, accel 0.12/0.11/0.24 m/s²) and drives auriol_x8 on the stand with
     the log's motors, sampled at the chip's 8,371 Hz on the same timestamps. At rest (the
     rotors stopped from the disarm) only its white noise acts, σ = N·√rate in closed form;

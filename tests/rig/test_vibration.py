@@ -48,9 +48,9 @@ def measured():
 
 
 def test_operating_points_of_the_x500_log(measured):
-    """SOURCES.md's timeline: idle on the ground before 411.2 s, the take-off climb, hover,
-    the AUTO_LAND descent, the props stopped after the 503.1 s disarm; the IMU stream is
-    PX4's 200 Hz means (IMU_INTEG_RATE)."""
+    """The log's timeline (data/flight_logs/README.md): idle on the ground before 411.2 s,
+    the take-off climb, hover, the AUTO_LAND descent, the props stopped after the 503.1 s
+    disarm; the IMU stream is PX4's 200 Hz means (IMU_INTEG_RATE)."""
     assert measured.stream_rate_hz == 200.0
     windows = {p.name: p.windows_s for p in measured.points}
     assert set(windows) == {"stopped", "idle", "hover", "climb", "descent"}
