@@ -144,6 +144,9 @@ class SensorTop(wiring.Component):
         Build the capture core with its simulation ports (``PwmCapture``'s ``skip`` and
         ``quiet_ticks``, reached as ``capture.skip``): for the compiled co-simulation,
         never for synthesis.
+    uart_skippable : bool
+        The same for the GPS receiver (``UbloxM8Core``'s ``skip`` and ``quiet``, reached as
+        ``gps.skip``).
 
     Attributes
     ----------
@@ -211,6 +214,7 @@ class SensorTop(wiring.Component):
         pwm_timeout_s: float = PWM_TIMEOUT_S,
         uart_clk_hz: float = UART_CLK_HZ,
         pwm_skippable: bool = False,
+        uart_skippable: bool = False,
     ) -> None:
         self.sys_clk_hz = sys_clk_hz
         self.pwm_tick_hz = pwm_tick_hz
@@ -218,7 +222,7 @@ class SensorTop(wiring.Component):
         self.imu = Mpu6000(sys_clk_hz=sys_clk_hz)
         self.baro = Ms5611(sys_clk_hz=sys_clk_hz)
         self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
-        self.gps = UbloxM8Core(sys_clk_hz=uart_clk_hz)
+        self.gps = UbloxM8Core(sys_clk_hz=uart_clk_hz, skippable=uart_skippable)
         self.range = LidarLiteCore(sys_clk_hz=sys_clk_hz)
         self.flow = Pmw3901(sys_clk_hz=sys_clk_hz)
         self.capture = PwmCapture(

@@ -8,7 +8,7 @@ crystal) is what the far end must tolerate; :func:`baud_error` gives it and
 """
 
 from amaranth.build import Platform
-from amaranth.hdl import Cat, Module, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -22,10 +22,19 @@ MAX_BAUD_ERROR = 0.02
 MIN_DIVIDER = 8
 #: Divider counter width: enough for 9600 baud at 100 MHz.
 DIVIDER_BITS = 14
+#: Largest ``quiet`` of a skippable :class:`UartTx` or :class:`UartRx`: "nothing to do
+#: until an input changes". A skippable one (the compiled co-simulation's build, never
+#: synthesis) says in ``quiet`` how many coming edges move nothing but its bit timer, and
+#: takes ``skip``: the next edge stands for ``1 + skip`` cycles (``skip < quiet``), so a
+#: byte costs a few edges instead of ten bit times of cycles.
+QUIET_MAX = (1 << DIVIDER_BITS) - 1
 #: Cycles :class:`UartRx` adds to a byte's nine and a half bit times before its strobe:
 #: the line passes two synchroniser flip-flops and the edge detector's register before
 #: the start bit is seen (checked cycle-exact against the RTL in test_native_harness).
 RX_DELAY_CYCLES = 3
+
+
+_SKIP_PORTS = {"skip": In(DIVIDER_BITS), "quiet": Out(DIVIDER_BITS)}
 
 
 def divider_for(clk_hz: float, baud: int) -> int:
@@ -85,14 +94,21 @@ class UartTx(wiring.Component):
         The byte stream.
     busy : Out(1)
         A frame is on the line.
+    skip : In(DIVIDER_BITS), quiet : Out(DIVIDER_BITS)
+        ``skippable`` only (see :data:`QUIET_MAX`).
     """
 
-    tx: Out(1, init=1)
-    divider: In(DIVIDER_BITS)
-    data: In(8)
-    valid: In(1)
-    ready: Out(1)
-    busy: Out(1)
+    def __init__(self, *, skippable: bool = False) -> None:
+        self.skippable = skippable
+        members = {
+            "tx": Out(1, init=1),
+            "divider": In(DIVIDER_BITS),
+            "data": In(8),
+            "valid": In(1),
+            "ready": Out(1),
+            "busy": Out(1),
+        }
+        super().__init__(members | (_SKIP_PORTS if skippable else {}))
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
@@ -104,6 +120,10 @@ class UartTx(wiring.Component):
             self.busy.eq(bits_left != 0),
             self.ready.eq((bits_left == 0) | ending),
         ]
+        cycles = 1 + self.skip if self.skippable else 1
+        if self.skippable:  # the edges before the next bit edge, or a byte taken
+            idle = Mux(self.valid, 0, QUIET_MAX)
+            m.d.comb += self.quiet.eq(Mux(bits_left != 0, timer, idle))
         with m.If(self.valid & self.ready):
             m.d.sync += [
                 self.tx.eq(0),  # start bit
@@ -120,7 +140,7 @@ class UartTx(wiring.Component):
                     timer.eq(self.divider - 1),
                 ]
             with m.Else():
-                m.d.sync += timer.eq(timer - 1)
+                m.d.sync += timer.eq(timer - cycles)
         return m
 
 
@@ -141,14 +161,21 @@ class UartRx(wiring.Component):
         One cycle: a frame ended with a low stop bit; its byte was dropped.
     busy : Out(1)
         A frame is being received.
+    skip : In(DIVIDER_BITS), quiet : Out(DIVIDER_BITS)
+        ``skippable`` only (see :data:`QUIET_MAX`).
     """
 
-    rx: In(1, init=1)
-    divider: In(DIVIDER_BITS)
-    data: Out(8)
-    stb: Out(1)
-    frame_error: Out(1)
-    busy: Out(1)
+    def __init__(self, *, skippable: bool = False) -> None:
+        self.skippable = skippable
+        members = {
+            "rx": In(1, init=1),
+            "divider": In(DIVIDER_BITS),
+            "data": Out(8),
+            "stb": Out(1),
+            "frame_error": Out(1),
+            "busy": Out(1),
+        }
+        super().__init__(members | (_SKIP_PORTS if skippable else {}))
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
@@ -157,11 +184,16 @@ class UartRx(wiring.Component):
         timer = Signal(DIVIDER_BITS)
         bit = Signal(range(10))  # 0 start, 1..8 data, 9 stop
         shift = Signal(8)
+        cycles = 1 + self.skip if self.skippable else 1
+        if self.skippable:  # the synchroniser settled, no strobe to clear: the next sample
+            settled = (self.rx == meta) & (meta == line) & (line == last)
+            still = settled & ~self.stb & ~self.frame_error
+            m.d.comb += self.quiet.eq(Mux(still, Mux(self.busy, timer, QUIET_MAX), 0))
         m.d.sync += [self.stb.eq(0), self.frame_error.eq(0)]
         with m.If(~self.busy), m.If(last & ~line):  # falling edge: the start bit began
             m.d.sync += [self.busy.eq(1), bit.eq(0), timer.eq((self.divider >> 1) - 1)]
         with m.Elif(timer != 0):
-            m.d.sync += timer.eq(timer - 1)
+            m.d.sync += timer.eq(timer - cycles)
         with m.Else():
             m.d.sync += [timer.eq(self.divider - 1), bit.eq(bit + 1)]
             with m.If(bit == 0), m.If(line):  # a glitch, not a start bit

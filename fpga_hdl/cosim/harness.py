@@ -53,6 +53,8 @@ ticks longer than ``PWM_RESULT_COPY_CYCLES + 0.5`` system periods, which SensorT
 
 from __future__ import annotations
 
+import functools
+
 from amaranth.build import Platform
 from amaranth.hdl import (
     Cat,
@@ -64,6 +66,7 @@ from amaranth.hdl import (
     Mux,
     ResetSignal,
     Signal,
+    Value,
 )
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
@@ -72,7 +75,7 @@ from fpga_hdl.buses.i2c_controller import I2cController
 from fpga_hdl.buses.pwm_generator import PwmGenerator
 from fpga_hdl.buses.spi_controller import SpiController
 from fpga_hdl.buses.spi_target import CS_SYNC_STAGES
-from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx
+from fpga_hdl.buses.uart import DIVIDER_BITS, QUIET_MAX, UartRx, UartTx
 from fpga_hdl.chips.pwm_capture.core import LATENCY_TICKS, SKIP_BITS
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
 from fpga_hdl.top import PWM_RESULT_COPY_CYCLES, PWM_TICK_HZ, UART_CLK_HZ, SensorTop
@@ -294,12 +297,19 @@ class UartPeer(wiring.Component):
         What the last request received.
     line_tx : Out(1), line_rx : In(1)
         The autopilot's TXD (to the receiver's RXD) and RXD (from its TXD).
+    skip : In(DIVIDER_BITS), quiet : Out(DIVIDER_BITS)
+        As :class:`~fpga_hdl.chips.ublox.core.UbloxM8Core`'s: the coming edges that move
+        nothing but counters, none in the first :data:`SETTLE_CYCLES` of a request.
     """
 
     #: Idle bit times that end a request: the receiver answers within a few cycles of a
     #: frame's last byte and sends its frames back to back, so two byte times of silence
     #: mean it has nothing more to say.
     QUIET_BITS = 20
+    #: Cycles at the start of a request clocked one by one: a fix or fault word the host
+    #: loaded crosses into the receiver's domain then (synchronisers, the epoch decision
+    #: and the fix's copy: under 40 cycles), through registers ``quiet`` does not watch.
+    SETTLE_CYCLES = 64
 
     def __init__(self, *, tx_depth: int = 64, rx_depth: int = 256) -> None:
         self.tx_depth = tx_depth
@@ -317,13 +327,16 @@ class UartPeer(wiring.Component):
                 "line_cycles": Out(32),
                 "line_tx": Out(1, init=1),
                 "line_rx": In(1, init=1),
+                "skip": In(DIVIDER_BITS),
+                "quiet": Out(DIVIDER_BITS),
             }
         )
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
-        m.submodules.uart_tx = uart_tx = UartTx()
-        m.submodules.uart_rx = uart_rx = UartRx()
+        m.submodules.uart_tx = uart_tx = UartTx(skippable=True)
+        m.submodules.uart_rx = uart_rx = UartRx(skippable=True)
+        cycles = 1 + self.skip  # what this edge stands for
         m.d.comb += [
             uart_tx.divider.eq(self.divider),
             uart_rx.divider.eq(self.divider),
@@ -341,7 +354,7 @@ class UartPeer(wiring.Component):
         last_cycles = Signal(32)
         m.d.sync += previous.eq(self.line_rx)
         with m.If(started):
-            m.d.sync += cycle.eq(cycle + 1)
+            m.d.sync += cycle.eq(cycle + cycles)
         with m.Elif(previous & ~self.line_rx):
             m.d.sync += [started.eq(1), cycle.eq(1)]
         with m.If(uart_rx.stb):
@@ -352,16 +365,22 @@ class UartPeer(wiring.Component):
         quiet = Signal(32)
         limit = Signal(32)
         m.d.comb += limit.eq(self.divider * self.QUIET_BITS)
-        with m.If(~self.line_rx | uart_rx.busy):
+        counting = self.line_rx & ~uart_rx.busy
+        with m.If(~counting):
             m.d.sync += quiet.eq(0)
         with m.Elif(quiet < limit):
-            m.d.sync += quiet.eq(quiet + 1)
+            m.d.sync += quiet.eq(quiet + cycles)
 
         index = Signal(range(self.tx_depth + 1))
+        settle = Signal(range(self.SETTLE_CYCLES + 1))
+        with m.If(settle != 0):
+            m.d.sync += settle.eq(settle - 1)
+        acting = Signal()  # this edge does more than count
         m.d.comb += uart_tx.data.eq(self.tx[index[: len(range(self.tx_depth))]])
         with m.FSM() as fsm:
             with m.State("IDLE"), m.If(self.request != self.acknowledge):
-                m.d.sync += index.eq(0)
+                m.d.comb += acting.eq(1)
+                m.d.sync += [index.eq(0), settle.eq(self.SETTLE_CYCLES)]
                 m.next = "SEND"
             with m.State("SEND"):
                 with m.If(index < self.tx_len):
@@ -369,9 +388,11 @@ class UartPeer(wiring.Component):
                     with m.If(uart_tx.ready):
                         m.d.sync += index.eq(index + 1)
                 with m.Elif(~uart_tx.busy):
+                    m.d.comb += acting.eq(1)
                     m.d.sync += quiet.eq(0)
                     m.next = "LISTEN"
             with m.State("LISTEN"), m.If(quiet == limit):
+                m.d.comb += acting.eq(1)
                 m.d.sync += [
                     self.rx.eq(received),
                     self.rx_len.eq(count),
@@ -382,10 +403,30 @@ class UartPeer(wiring.Component):
                 ]
                 m.next = "DONE"
             with m.State("DONE"):  # a cycle after the results, as HostReader's
+                m.d.comb += acting.eq(1)
                 m.d.sync += self.acknowledge.eq(self.request)
                 m.next = "IDLE"
         m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
+
+        # Quiet: the bit timers' own, and the line-quiet count's edges up to its limit.
+        counted = Signal(DIVIDER_BITS)
+        left = limit - quiet
+        m.d.comb += counted.eq(
+            Mux(counting & (quiet < limit) & (left < QUIET_MAX), left, QUIET_MAX)
+        )
+        least = _least(uart_tx.quiet, uart_rx.quiet, counted)
+        still = ~acting & (settle == 0) & (previous == self.line_rx)
+        m.d.comb += [
+            uart_tx.skip.eq(self.skip),
+            uart_rx.skip.eq(self.skip),
+            self.quiet.eq(Mux(still, least, 0)),
+        ]
         return m
+
+
+def _least(*values: Value) -> Value:
+    """The smallest of ``values`` (unsigned), as a mux tree."""
+    return functools.reduce(lambda a, b: Mux(a < b, a, b), values)
 
 
 #: Harness ports forwarded to each peripheral, by the peripheral's own port names.
@@ -424,7 +465,7 @@ class CosimHarness(wiring.Component):
         self.uart_clk_hz = uart_clk_hz
         self.top = SensorTop(
             sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz, uart_clk_hz=uart_clk_hz,
-            pwm_skippable=True,
+            pwm_skippable=True, uart_skippable=True,
         )  # fmt: skip
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz)
@@ -445,6 +486,7 @@ class CosimHarness(wiring.Component):
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
         members |= {"pwm_skip": In(SKIP_BITS), "pwm_quiet_ticks": Out(SKIP_BITS)}
+        members |= {"uart_skip": In(DIVIDER_BITS), "uart_quiet": Out(DIVIDER_BITS)}
         members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "pwm_cycles",
                                                "uart_cycles")}  # fmt: skip
         super().__init__(members)
@@ -552,7 +594,7 @@ class CosimHarness(wiring.Component):
         m.d.sync += self.sync_cycles.eq(self.sync_cycles + 1)
         m.d.spi_ctrl += self.spi_cycles.eq(self.spi_cycles + 1)
         m.d.pwm_out += self.pwm_cycles.eq(self.pwm_cycles + 1 + self.pwm_skip)
-        m.d.uart_peer += self.uart_cycles.eq(self.uart_cycles + 1)
+        m.d.uart_peer += self.uart_cycles.eq(self.uart_cycles + 1 + self.uart_skip)
 
         # Host port.
         m.d.comb += [
@@ -595,6 +637,12 @@ class CosimHarness(wiring.Component):
             ),
         ]
         m.d.comb += [top.gps_rx.eq(uart.line_tx), uart.line_rx.eq(top.gps_tx)]
+        # The UART clock by event likewise: both ends of the line quiet.
+        m.d.comb += [
+            top.gps.skip.eq(self.uart_skip),
+            uart.skip.eq(self.uart_skip),
+            self.uart_quiet.eq(_least(top.gps.quiet, uart.quiet)),
+        ]
         # Monitor outputs: the pins as a logic analyser on the rig would see them.
         m.d.comb += [
             self.spi_sclk.eq(spi.sclk),

@@ -206,6 +206,7 @@ _SIGNATURES = {
                    ctypes.c_int),
     "nh_pwm_cycles": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
     "nh_pwm_by_event": ([ctypes.c_void_p, ctypes.c_int], ctypes.c_int),
+    "nh_uart_by_event": ([ctypes.c_void_p, ctypes.c_int], ctypes.c_int),
     "nh_uart": ([ctypes.c_void_p, ctypes.c_uint32, ctypes.c_char_p, ctypes.c_size_t,
                  ctypes.c_uint32, _u8p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint32),
                  ctypes.POINTER(ctypes.c_uint32)], ctypes.c_int),
@@ -473,13 +474,18 @@ class NativeHarness:
 
     Builds the library on first use (about half a minute; then cached). ``close`` frees
     the model; the library stays loaded for the process's other harnesses. The capture
-    clock advances by event (one edge for each quiet stretch of ticks, see
-    ``native_harness.cpp``); ``pwm_by_event=False`` clocks every tick, the reference the
-    tests compare it with.
+    clock and the UART clock advance by event (one edge for each quiet stretch, see
+    ``native_harness.cpp``); ``pwm_by_event=False`` and ``uart_by_event=False`` clock every
+    cycle, the reference the tests compare them with.
     """
 
     def __init__(
-        self, *, pwm_tick_hz: float = PWM_TICK_HZ, spi_mode: int = 0, pwm_by_event: bool = True
+        self,
+        *,
+        pwm_tick_hz: float = PWM_TICK_HZ,
+        spi_mode: int = 0,
+        pwm_by_event: bool = True,
+        uart_by_event: bool = True,
     ) -> None:
         gateware = CosimHarness(pwm_tick_hz=pwm_tick_hz)
         self.pwm_tick_hz = pwm_tick_hz
@@ -492,6 +498,7 @@ class NativeHarness:
         self.pwm = NativePwm(model, gateware.pwm_generator.counter_bits, tick_hz=pwm_tick_hz)
         self.uart = NativeUart(model, gateware.uart.tx_depth, gateware.uart.rx_depth)
         model.call("nh_pwm_by_event", int(pwm_by_event))
+        model.call("nh_uart_by_event", int(uart_by_event))
 
     def reset(self) -> None:
         """Reset every clock domain for three capture ticks, as the cocotb harness does;

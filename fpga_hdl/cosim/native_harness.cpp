@@ -19,7 +19,10 @@
 // nothing but counters (no PWM output changes, no period starts, the capture's pipeline
 // at rest, no timeout due), one edge stands for that many ticks (`pwm_skip`, the RTL's own
 // counters add them), so a PWM period costs a few edges around each pulse edge instead of
-// one per tick. nh_pwm_by_event turns it off: the tests compare both, tick for tick.
+// one per tick. nh_pwm_by_event turns it off: the tests compare both, tick for tick. The
+// UART clock likewise (`uart_quiet`, `uart_skip`): between the bit edges and samples of
+// both ends of the GPS line only bit timers move, so a byte costs a few dozen edges
+// instead of ten bit times; nh_uart_by_event turns it off.
 //
 // Costs: every call that clocks the design adds its wall time and cycles to a slot
 // (nh_costs): one per SPI device, per I2C address, the host writes, the host reads, the
@@ -156,8 +159,12 @@ struct Harness {
     Cost costs[COST_SLOTS];
     std::string error;
     bool by_event = true;  // capture-clock edges stand for every quiet tick
+    bool uart_by_event = true;  // UART edges likewise for every quiet cycle
 
-    Harness() { model.pwm_skip = 0; }
+    Harness() {
+        model.pwm_skip = 0;
+        model.uart_skip = 0;
+    }
 
     void sync_cycle() {
         model.rootp->SYNC_CLOCK = 1;
@@ -198,6 +205,16 @@ struct Harness {
         ++uart_cycles;
     }
 
+    // One UART edge standing for every cycle `uart_quiet` says is quiet (see the top): the
+    // skip is a port, so the edge evaluates the inputs too.
+    void uart_event() {
+        const uint64_t cycles = std::max<uint64_t>(model.uart_quiet, 1);
+        model.uart_skip = static_cast<SData>(cycles - 1);
+        model.rootp->UART_CLOCK = 1;
+        evaluate(model);
+        uart_cycles += cycles;
+    }
+
     // The gated clock's rule: whole cycles while `enable` is high, checked after each.
     template <typename Cycle>
     bool run_gated(const CData& enable, Cycle cycle, const char* clock, const char* what) {
@@ -218,7 +235,13 @@ struct Harness {
     }
 
     bool run_uart(const char* what) {
-        return run_gated(model.rootp->UART_ENABLE, [this] { uart_cycle(); }, "UART", what);
+        if (!uart_by_event) {
+            return run_gated(model.rootp->UART_ENABLE, [this] { uart_cycle(); }, "UART", what);
+        }
+        const bool ran =
+            run_gated(model.rootp->UART_ENABLE, [this] { uart_event(); }, "UART", what);
+        model.uart_skip = 0;
+        return ran;
     }
 
     bool run_spi(const char* what) {
@@ -451,6 +474,13 @@ EXPORT int nh_pwm_cycles(void* handle, uint64_t count) {
 EXPORT int nh_pwm_by_event(void* handle, int enabled) {
     auto* h = static_cast<Harness*>(handle);
     h->by_event = enabled != 0;
+    return 0;
+}
+
+// Whether UART edges stand for every quiet cycle (1, the default) or one cycle each.
+EXPORT int nh_uart_by_event(void* handle, int enabled) {
+    auto* h = static_cast<Harness*>(handle);
+    h->uart_by_event = enabled != 0;
     return 0;
 }
 

@@ -186,6 +186,52 @@ FIX = GpsFix(
 )  # fmt: skip
 
 
+def test_the_uart_clock_by_event_equals_every_cycle():
+    """One UART edge per quiet stretch (the default) against one edge per cycle: the same
+    bytes, line times and cycle counts through PX4's configuration from 9600 Bd (rate
+    switches, ACKs, NAKs, MON-VER), CFG-RATE, fixes at 10 Hz loaded just before an
+    exchange or while a NAV-PVT is still on the line, the mute and flip faults, and
+    bytes the receiver drops (garbage, a bad checksum, a frame split over exchanges)."""
+    from fpga_hdl.cosim.native import NativeHarness
+
+    by_event, every_cycle = NativeHarness(), NativeHarness(uart_by_event=False)
+    harnesses = (by_event, every_cycle)
+    rng = random.Random(36)
+    rate = ubx.frame(ubx.CLASS_CFG, ubx.ID_CFG_RATE, struct.pack("<HHH", 100, 1, 0))
+    bad = bytearray(rate)
+    bad[-1] ^= 0xFF
+
+    def exchange(frame: bytes, baud: int) -> None:
+        transfers = [_run(h.uart.exchange(frame, baud=baud)) for h in harnesses]
+        assert transfers[0] == transfers[1], (frame.hex(), baud)
+        assert by_event.uart.line_cycles == every_cycle.uart.line_cycles
+        assert by_event.cycles() == every_cycle.cycles()
+
+    try:
+        for harness in harnesses:
+            harness.reset()
+        for step in px4_configuration():
+            exchange(step.frame, step.baud)
+        exchange(rate, 115200)
+        epoch_ms = 345_600_000
+        for k in range(60):
+            epoch_ms += 100
+            fault = rng.choice([(False, 0)] * 6 + [(True, 0), (False, 0x5A)])
+            pvt = receiver_solution(FIX, epoch_ms * 1000)
+            for harness in harnesses:
+                harness.host.load({"gps": pvt.fields()}, now_us=epoch_ms * 1000,
+                                  faults={"gps": fault})  # fmt: skip
+            extra = rng.choice([b"", b"", b"", bytes(rng.randrange(256) for _ in range(5)),
+                                bytes(bad), rate[:5], rate[5:]])  # fmt: skip
+            exchange(extra, 115200)
+            if k % 7 == 3:  # the next fix lands while this one's NAV-PVT is on the line
+                exchange(b"", 115200)
+        assert by_event.cycles()[2] > 1_000_000  # whole frames really crossed the line
+    finally:
+        for harness in harnesses:
+            harness.close()
+
+
 def test_nav_pvt_follows_cfg_rate_on_the_rtl_as_on_the_twin():
     """After PX4's configuration, CFG-RATE measRate 1000, 200 and 100 ms: two seconds of
     the rig's 10 Hz measurements (the receiver's maximum) give NAV-PVT at 1, 5 and 10 Hz,

@@ -105,10 +105,19 @@ class UbloxM8Core(wiring.Component):
         ``mute`` holds TXD idle (bytes are lost); ``flip`` is XORed into every byte after
         a frame's 6-byte header (payload and checksum), so the driver finds the frame and
         drops it for its checksum, as after noise on a real line.
+    skip : In(DIVIDER_BITS), quiet : Out(DIVIDER_BITS)
+        ``skippable`` only (the compiled co-simulation, never synthesis): the coming edges
+        that move nothing but the UART's bit timers, and the cycles the next edge stands
+        for (:data:`fpga_hdl.buses.uart.QUIET_MAX`). Its inputs must hold still meanwhile.
     """
 
     def __init__(
-        self, *, sys_clk_hz: float, baud: int = RESET_BAUD, nav_pvt_at_reset: bool = False
+        self,
+        *,
+        sys_clk_hz: float,
+        baud: int = RESET_BAUD,
+        nav_pvt_at_reset: bool = False,
+        skippable: bool = False,
     ) -> None:
         self.dividers = {rate: divider_for(sys_clk_hz, rate) for rate in BAUD_RATES}
         if baud not in self.dividers:
@@ -116,23 +125,25 @@ class UbloxM8Core(wiring.Component):
         self.sys_clk_hz = sys_clk_hz
         self.reset_baud = baud
         self.nav_pvt_at_reset = nav_pvt_at_reset
-        super().__init__(
-            {
-                "tx": Out(1, init=1),
-                "rx": In(1, init=1),
-                "sample": In(ubx.SAMPLE_LAYOUT),
-                "sample_stb": In(1),
-                "sample_pending": Out(1),
-                "baud": Out(20, init=baud),
-                "meas_rate_ms": Out(16, init=RESET_MEAS_RATE_MS),
-                "fault": In(BUS_FAULT),
-            }
-        )
+        self.skippable = skippable
+        members = {
+            "tx": Out(1, init=1),
+            "rx": In(1, init=1),
+            "sample": In(ubx.SAMPLE_LAYOUT),
+            "sample_stb": In(1),
+            "sample_pending": Out(1),
+            "baud": Out(20, init=baud),
+            "meas_rate_ms": Out(16, init=RESET_MEAS_RATE_MS),
+            "fault": In(BUS_FAULT),
+        }
+        if skippable:
+            members |= {"skip": In(DIVIDER_BITS), "quiet": Out(DIVIDER_BITS)}
+        super().__init__(members)
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
-        m.submodules.uart_tx = uart_tx = UartTx()
-        m.submodules.uart_rx = uart_rx = UartRx()
+        m.submodules.uart_tx = uart_tx = UartTx(skippable=self.skippable)
+        m.submodules.uart_rx = uart_rx = UartRx(skippable=self.skippable)
         divider = Signal(DIVIDER_BITS, init=self.dividers[self.reset_baud])
         m.d.comb += [
             uart_tx.divider.eq(divider),
@@ -207,7 +218,7 @@ class UbloxM8Core(wiring.Component):
                         pvt_enabled=pvt_enabled,
                         switch=(switch_pending, new_divider, new_baud),
                     )
-        epoch = self._navigation_epoch(m)
+        epoch, deciding = self._navigation_epoch(m)
 
         # --- output: the frame sequencer -------------------------------------------------
         frame = Signal(range(len(FRAMES)))
@@ -269,10 +280,25 @@ class UbloxM8Core(wiring.Component):
         # After the sequencer: an epoch in the cycle a NAV-PVT starts is not lost.
         with m.If(epoch & pvt_enabled):
             m.d.sync += pvt_pending.eq(1)
+        if self.skippable:
+            # Quiet while only the bit timers move: no byte or fix to take, no epoch being
+            # decided, no copy of a fix, and no frame or rate switch waiting to start.
+            waiting = ack_pending | switch_pending | mon_ver_pending | pvt_pending
+            acting = Cat(
+                uart_rx.stb, uart_rx.frame_error, self.sample_stb, deciding, epoch,
+                latch.copying, ~sending & waiting,
+            ).any()  # fmt: skip
+            least = Mux(uart_tx.quiet < uart_rx.quiet, uart_tx.quiet, uart_rx.quiet)
+            m.d.comb += [
+                uart_tx.skip.eq(self.skip),
+                uart_rx.skip.eq(self.skip),
+                self.quiet.eq(Mux(acting, 0, least)),
+            ]
         return m
 
-    def _navigation_epoch(self, m: Module) -> Value:
-        """1 for a cycle when the last loaded fix's iTOW is a whole multiple of measRate.
+    def _navigation_epoch(self, m: Module) -> tuple[Value, Value]:
+        """1 for a cycle when the last loaded fix's iTOW is a whole multiple of measRate,
+        and whether that is being decided.
 
         Hand-written restoring division (Amaranth's library has no divider, and a
         combinational 32-by-16-bit remainder would be a large, slow block for a question
@@ -303,7 +329,7 @@ class UbloxM8Core(wiring.Component):
             ]
             with m.If(bits_left == 1):
                 m.d.sync += epoch.eq(reduced == 0)
-        return epoch
+        return epoch, bits_left != 0
 
     def _act(
         self,
