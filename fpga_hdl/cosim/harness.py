@@ -38,7 +38,9 @@ capture core's own account, both checked tick for tick in the tests). The UART c
 (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the autopilot's UART) runs
 while a UART exchange is requested or under way, or ``rst`` is high: a fix the host loaded
 crosses into the receiver in the exchange's first cycles, before its first start bit, so
-the line times are those of a free-running clock.
+the line times are those of a free-running clock. The compiled harness runs it by event
+too: one edge for ``1 + uart_skip`` cycles while ``uart_quiet`` (the u-blox core's and the
+peer's) says only bit timers and counters move through them.
 Verilator needs ``--timing`` for these delays (``fpga_hdl.cosim.runner`` adds it when a
 design brings behavioural Verilog).
 

@@ -28,7 +28,7 @@ each transaction sees the same edges as under cocotb, where the design sees no t
 its clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
 caller asks (:meth:`NativePwm.cycles`), and by event: one edge for each stretch of ticks in
 which nothing but counters move (``native_harness.cpp``), so a 400 Hz PWM period costs a
-few dozen edges.
+few dozen edges. A UART exchange's clock likewise: a byte costs a few dozen edges.
 
 :class:`NativeHarness` bundles the buses like :class:`fpga_hdl.cosim.peripherals.Harness`
 (whose cocotb classes this mirrors): ``spi`` and ``i2c`` implement the
