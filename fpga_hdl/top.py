@@ -147,6 +147,11 @@ class SensorTop(wiring.Component):
     uart_skippable : bool
         The same for the GPS receiver (``UbloxM8Core``'s ``skip`` and ``quiet``, reached as
         ``gps.skip``).
+    i2c_domain : str
+        The clock domain of the I2C chips (the IST8310 and the LIDAR-Lite, targets and
+        registers): ``sync`` on the FPGA. The compiled co-simulation names one of its own,
+        clocked with ``sync`` and also alone during an I2C transfer, so a transfer's
+        cycles clock the I2C bus and nothing else (``fpga_hdl.cosim.harness``).
 
     Attributes
     ----------
@@ -215,8 +220,10 @@ class SensorTop(wiring.Component):
         uart_clk_hz: float = UART_CLK_HZ,
         pwm_skippable: bool = False,
         uart_skippable: bool = False,
+        i2c_domain: str = "sync",
     ) -> None:
         self.sys_clk_hz = sys_clk_hz
+        self.i2c_domain = i2c_domain
         self.pwm_tick_hz = pwm_tick_hz
         self.uart_clk_hz = uart_clk_hz
         self.imu = Mpu6000(sys_clk_hz=sys_clk_hz)
@@ -247,8 +254,8 @@ class SensorTop(wiring.Component):
         m.submodules.host = host
         m.submodules.imu = imu
         m.submodules.baro = baro
-        m.submodules.mag = mag
-        m.submodules.range = rangefinder
+        m.submodules.mag = DomainRenamer(self.i2c_domain)(mag)
+        m.submodules.range = DomainRenamer(self.i2c_domain)(rangefinder)
         m.submodules.flow = flow
         m.domains.pwm = ClockDomain(local=True)
         m.d.comb += [ClockSignal("pwm").eq(self.pwm_clk), ResetSignal("pwm").eq(self.pwm_rst)]

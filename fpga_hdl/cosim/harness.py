@@ -18,10 +18,11 @@ Each peripheral takes a *request toggle* and answers with an *acknowledge*: Pyth
 ``<name>_request`` and awaits a change of ``<name>_acknowledge``, two wake-ups per
 transaction however many bits it moves.
 
-Clocks, without Python per cycle: four :data:`GATED_CLOCK_VERILOG` instances, a behavioural
+Clocks, without Python per cycle: five :data:`GATED_CLOCK_VERILOG` instances, a behavioural
 Verilog clock that *waits* on its enable (no polling, so a stopped clock costs nothing). The
-system clock (``sync``, :data:`HARNESS_SYS_CLK_HZ`) runs while a request is pending, a
-peripheral is busy, a chip still waits to take a sample, or ``rst`` is high. The SPI
+system clock (``sync``, :data:`HARNESS_SYS_CLK_HZ`) runs while a host-port request is
+pending, a host-port peripheral is busy, an SPI transfer's settle cycles are due, a chip
+still waits to take a sample, or ``rst`` is high. The SPI
 controller has a clock of its own at the same rate (``spi_ctrl``, as the flight controller's
 peripheral runs on the MCU's clock): an SPI transfer clocks only the controller and the
 chips' SCLK domains, not every register of the design, and then the system clock runs
@@ -29,7 +30,12 @@ chips' SCLK domains, not every register of the design, and then the system clock
 chip select through their synchronisers, the flow chip's take of its motion), before the
 transfer is acknowledged. What a transfer moves is the same, clock for clock on the bus; the
 system side sees its chip select only after the transfer, as it would see a transfer too
-short for its synchronisers. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while
+short for its synchronisers. The I2C bus's controller and chips (SensorTop's
+``i2c_domain``) have a domain of their own too, ``i2c``: every system clock edge clocks it,
+and so does an I2C clock of the same rate that runs alone while a transfer is requested or
+under way (and the system clock stands still). Nothing else in SensorTop sees the bus, and
+the chips take their samples, time and faults from the host port in system cycles, so a
+transfer clocks only the bus. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while
 ``pwm_run`` is high: the capture must count every tick of every period, so in a closed loop
 it runs all the time. Under cocotb every tick is an edge; the compiled harness
 (``fpga_hdl.cosim.native``) lets one edge stand for ``1 + pwm_skip`` ticks while
@@ -452,7 +458,8 @@ class CosimHarness(wiring.Component):
     wires as monitor outputs (``spi_sclk``, ``spi_mosi``, ``spi_miso``, ``<device>_cs_n``
     per :data:`SPI_DEVICES`, ``i2c_scl``, ``i2c_sda``, ``pwm``, ``gps_tx``, ``gps_rx``, ``clk``,
     ``pwm_clk``, ``uart_clk``); and the cycle counters ``sync_cycles``, ``spi_cycles`` (the
-    SPI controller's clock), ``pwm_cycles`` and ``uart_cycles``, the simulation's cost.
+    SPI controller's clock), ``i2c_cycles`` (the I2C clock's, alone), ``pwm_cycles`` and
+    ``uart_cycles``, the simulation's cost.
     """
 
     def __init__(
@@ -467,7 +474,7 @@ class CosimHarness(wiring.Component):
         self.uart_clk_hz = uart_clk_hz
         self.top = SensorTop(
             sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz, uart_clk_hz=uart_clk_hz,
-            pwm_skippable=True, uart_skippable=True,
+            pwm_skippable=True, uart_skippable=True, i2c_domain="i2c",
         )  # fmt: skip
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz)
@@ -489,8 +496,8 @@ class CosimHarness(wiring.Component):
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
         members |= {"pwm_skip": In(SKIP_BITS), "pwm_quiet_ticks": Out(SKIP_BITS)}
         members |= {"uart_skip": In(DIVIDER_BITS), "uart_quiet": Out(DIVIDER_BITS)}
-        members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "pwm_cycles",
-                                               "uart_cycles")}  # fmt: skip
+        members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "i2c_cycles",
+                                               "pwm_cycles", "uart_cycles")}  # fmt: skip
         super().__init__(members)
 
     def _forwarded(self) -> tuple[tuple[str, wiring.Component, tuple[str, ...]], ...]:
@@ -509,7 +516,7 @@ class CosimHarness(wiring.Component):
         writer, reader = self.host_writer, self.host_reader
         m.submodules.top = top
         m.submodules.spi = DomainRenamer("spi_ctrl")(spi)
-        m.submodules.i2c = i2c
+        m.submodules.i2c = DomainRenamer("i2c")(i2c)
         m.submodules.pwm_generator = DomainRenamer("pwm_out")(self.pwm_generator)
         m.submodules.host_writer = writer
         m.submodules.host_reader = reader
@@ -545,8 +552,6 @@ class CosimHarness(wiring.Component):
             self.rst
             | top.pending
             | (spi_settled != spi.acknowledge)
-            | i2c.busy
-            | (i2c.request != i2c.acknowledge)
             | writer.busy
             | (writer.request != writer.acknowledge)
             | reader.busy
@@ -571,6 +576,18 @@ class CosimHarness(wiring.Component):
             i_enable=self.pwm_run | self.rst,
             o_clk=pwm_clk,
         )
+        # The I2C bus: its controller and its chips run on every system clock edge, and
+        # on the I2C clock's alone while a transfer needs them (never both: the I2C clock
+        # waits while the system clock runs).
+        i2c_clk = Signal()
+        m.domains.i2c = ClockDomain()
+        m.domains.i2c_alone = ClockDomain(reset_less=True)  # counts the I2C clock's cycles
+        m.submodules.i2c_clock = Instance(
+            "cosim_gated_clock",
+            p_HALF_PERIOD_PS=_half_period_ps(self.sys_clk_hz),
+            i_enable=(i2c.busy | (i2c.request != i2c.acknowledge)) & ~sync_run,
+            o_clk=i2c_clk,
+        )
         m.domains.uart_peer = ClockDomain()
         m.submodules.uart_clock = Instance(
             "cosim_gated_clock",
@@ -583,6 +600,9 @@ class CosimHarness(wiring.Component):
             ResetSignal("sync").eq(self.rst),
             ClockSignal("spi_ctrl").eq(spi_clk),
             ResetSignal("spi_ctrl").eq(self.rst),
+            ClockSignal("i2c").eq(self.clk | i2c_clk),
+            ResetSignal("i2c").eq(self.rst),
+            ClockSignal("i2c_alone").eq(i2c_clk),
             ClockSignal("pwm_out").eq(pwm_clk),
             ResetSignal("pwm_out").eq(self.rst),
             top.pwm_clk.eq(pwm_clk),
@@ -595,6 +615,7 @@ class CosimHarness(wiring.Component):
         ]
         m.d.sync += self.sync_cycles.eq(self.sync_cycles + 1)
         m.d.spi_ctrl += self.spi_cycles.eq(self.spi_cycles + 1)
+        m.d.i2c_alone += self.i2c_cycles.eq(self.i2c_cycles + 1)
         m.d.pwm_out += self.pwm_cycles.eq(self.pwm_cycles + 1 + self.pwm_skip)
         m.d.uart_peer += self.uart_cycles.eq(self.uart_cycles + 1 + self.uart_skip)
 

@@ -22,8 +22,9 @@ whole cycle (nothing in the design uses a falling clock edge). That halves the c
 of a cycle against a rising and a falling ``eval()`` (measured on the harness: about 100
 instead of 270 ns per capture tick, 230 instead of 520 ns per system cycle). The system
 clock keeps the gated clock's rule, whole cycles while its ``enable`` is high, and so do
-the SPI controller's clock, which only an SPI transfer enables, and the UART clock, which
-only a UART exchange enables (nothing else runs meanwhile), so
+the SPI controller's clock, which only an SPI transfer enables, the I2C bus's, which only
+an I2C transfer enables, and the UART clock, which only a UART exchange enables (nothing
+else runs meanwhile), so
 each transaction sees the same edges as under cocotb, where the design sees no time but
 its clock edges and the ``now_us`` the host port loads. The capture clock runs only when the
 caller asks (:meth:`NativePwm.cycles`), and by event: one edge for each stretch of ticks in
@@ -83,9 +84,9 @@ __all__ = [
 
 SOURCE = Path(__file__).with_name("native_harness.cpp")
 #: The harness's clock instances (``CosimHarness.elaborate``: ``m.submodules.sync_clock``,
-#: ``spi_clock``, ``pwm_clock``, ``uart_clock``); the C++ reaches their registers through
-#: Verilator's root members.
-_SYNC_CLOCK, _SPI_CLOCK = "sync_clock", "spi_clock"
+#: ``spi_clock``, ``i2c_clock``, ``pwm_clock``, ``uart_clock``); the C++ reaches their
+#: registers through Verilator's root members.
+_SYNC_CLOCK, _SPI_CLOCK, _I2C_CLOCK = "sync_clock", "spi_clock", "i2c_clock"
 _PWM_CLOCK, _UART_CLOCK = "pwm_clock", "uart_clock"
 #: ``cosim_gated_clock`` for this build: the C++ writes 1, the rising edge clears it. The
 #: ports and parameter are the gated clock's; ``enable`` is read by the C++ only.
@@ -142,6 +143,8 @@ def build_native_harness(harness: CosimHarness, *, build_dir: Path = BUILD_DIR) 
         "SYNC_ENABLE": _root_member(_SYNC_CLOCK, "enable"),
         "SPI_CLOCK": _root_member(_SPI_CLOCK, "clk"),
         "SPI_ENABLE": _root_member(_SPI_CLOCK, "enable"),
+        "I2C_CLOCK": _root_member(_I2C_CLOCK, "clk"),
+        "I2C_ENABLE": _root_member(_I2C_CLOCK, "enable"),
         "PWM_CLOCK": _root_member(_PWM_CLOCK, "clk"),
         "UART_CLOCK": _root_member(_UART_CLOCK, "clk"),
         "UART_ENABLE": _root_member(_UART_CLOCK, "enable"),

@@ -12,7 +12,8 @@
 // follows the gated clock's rule: whole cycles while its `enable` (the harness's
 // `sync_run`) is high, checked after every cycle; so do the SPI controller's clock, which
 // only an SPI transfer enables (its cycles then run alone, and the system clock's settle
-// cycles after them), and the UART clock (the GPS receiver's domain and the autopilot's
+// cycles after them), the I2C clock (the I2C bus's controller and chips alone), which only
+// an I2C transfer enables, and the UART clock (the GPS receiver's domain and the autopilot's
 // UART), which only a UART exchange enables.
 //
 // By event. Where the harness's `pwm_quiet_ticks` says the next capture-clock edges move
@@ -45,8 +46,9 @@
 
 // The root members of the clocks' registers and the gated ones' enables, given by
 // fpga_hdl.cosim.native as -D flags (their names follow the harness's hierarchy).
-#if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(SPI_CLOCK) || \
-    !defined(SPI_ENABLE) || !defined(PWM_CLOCK) || !defined(UART_CLOCK) || !defined(UART_ENABLE)
+#if !defined(SYNC_CLOCK) || !defined(SYNC_ENABLE) || !defined(SPI_CLOCK) ||      \
+    !defined(SPI_ENABLE) || !defined(I2C_CLOCK) || !defined(I2C_ENABLE) ||          \
+    !defined(PWM_CLOCK) || !defined(UART_CLOCK) || !defined(UART_ENABLE)
 #error "build through fpga_hdl.cosim.native: the clock and register -D flags are missing"
 #endif
 
@@ -180,6 +182,14 @@ struct Harness {
         ++sys_cycles;
     }
 
+    // The I2C clock: the I2C controller and chips alone, at the system clock's rate (bus
+    // time, as the SPI controller's).
+    void i2c_cycle() {
+        model.rootp->I2C_CLOCK = 1;
+        clock_edge(model);
+        ++sys_cycles;
+    }
+
     void pwm_cycle() {
         model.rootp->PWM_CLOCK = 1;
         evaluate(model);
@@ -234,6 +244,10 @@ struct Harness {
         return run_gated(model.rootp->SYNC_ENABLE, [this] { sync_cycle(); }, "system", what);
     }
 
+    bool run_i2c(const char* what) {
+        return run_gated(model.rootp->I2C_ENABLE, [this] { i2c_cycle(); }, "I2C", what);
+    }
+
     bool run_uart(const char* what) {
         if (!uart_by_event) {
             return run_gated(model.rootp->UART_ENABLE, [this] { uart_cycle(); }, "UART", what);
@@ -248,17 +262,18 @@ struct Harness {
         return run_gated(model.rootp->SPI_ENABLE, [this] { spi_cycle(); }, "SPI", what);
     }
 
-    // The clocks a request runs, in turn: the system clock; the UART clock; or the SPI
-    // controller's, then the system clock's settle cycles.
-    enum class Clocks { SYNC, UART, SPI };
+    // The clocks a request runs, in turn: the system clock; the I2C clock; the UART
+    // clock; or the SPI controller's, then the system clock's settle cycles.
+    enum class Clocks { SYNC, I2C, UART, SPI };
 
     // Flip a peripheral's request toggle and clock until it has acknowledged.
     bool request(CData& request, const CData& acknowledge, const char* what,
                  Clocks clocks = Clocks::SYNC) {
         request ^= 1;
-        const bool ran = clocks == Clocks::UART  ? run_uart(what)
-                         : clocks == Clocks::SPI ? run_spi(what) && run_sync(what)
-                                                 : run_sync(what);
+        const bool ran = clocks == Clocks::I2C    ? run_i2c(what)
+                         : clocks == Clocks::UART ? run_uart(what)
+                         : clocks == Clocks::SPI  ? run_spi(what) && run_sync(what)
+                                                  : run_sync(what);
         if (!ran) return false;
         if (acknowledge != request) {
             error = std::string(what) + ": the clock stopped before the acknowledge";
@@ -405,7 +420,8 @@ EXPORT int nh_i2c(void* handle, uint32_t address, uint32_t write_len, uint32_t r
     m.i2c_read_len = read_len;
     m.i2c_fast = fast;
     bool ok = put(*h, m.i2c_tx, tx, tx_bytes, "i2c_tx") &&
-              h->request(m.i2c_request, m.i2c_acknowledge, "I2C transfer") &&
+              h->request(m.i2c_request, m.i2c_acknowledge, "I2C transfer",
+                         Harness::Clocks::I2C) &&
               get(*h, m.i2c_rx, rx, rx_bytes, "i2c_rx");
     *nack_index = m.i2c_nack ? static_cast<int32_t>(m.i2c_nack_index) : -1;
     return status(ok);

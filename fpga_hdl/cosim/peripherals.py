@@ -293,9 +293,10 @@ class Harness:
 
     def cycles(self) -> tuple[int, int, int]:
         """(system, PWM, UART) clock cycles so far: what the simulation has cost. The SPI
-        controller's clock runs at the system clock's rate and counts with it (bus time)."""
+        controller's and the I2C bus's clocks run at the system clock's rate and count with
+        it (bus time)."""
         dut = self.dut
-        system = int(dut.sync_cycles.value) + int(dut.spi_cycles.value)
+        system = sum(int(getattr(dut, f"{clock}_cycles").value) for clock in ("sync", "spi", "i2c"))
         return system, int(dut.pwm_cycles.value), int(dut.uart_cycles.value)
 
     async def wait_until_s(self, time_s: float) -> None:
