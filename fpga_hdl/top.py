@@ -142,7 +142,7 @@ class SensorTop(wiring.Component):
         Frequency of the ``uart`` domain (the GPS receiver).
     pwm_skippable : bool
         Build the capture core with its simulation ports (``PwmCapture``'s ``skip`` and
-        ``quiet_ticks``, reached as ``capture.skip``): for the compiled co-simulation,
+        ``quiet``, reached as ``capture.skip``): for the compiled co-simulation,
         never for synthesis.
     uart_skippable : bool
         The same for the GPS receiver (``UbloxM8Core``'s ``skip`` and ``quiet``, reached as

@@ -10,20 +10,19 @@ on its own clock (one tick per cycle), so the simulator pays ``tick_hz`` cycles 
 second for all eight channels and nothing per pulse edge.
 
 A simulation that runs many ticks at a time may let one edge stand for several
-(``skip``) while nothing but the counter moves: ``quiet_ticks`` says how many, counting
+(``skip``) while nothing but the counter moves: ``quiet`` says how many, counting
 only once the outputs have held still for ``settle_edges`` edges (the synchronisers of
 the core that samples them), so the reader's pipeline is at rest too.
 """
 
 from __future__ import annotations
 
-import functools
-
 from amaranth.build import Platform
 from amaranth.hdl import Cat, Module, Mux, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.by_event import least, skip_members
 from fpga_hdl.buses.signatures import PWM, PWM_CHANNELS
 
 __all__ = ["PwmGenerator"]
@@ -37,7 +36,7 @@ class PwmGenerator(wiring.Component):
     counter_bits : int
         Width of the period and width registers (16 bits: periods up to 65.5 ms at 1 µs).
     settle_edges : int
-        Edges the outputs must have held still before ``quiet_ticks`` is ever above 0.
+        Edges the outputs must have held still before ``quiet`` is ever above 0.
 
     Attributes
     ----------
@@ -49,7 +48,7 @@ class PwmGenerator(wiring.Component):
         ``pulses``: the outputs, one bit per channel.
     skip : In(counter_bits)
         Ticks beyond one that the next edge stands for (0: an ordinary edge).
-    quiet_ticks : Out(counter_bits)
+    quiet : Out(counter_bits)
         How many ticks the next edge may stand for with no output changing and no period
         starting (0: the next edge must be an ordinary one).
     """
@@ -66,8 +65,7 @@ class PwmGenerator(wiring.Component):
                 "period_ticks": In(counter_bits),
                 "width_ticks": In(data.ArrayLayout(counter_bits, PWM_CHANNELS)),
                 "pwm": Out(PWM),
-                "skip": In(counter_bits),
-                "quiet_ticks": Out(counter_bits),
+                **skip_members(counter_bits),
             }
         )
 
@@ -94,7 +92,7 @@ class PwmGenerator(wiring.Component):
     def _quiet(
         self, m: Module, count: Signal, active: list[Signal], running: Value, pulses: Value
     ) -> None:
-        """``quiet_ticks``: edges before the next period start or output change, once the
+        """``quiet``: edges before the next period start or output change, once the
         outputs have held still for ``settle_edges`` edges (``pulses``: their next value).
         A high output holds while the count stays below its width, so for
         ``width - count`` more edges; a low one stays low until the period ends."""
@@ -107,6 +105,5 @@ class PwmGenerator(wiring.Component):
         limit = (1 << self.counter_bits) - 1
         left: list[Value] = [self.period_ticks - 1 - count]  # edges before the wrap
         left += [Mux(outputs[ch], width - count, limit) for ch, width in enumerate(active)]
-        least = functools.reduce(lambda a, b: Mux(a < b, a, b), left)
         settled = running & (count != 0) & (count < self.period_ticks) & (held == self.settle_edges)
-        m.d.comb += self.quiet_ticks.eq(Mux(settled, least, 0))
+        m.d.comb += self.quiet.eq(Mux(settled, least(*left), 0))

@@ -12,6 +12,8 @@ from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.by_event import skip_members
+
 #: Largest transmitter rate error accepted for a divider: 2 %. A receiver that samples
 #: mid-bit loses sync when the error accumulated to the stop bit (9.5 bits) reaches about
 #: half a bit, 5 %; an STM32 USART (PX4's flight controllers) is specified at 3.75 % total
@@ -32,9 +34,6 @@ QUIET_MAX = (1 << DIVIDER_BITS) - 1
 #: the line passes two synchroniser flip-flops and the edge detector's register before
 #: the start bit is seen (checked cycle-exact against the RTL in test_native_harness).
 RX_DELAY_CYCLES = 3
-
-
-_SKIP_PORTS = {"skip": In(DIVIDER_BITS), "quiet": Out(DIVIDER_BITS)}
 
 
 def divider_for(clk_hz: float, baud: int) -> int:
@@ -108,7 +107,7 @@ class UartTx(wiring.Component):
             "ready": Out(1),
             "busy": Out(1),
         }
-        super().__init__(members | (_SKIP_PORTS if skippable else {}))
+        super().__init__(members | (skip_members(DIVIDER_BITS) if skippable else {}))
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
@@ -175,7 +174,7 @@ class UartRx(wiring.Component):
             "frame_error": Out(1),
             "busy": Out(1),
         }
-        super().__init__(members | (_SKIP_PORTS if skippable else {}))
+        super().__init__(members | (skip_members(DIVIDER_BITS) if skippable else {}))
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()

@@ -31,16 +31,18 @@ chip select through their synchronisers, the flow chip's take of its motion), be
 transfer is acknowledged. What a transfer moves is the same, clock for clock on the bus; the
 system side sees its chip select only after the transfer, as it would see a transfer too
 short for its synchronisers. The I2C bus's controller and chips (SensorTop's
-``i2c_domain``) have a domain of their own too, ``i2c``: every system clock edge clocks it,
-and so does an I2C clock of the same rate that runs alone while a transfer is requested or
-under way (and the system clock stands still). Nothing else in SensorTop sees the bus, and
-the chips take their samples, time and faults from the host port in system cycles, so a
-transfer clocks only the bus. The PWM tick clock (``pwm``, ``pwm_tick_hz``) runs while
-``pwm_run`` is high: the capture must count every tick of every period, so in a closed loop
-it runs all the time. Under cocotb every tick is an edge; the compiled harness
-(``fpga_hdl.cosim.native``) lets one edge stand for ``1 + pwm_skip`` ticks while
-``pwm_quiet_ticks`` says nothing moves through them but counters (the generator's and the
-capture core's own account, both checked tick for tick in the tests). The UART clock
+``i2c_domain``) have a domain of their own too, ``i2c``: the system clock's edges clock it
+while the host writer runs (the chips take their samples, time and faults from the host
+port then) or ``rst`` is high, and so does an I2C clock of the same rate that runs alone
+while a transfer is requested or under way (and the system clock stands still). Nothing
+else in SensorTop sees the bus, so a transfer clocks only the bus, and a host read or an
+SPI transfer's settle cycles do not clock it. The PWM tick clock (``pwm``,
+``pwm_tick_hz``) runs while ``pwm_run`` is high: the capture must count every tick of
+every period, so in a closed loop it runs all the time. Under cocotb every tick is an
+edge; the compiled harness (``fpga_hdl.cosim.native``) lets one edge stand for
+``1 + pwm_skip`` ticks while ``pwm_quiet`` says nothing moves through them but counters
+(the generator's and the capture core's own account, both checked tick for tick in the
+tests). The UART clock
 (``uart``, SensorTop's ``UART_CLK_HZ``: the GPS receiver and the autopilot's UART) runs
 while a UART exchange is requested or under way, or ``rst`` is high: a fix the host loaded
 crosses into the receiver in the exchange's first cycles, before its first start bit, so
@@ -61,8 +63,6 @@ ticks longer than ``PWM_RESULT_COPY_CYCLES + 0.5`` system periods, which SensorT
 
 from __future__ import annotations
 
-import functools
-
 from amaranth.build import Platform
 from amaranth.hdl import (
     Cat,
@@ -74,11 +74,11 @@ from amaranth.hdl import (
     Mux,
     ResetSignal,
     Signal,
-    Value,
 )
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.by_event import least, skip_members
 from fpga_hdl.buses.i2c_controller import I2cController
 from fpga_hdl.buses.pwm_generator import PwmGenerator
 from fpga_hdl.buses.spi_controller import SpiController
@@ -335,8 +335,7 @@ class UartPeer(wiring.Component):
                 "line_cycles": Out(32),
                 "line_tx": Out(1, init=1),
                 "line_rx": In(1, init=1),
-                "skip": In(DIVIDER_BITS),
-                "quiet": Out(DIVIDER_BITS),
+                **skip_members(DIVIDER_BITS),
             }
         )
 
@@ -422,19 +421,13 @@ class UartPeer(wiring.Component):
         m.d.comb += counted.eq(
             Mux(counting & (quiet < limit) & (left < QUIET_MAX), left, QUIET_MAX)
         )
-        least = _least(uart_tx.quiet, uart_rx.quiet, counted)
         still = ~acting & (settle == 0) & (previous == self.line_rx)
         m.d.comb += [
             uart_tx.skip.eq(self.skip),
             uart_rx.skip.eq(self.skip),
-            self.quiet.eq(Mux(still, least, 0)),
+            self.quiet.eq(Mux(still, least(uart_tx.quiet, uart_rx.quiet, counted), 0)),
         ]
         return m
-
-
-def _least(*values: Value) -> Value:
-    """The smallest of ``values`` (unsigned), as a mux tree."""
-    return functools.reduce(lambda a, b: Mux(a < b, a, b), values)
 
 
 #: Harness ports forwarded to each peripheral, by the peripheral's own port names.
@@ -494,7 +487,7 @@ class CosimHarness(wiring.Component):
         members |= {f"{device}_cs_n": Out(1) for device in SPI_DEVICES}
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
-        members |= {"pwm_skip": In(SKIP_BITS), "pwm_quiet_ticks": Out(SKIP_BITS)}
+        members |= {f"pwm_{name}": member for name, member in skip_members(SKIP_BITS).items()}
         members |= {"uart_skip": In(DIVIDER_BITS), "uart_quiet": Out(DIVIDER_BITS)}
         members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "i2c_cycles",
                                                "pwm_cycles", "uart_cycles")}  # fmt: skip
@@ -576,10 +569,13 @@ class CosimHarness(wiring.Component):
             i_enable=self.pwm_run | self.rst,
             o_clk=pwm_clk,
         )
-        # The I2C bus: its controller and its chips run on every system clock edge, and
-        # on the I2C clock's alone while a transfer needs them (never both: the I2C clock
-        # waits while the system clock runs).
-        i2c_clk = Signal()
+        # The I2C bus: its controller and its chips run on the system clock's edges while
+        # the host writer runs (or ``rst``), when they take samples, time and faults, and on
+        # the I2C clock's alone while a transfer needs them (never both: the I2C clock
+        # waits while the system clock runs). Nothing else in the system domain talks to
+        # them, so a host read or an SPI transfer's settle cycles need not clock them.
+        i2c_clk, sync_to_i2c = Signal(), Signal()
+        m.d.comb += sync_to_i2c.eq(self.rst | writer.busy | (writer.request != writer.acknowledge))
         m.domains.i2c = ClockDomain()
         m.domains.i2c_alone = ClockDomain(reset_less=True)  # counts the I2C clock's cycles
         m.submodules.i2c_clock = Instance(
@@ -600,7 +596,7 @@ class CosimHarness(wiring.Component):
             ResetSignal("sync").eq(self.rst),
             ClockSignal("spi_ctrl").eq(spi_clk),
             ResetSignal("spi_ctrl").eq(self.rst),
-            ClockSignal("i2c").eq(self.clk | i2c_clk),
+            ClockSignal("i2c").eq((self.clk & sync_to_i2c) | i2c_clk),
             ResetSignal("i2c").eq(self.rst),
             ClockSignal("i2c_alone").eq(i2c_clk),
             ClockSignal("pwm_out").eq(pwm_clk),
@@ -651,20 +647,17 @@ class CosimHarness(wiring.Component):
         m.d.comb += top.pwm.eq(self.pwm_generator.pwm.pulses)
         # Advancing the capture clock by event: one edge for 1 + ``pwm_skip`` ticks, as
         # many as both the generator and the capture core say are quiet.
-        generator_quiet, capture_quiet = self.pwm_generator.quiet_ticks, top.capture.quiet_ticks
         m.d.comb += [
             self.pwm_generator.skip.eq(self.pwm_skip),
             top.capture.skip.eq(self.pwm_skip),
-            self.pwm_quiet_ticks.eq(
-                Mux(generator_quiet < capture_quiet, generator_quiet, capture_quiet)
-            ),
+            self.pwm_quiet.eq(least(self.pwm_generator.quiet, top.capture.quiet)),
         ]
         m.d.comb += [top.gps_rx.eq(uart.line_tx), uart.line_rx.eq(top.gps_tx)]
         # The UART clock by event likewise: both ends of the line quiet.
         m.d.comb += [
             top.gps.skip.eq(self.uart_skip),
             uart.skip.eq(self.uart_skip),
-            self.uart_quiet.eq(_least(top.gps.quiet, uart.quiet)),
+            self.uart_quiet.eq(least(top.gps.quiet, uart.quiet)),
         ]
         # Monitor outputs: the pins as a logic analyser on the rig would see them.
         m.d.comb += [

@@ -16,7 +16,7 @@
 // an I2C transfer enables, and the UART clock (the GPS receiver's domain and the autopilot's
 // UART), which only a UART exchange enables.
 //
-// By event. Where the harness's `pwm_quiet_ticks` says the next capture-clock edges move
+// By event. Where the harness's `pwm_quiet` says the next capture-clock edges move
 // nothing but counters (no PWM output changes, no period starts, the capture's pipeline
 // at rest, no timeout due), one edge stands for that many ticks (`pwm_skip`, the RTL's own
 // counters add them), so a PWM period costs a few edges around each pulse edge instead of
@@ -199,7 +199,7 @@ struct Harness {
     // `count` ticks of the capture clock, each quiet stretch in one edge (see the top).
     void pwm_ticks(uint64_t count) {
         while (count != 0) {
-            const uint64_t quiet = by_event ? model.pwm_quiet_ticks : 1;
+            const uint64_t quiet = by_event ? model.pwm_quiet : 1;
             const uint64_t ticks = std::clamp<uint64_t>(quiet, 1, count);
             model.pwm_skip = static_cast<SData>(ticks - 1);
             pwm_cycle();

@@ -1,6 +1,5 @@
 """Eight-channel PWM capture: pulse width, period and a timeout flag per channel, in ticks."""
 
-import functools
 import math
 
 from amaranth.build import Platform
@@ -9,6 +8,7 @@ from amaranth.lib import data, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.by_event import least, skip_members
 from fpga_hdl.buses.signatures import PWM, PWM_CHANNELS
 
 __all__ = ["CHANNELS", "LATENCY_TICKS", "SKIP_BITS", "PwmCapture", "timeout_ticks"]
@@ -20,7 +20,7 @@ SYNC_STAGES = 2
 #: results: the synchroniser's second stage, then the result registers (the edge detector
 #: between them is combinational).
 LATENCY_TICKS = SYNC_STAGES
-#: Width of a skippable core's ``skip`` and ``quiet_ticks`` (ticks one edge may stand for).
+#: Width of a skippable core's ``skip`` and ``quiet`` (ticks one edge may stand for).
 SKIP_BITS = 16
 _QUIET_MAX = (1 << SKIP_BITS) - 1
 
@@ -74,7 +74,7 @@ class PwmCapture(wiring.Component):
 
     skip : In(SKIP_BITS)
         Ticks beyond one that the next edge stands for (0: an ordinary edge).
-    quiet_ticks : Out(SKIP_BITS)
+    quiet : Out(SKIP_BITS)
         How many ticks the next edge may stand for: through them the core only counts
         (no edge in its pipeline, no timeout due), provided its input has held still for
         the synchroniser's ``SYNC_STAGES`` edges, which only the driver of the pins can
@@ -99,7 +99,7 @@ class PwmCapture(wiring.Component):
             "timeout": Out(CHANNELS, init=(1 << CHANNELS) - 1),
         }
         if skippable:
-            members |= {"skip": In(SKIP_BITS), "quiet_ticks": Out(SKIP_BITS)}
+            members |= skip_members(SKIP_BITS)
         super().__init__(members)
 
     def elaborate(self, platform: Platform | None) -> Module:
@@ -141,6 +141,5 @@ class PwmCapture(wiring.Component):
                 left = self.timeout_ticks - since_rise
                 quiet.append(Mux(armed & (left < _QUIET_MAX), left, _QUIET_MAX))
         if self.skippable:
-            least = functools.reduce(lambda a, b: Mux(a < b, a, b), quiet)
-            m.d.comb += self.quiet_ticks.eq(Mux(level == previous, least, 0))
+            m.d.comb += self.quiet.eq(Mux(level == previous, least(*quiet), 0))
         return m

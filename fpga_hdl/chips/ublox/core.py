@@ -7,6 +7,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.by_event import least, skip_members
 from fpga_hdl.buses.signatures import BUS_FAULT
 from fpga_hdl.buses.uart import DIVIDER_BITS, UartRx, UartTx, divider_for
 from fpga_hdl.chips.ublox import ubx
@@ -137,7 +138,7 @@ class UbloxM8Core(wiring.Component):
             "fault": In(BUS_FAULT),
         }
         if skippable:
-            members |= {"skip": In(DIVIDER_BITS), "quiet": Out(DIVIDER_BITS)}
+            members |= skip_members(DIVIDER_BITS)
         super().__init__(members)
 
     def elaborate(self, platform: Platform | None) -> Module:
@@ -288,11 +289,10 @@ class UbloxM8Core(wiring.Component):
                 uart_rx.stb, uart_rx.frame_error, self.sample_stb, deciding, epoch,
                 latch.copying, ~sending & waiting,
             ).any()  # fmt: skip
-            least = Mux(uart_tx.quiet < uart_rx.quiet, uart_tx.quiet, uart_rx.quiet)
             m.d.comb += [
                 uart_tx.skip.eq(self.skip),
                 uart_rx.skip.eq(self.skip),
-                self.quiet.eq(Mux(acting, 0, least)),
+                self.quiet.eq(Mux(acting, 0, least(uart_tx.quiet, uart_rx.quiet))),
             ]
         return m
 
