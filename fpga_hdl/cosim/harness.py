@@ -487,8 +487,8 @@ class CosimHarness(wiring.Component):
         members |= {f"{device}_cs_n": Out(1) for device in SPI_DEVICES}
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
-        members |= {f"pwm_{name}": member for name, member in skip_members(SKIP_BITS).items()}
-        members |= {"uart_skip": In(DIVIDER_BITS), "uart_quiet": Out(DIVIDER_BITS)}
+        for clock, bits in (("pwm", SKIP_BITS), ("uart", DIVIDER_BITS)):  # clocked by event
+            members |= {f"{clock}_{name}": member for name, member in skip_members(bits).items()}
         members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "i2c_cycles",
                                                "pwm_cycles", "uart_cycles")}  # fmt: skip
         super().__init__(members)
