@@ -166,7 +166,7 @@ def ned_to_geodetic(
     PX4's azimuthal equidistant projection (``MapProjection::reproject`` in
     ``src/lib/geo/geo.cpp``) so the autopilot maps the position back to the same NED point.
     """
-    n, e, d = np.asarray(position_ned_m, dtype=float)
+    n, e, d = np.asarray(position_ned_m, dtype=float).tolist()  # floats: faster scalar math
     lat0, lon0 = math.radians(ref_lat_deg), math.radians(ref_lon_deg)
     x_rad, y_rad = n / EARTH_RADIUS_M, e / EARTH_RADIUS_M
     c = math.hypot(x_rad, y_rad)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import os
 import socket
+from collections.abc import Mapping
 from typing import Any
 
 import cocotb
@@ -56,7 +57,7 @@ from rig.chips.channel import (
     receive_message,
     send_message,
 )
-from rig.chips.layer import ChipFrame, SensorEngine, host_port_inputs
+from rig.chips.layer import ChipFault, ChipFrame, SensorEngine, host_port_inputs
 from rig.chips.pwm import Pulse, PwmTimingError, replay_periods
 
 
@@ -73,6 +74,7 @@ class RtlChips:
         self._next_start_us = 0  # the next PWM period start not replayed yet
         self._loaded: list[int] = [0] * CHANNELS  # widths (ticks) in the preload register
         self._later: list[tuple[int, list[int]]] = []  # this frame's further periods
+        self._held_faults: Mapping[str, ChipFault] | None = None  # what the chips were loaded with
 
     async def start_pwm(self, period_us: int, motors: int) -> None:
         """Fix the epoch two ticks ahead, start the generator and the capture clock; the
@@ -108,8 +110,9 @@ class RtlChips:
         if periods:
             self._preload(*periods[0])
         self._later = periods[1:]
-        samples, faults = host_port_inputs(frame)
+        samples, faults = host_port_inputs(frame, self._held_faults)
         await self.harness.host.load(samples, now_us=frame.now_us, faults=faults)
+        self._held_faults = frame.faults
 
     def _preload(self, start_us: int, widths: list[int]) -> None:
         """Write the widths of the period at ``start_us`` before the generator takes them."""

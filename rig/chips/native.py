@@ -33,11 +33,13 @@ few dozen edges, run at once when the frame's pulses are fed.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ
 from rig.chips.layer import (
+    ChipFault,
     ChipFrame,
     ChipReadout,
     SensorEngine,
@@ -67,6 +69,7 @@ class NativeChips:
         self._loaded: list[int] = [0] * CHANNELS  # widths (ticks) in the preload register
         self._read_us = 0  # the previous frame's time, and the system cycles then
         self._read_cycles = 0
+        self._held_faults: Mapping[str, ChipFault] | None = None  # what the chips were loaded with
 
     def start_pwm(self, period_us: int) -> None:
         """Start the generator with zero widths; its first edge is rig tick -1."""
@@ -94,8 +97,9 @@ class NativeChips:
         return now_us * 1_000_000 // self.tick_ps
 
     async def load(self, frame: ChipFrame) -> None:
-        samples, faults = host_port_inputs(frame)
+        samples, faults = host_port_inputs(frame, self._held_faults)
         self.harness.host.load(samples, now_us=frame.now_us, faults=faults)
+        self._held_faults = frame.faults
 
     def _preload(self, start_us: int, widths: list[int]) -> None:
         """Write the widths of the period at ``start_us`` before the generator takes them."""

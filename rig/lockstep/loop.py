@@ -442,6 +442,7 @@ class _Loop:
         truth, readings = self._advance(1)
         self._sense(1, readings)
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
+        self._spent_s = dict.fromkeys(self._spent_s, 0.0)  # and so does the budget
         pacer = Pacer(self.options.speed)
         state_next_us = self.clock_start_us
         truth_every = max(1, self.rates.imu_hz // TRUTH_LOG_HZ)

@@ -18,6 +18,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from rig.errors import AutopilotProtocolError
 from rig.mavlink.px4_api import (
     ACCEL_FIELDS,
@@ -153,6 +155,14 @@ def hil_gps(
     )
 
 
+def _floats(values: Iterable[float]) -> list[float]:
+    """Python floats of a vector: an array's by ``tolist`` (``float()`` of each of its
+    elements costs several times as much, and the rig sends ground truth at 200 Hz)."""
+    if isinstance(values, np.ndarray):
+        return values.astype(float, copy=False).tolist()
+    return [float(v) for v in values]
+
+
 def hil_state_quaternion(
     mav: mavlink.MAVLink,
     time_us: int,
@@ -166,16 +176,16 @@ def hil_state_quaternion(
     specific_force_frd_mps2: Iterable[float],
 ) -> mavlink.MAVLink_hil_state_quaternion_message:
     """HIL_STATE_QUATERNION (ground truth): q (w, x, y, z), rad/s, degE7, mm, cm/s, mG."""
-    vn, ve, vd = (float(v) for v in vel_ned_mps)
+    vn, ve, vd = _floats(vel_ned_mps)
     speed_cmps = _uint16_cm(math.sqrt(vn * vn + ve * ve + vd * vd))
     milli_g = [
-        min(max(round(float(a) / STANDARD_GRAVITY_MPS2 * 1000.0), _INT16_MIN), _INT16_MAX)
-        for a in specific_force_frd_mps2
+        min(max(round(a / STANDARD_GRAVITY_MPS2 * 1000.0), _INT16_MIN), _INT16_MAX)
+        for a in _floats(specific_force_frd_mps2)
     ]
-    p, q, r = (float(w) for w in rates_frd_radps)
+    p, q, r = _floats(rates_frd_radps)
     return mav.hil_state_quaternion_encode(
         time_us,
-        [float(c) for c in q_body_to_ned],
+        _floats(q_body_to_ned),
         p, q, r,
         round(lat_deg * 1e7), round(lon_deg * 1e7), round(alt_amsl_m * 1000.0),
         _int16_cm(vn), _int16_cm(ve), _int16_cm(vd),

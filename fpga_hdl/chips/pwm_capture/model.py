@@ -9,16 +9,16 @@ landing exactly on a clock edge counts as already there. The core acts on a samp
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from fpga_hdl.chips.pwm_capture.core import CHANNELS, LATENCY_TICKS, timeout_ticks
 
 __all__ = ["ChannelCapture", "PwmCaptureModel"]
 
 
-@dataclass(frozen=True)
-class ChannelCapture:
-    """One channel's results, as the core's output registers hold them."""
+class ChannelCapture(NamedTuple):
+    """One channel's results, as the core's output registers hold them (a named tuple: the
+    rig reads every motor's once a frame)."""
 
     width_ticks: int
     period_ticks: int

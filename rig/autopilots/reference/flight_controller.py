@@ -180,7 +180,16 @@ class FlightController:
 
     # ------------------------------------------------------------------ frame
     def update(self, sensors: SensorFrame, time_us: int) -> Controls:
-        """Run one frame at sensor time ``time_us`` and return the motor commands."""
+        """Run one frame at sensor time ``time_us`` and return the motor commands, logged
+        (:meth:`step`, then :meth:`write_log`)."""
+        controls = self.step(sensors, time_us)
+        self.write_log(time_us)
+        return controls
+
+    def step(self, sensors: SensorFrame, time_us: int) -> Controls:
+        """Run one frame at sensor time ``time_us`` and return the motor commands; the frame's
+        log waits for :meth:`write_log`, so the process can answer the simulator first (as
+        PX4's logger writes from a thread of its own, off the control path)."""
         dt_s = min(max((time_us - self.time_us) * 1e-6, 1e-4), 0.02) if self.time_us else 1e-3
         self.time_us = time_us
         if self._params_version != self.params.version:
@@ -197,7 +206,6 @@ class FlightController:
             self.motors = self._stopped()
             self.rate_control.reset_integral()
             self.position_control.reset_integral()
-        self._write_log(time_us)
         if self._motor_test is not None and not self.armed:
             motor, throttle, end_us = self._motor_test
             if time_us < end_us:
@@ -843,7 +851,8 @@ class FlightController:
             gyro_rate=sample.gyro_rad / sample.dt_s, gyro_rate_integral=sample.gyro_rad,
         )  # fmt: skip
 
-    def _write_log(self, time_us: int) -> None:
+    def write_log(self, time_us: int) -> None:
+        """Log the frame :meth:`step` ran at ``time_us`` (the topics due at that time)."""
         log = self.log
         if log is None or not self._imu_frames:
             return

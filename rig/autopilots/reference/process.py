@@ -308,11 +308,13 @@ class Autopilot:
             self._silence_noted = False
             frame = sensor_frame(message, self._gps, self._range, self._flow)
             self._gps = self._range = self._flow = None
-            controls = self.fc.update(frame, message.time_usec)
+            controls = self.fc.step(frame, message.time_usec)
             mode = CUSTOM_MODE_ENABLED | (SAFETY_ARMED if controls.armed else 0)
             outputs = [*controls.motors, *[0.0] * (_ACTUATOR_OUTPUTS - len(controls.motors))]
             self._send_sim(mavlink.MAVLink_hil_actuator_controls_message(
                 message.time_usec, outputs, mode, LOCKSTEP_FLAG))  # fmt: skip
+            # Logged once the simulator has its answer: in lockstep it waits for nothing else.
+            self.fc.write_log(message.time_usec)
             self.ground.stream(message.time_usec)
         elif kind == "HIL_GPS":
             self._gps = gps_fix(message)
