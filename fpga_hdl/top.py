@@ -47,7 +47,16 @@ so a simulation runs the ``uart`` clock whenever it exchanges bytes with the rec
 """
 
 from amaranth.build import Platform
-from amaranth.hdl import Cat, ClockDomain, ClockSignal, DomainRenamer, Module, ResetSignal, Signal
+from amaranth.hdl import (
+    Cat,
+    ClockDomain,
+    ClockSignal,
+    DomainRenamer,
+    Module,
+    Mux,
+    ResetSignal,
+    Signal,
+)
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -149,9 +158,17 @@ class SensorTop(wiring.Component):
         ``gps.skip``).
     i2c_domain : str
         The clock domain of the I2C chips (the IST8310 and the LIDAR-Lite, targets and
-        registers): ``sync`` on the FPGA. The compiled co-simulation names one of its own,
-        clocked with ``sync`` and also alone during an I2C transfer, so a transfer's
-        cycles clock the I2C bus and nothing else (``fpga_hdl.cosim.harness``).
+        registers): ``sync`` on the FPGA. The co-simulation harness names one of its own,
+        clocked by the system clock while the host writer runs (the chips take their
+        samples then) and alone during an I2C transfer, so a transfer's cycles clock the
+        I2C bus and nothing else (``fpga_hdl.cosim.harness``).
+    spi_idle_sclk : int or None
+        None (the FPGA): SCLK reaches every SPI chip. 0 or 1: SCLK's level between
+        transfers (CPOL) in a co-simulation whose controller runs one SPI mode; each chip
+        then sees SCLK only while its chip select is low, and this level otherwise. The
+        chips read the same: a deselected chip's SCLK domains are held in reset by its
+        chip select, and its registers change only on a byte it receives. A transfer then
+        clocks only the chip it selects (``fpga_hdl.cosim.native``).
 
     Attributes
     ----------
@@ -221,9 +238,13 @@ class SensorTop(wiring.Component):
         pwm_skippable: bool = False,
         uart_skippable: bool = False,
         i2c_domain: str = "sync",
+        spi_idle_sclk: int | None = None,
     ) -> None:
+        if spi_idle_sclk not in (None, 0, 1):
+            raise ValueError(f"spi_idle_sclk must be None, 0 or 1, not {spi_idle_sclk!r}")
         self.sys_clk_hz = sys_clk_hz
         self.i2c_domain = i2c_domain
+        self.spi_idle_sclk = spi_idle_sclk
         self.pwm_tick_hz = pwm_tick_hz
         self.uart_clk_hz = uart_clk_hz
         self.imu = Mpu6000(sys_clk_hz=sys_clk_hz)
@@ -288,7 +309,10 @@ class SensorTop(wiring.Component):
 
         spi_chips = ((imu, self.imu_cs_n), (baro, self.baro_cs_n), (flow, self.flow_cs_n))
         for chip, cs_n in spi_chips:
-            m.d.comb += [chip.spi.sclk.eq(self.spi_sclk), chip.spi.mosi.eq(self.spi_mosi)]
+            sclk = self.spi_sclk
+            if self.spi_idle_sclk is not None:
+                sclk = Mux(cs_n, self.spi_idle_sclk, self.spi_sclk)
+            m.d.comb += [chip.spi.sclk.eq(sclk), chip.spi.mosi.eq(self.spi_mosi)]
             m.d.comb += chip.spi.cs_n.eq(cs_n)
         drives = Cat(chip.spi.miso_oe for chip, _ in spi_chips)
         m.d.comb += [

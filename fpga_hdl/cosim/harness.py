@@ -83,6 +83,7 @@ from fpga_hdl.buses.i2c_controller import I2cController
 from fpga_hdl.buses.pwm_generator import PwmGenerator
 from fpga_hdl.buses.spi_controller import SpiController
 from fpga_hdl.buses.spi_target import CS_SYNC_STAGES
+from fpga_hdl.buses.transactions import check_spi_mode
 from fpga_hdl.buses.uart import DIVIDER_BITS, QUIET_MAX, UartRx, UartTx
 from fpga_hdl.chips.pwm_capture.core import LATENCY_TICKS, SKIP_BITS
 from fpga_hdl.host.host_port import WORD_BITS, HostPortMap
@@ -453,6 +454,11 @@ class CosimHarness(wiring.Component):
     ``pwm_clk``, ``uart_clk``); and the cycle counters ``sync_cycles``, ``spi_cycles`` (the
     SPI controller's clock), ``i2c_cycles`` (the I2C clock's, alone), ``pwm_cycles`` and
     ``uart_cycles``, the simulation's cost.
+
+    ``spi_mode`` (0 or 3): the build serves SPI transfers of that mode only, and SensorTop
+    holds a deselected chip's SCLK at the mode's idle level (its ``spi_idle_sclk``), so a
+    transfer clocks only the chip it selects; the compiled harness is built so. None (the
+    cocotb builds): transfers of either mode, SCLK to every chip as on the FPGA.
     """
 
     def __init__(
@@ -461,13 +467,17 @@ class CosimHarness(wiring.Component):
         sys_clk_hz: float = HARNESS_SYS_CLK_HZ,
         pwm_tick_hz: float = PWM_TICK_HZ,
         uart_clk_hz: float = UART_CLK_HZ,
+        spi_mode: int | None = None,
     ) -> None:
         self.sys_clk_hz = sys_clk_hz
         self.pwm_tick_hz = pwm_tick_hz
         self.uart_clk_hz = uart_clk_hz
+        if spi_mode is not None:
+            check_spi_mode(spi_mode)
         self.top = SensorTop(
             sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz, uart_clk_hz=uart_clk_hz,
             pwm_skippable=True, uart_skippable=True, i2c_domain="i2c",
+            spi_idle_sclk=None if spi_mode is None else int(spi_mode == 3),
         )  # fmt: skip
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz)

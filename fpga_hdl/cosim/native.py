@@ -493,7 +493,9 @@ class NativeHarness:
     the model; the library stays loaded for the process's other harnesses. The capture
     clock and the UART clock advance by event (one edge for each quiet stretch, see
     ``native_harness.cpp``); ``pwm_by_event=False`` and ``uart_by_event=False`` clock every
-    cycle, the reference the tests compare them with.
+    cycle, the reference the tests compare them with. ``spi_mode`` is the SPI bus's
+    mode, built in: a transfer clocks only the chip it selects (SensorTop's
+    ``spi_idle_sclk``).
     """
 
     def __init__(
@@ -504,7 +506,7 @@ class NativeHarness:
         pwm_by_event: bool = True,
         uart_by_event: bool = True,
     ) -> None:
-        gateware = CosimHarness(pwm_tick_hz=pwm_tick_hz)
+        gateware = CosimHarness(pwm_tick_hz=pwm_tick_hz, spi_mode=spi_mode)
         self.pwm_tick_hz = pwm_tick_hz
         self._model = _Model(_load(build_native_harness(gateware)))
         model = self._model
