@@ -176,6 +176,8 @@ class FlightController:
         self._last_mag_gauss: NDArray[np.float64] | None = None
         self._offboard_body: BodySetpoint | None = None
         self._imu_average: ImuAverage | None = None
+        #: The frame's gyro and accelerometer sample (:meth:`step`), until :meth:`write_log`.
+        self._imu_sample: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         self._motor_test: tuple[int, float, int] | None = None  # motor, throttle, end time
 
     # ------------------------------------------------------------------ frame
@@ -197,7 +199,7 @@ class FlightController:
         self._sample_monitors(sensors, time_us)
         gyro, accel = sensors.gyro_radps, sensors.accel_mps2
         if accel is not None and gyro is not None:
-            self._log_imu_average(gyro, accel, time_us)
+            self._imu_sample = (gyro, accel)  # averaged for the log by write_log
             self._estimate(sensors, gyro, accel, dt_s, time_us)
         self._commander(time_us)
         if self.armed and self._imu_frames:
@@ -852,7 +854,11 @@ class FlightController:
         )  # fmt: skip
 
     def write_log(self, time_us: int) -> None:
-        """Log the frame :meth:`step` ran at ``time_us`` (the topics due at that time)."""
+        """Log the frame :meth:`step` ran at ``time_us`` (the topics due at that time); to
+        follow every step, as its IMU sample counts in ``sensor_combined``'s average."""
+        if self._imu_sample is not None:
+            self._log_imu_average(*self._imu_sample, time_us)
+            self._imu_sample = None
         log = self.log
         if log is None or not self._imu_frames:
             return
