@@ -20,6 +20,8 @@ error says so.
 
 from __future__ import annotations
 
+import math
+import os
 import select
 import socket
 import time
@@ -39,6 +41,15 @@ PX4_NEVER_RECONNECTS = "PX4 never reconnects to a simulator: start a new PX4 pro
 #: The rig's own MAVLink identity on the simulator link (Gazebo uses 1/51; PX4 ignores it).
 RIG_SYSTEM_ID, RIG_COMPONENT_ID = 1, 51
 _RECV_BYTES = 65536
+#: While the autopilot's answers come within this long of the rig starting to wait
+#: (wall time), the rig polls for the next one this long before it sleeps in ``select``.
+#: On a virtual machine a process asleep in ``select`` takes 50–150 µs to wake and runs
+#: slower for a while after (the reference autopilot polls for its frames for the same
+#: reason, ``rig.autopilots.reference.process.FRAME_POLL_S``): the RTL loop at IMU 1 kHz
+#: with the reference autopilot ran 1.59–1.79× polling and 1.37–1.59× sleeping, four
+#: runs of each taken in turns. A slower autopilot (an answer later than this) gets the sleep, and
+#: polling yields the CPU between polls, to whatever else is ready to run.
+ANSWER_POLL_S = 0.001
 #: How long a closed link waits for the autopilot's process to be seen ended, so the error
 #: names how it ended: the kernel closes a killed process's sockets before its parent can
 #: reap it, and a link can reset a few milliseconds before the exit status exists.
@@ -134,6 +145,7 @@ class SimulatorLink:
         self._first_sent_us: int | None = None  # the clock need not start at 0 (a replay)
         self._first_sent_wall_s = 0.0  # time.monotonic() then
         self._awaited_us: int | None = None  # the frame whose answer is being waited for
+        self._last_wait_s = math.inf  # how long the last answer was waited for (wall time)
         self._conn: socket.socket | None = None
         self._server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self._server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -269,6 +281,9 @@ class SimulatorLink:
     def _wait_for_answer(self, time_us: int) -> None:
         deadline = time.monotonic() + self.timeouts.answer_s
         self._awaited_us = time_us
+        waiting = time.perf_counter()
+        if self._last_wait_s < ANSWER_POLL_S:
+            self._poll(waiting + ANSWER_POLL_S)
         while self._latest is None or self._latest.time_us < time_us:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -282,7 +297,17 @@ class SimulatorLink:
                 )
             self._receive(min(remaining, 0.25))
         self._awaited_us = None
+        self._last_wait_s = time.perf_counter() - waiting
         self.stats.answers += 1
+
+    def _poll(self, until_s: float) -> None:
+        """Poll for the autopilot's bytes until they are there or ``until_s`` (a
+        ``perf_counter`` time) has passed, yielding the CPU between polls."""
+        conn = self._connection()
+        started = time.perf_counter()
+        while not select.select([conn], [], [], 0)[0] and time.perf_counter() < until_s:
+            os.sched_yield()
+        self.stats.wait_s += time.perf_counter() - started
 
     def _receive(self, timeout_s: float) -> None:
         """Read what is there (waiting at most ``timeout_s``) and handle each message."""
