@@ -200,7 +200,7 @@ def host_port_inputs(
 
     ``held_faults``: the faults the chips were last loaded with. The host port keeps each
     fault word until it is written again, so when the frame's faults equal them no fault
-    word is written (six words, a sixth of a frame's load, on every frame without a change).
+    word is written (six of the twenty words a frame loads, on every frame without a change).
     """
     samples: dict[str, dict[str, int]] = {}
     if frame.imu is not None:

@@ -78,7 +78,7 @@ class ReferenceAutopilotRun:
         self._process = subprocess.Popen(list(self._argv), start_new_session=True,
                                          preexec_fn=restore_sigint)  # fmt: skip
         link.accept("the reference autopilot (python -m rig.autopilots.reference)",
-                    answers_every_frame=True)  # fmt: skip
+                    answers_every_frame=True, poll_answers=True)  # fmt: skip
 
     def settle(self) -> bool:
         """Nothing waits for its start-up."""

@@ -41,14 +41,16 @@ PX4_NEVER_RECONNECTS = "PX4 never reconnects to a simulator: start a new PX4 pro
 #: The rig's own MAVLink identity on the simulator link (Gazebo uses 1/51; PX4 ignores it).
 RIG_SYSTEM_ID, RIG_COMPONENT_ID = 1, 51
 _RECV_BYTES = 65536
-#: While the autopilot's answers come within this long of the rig starting to wait
-#: (wall time), the rig polls for the next one this long before it sleeps in ``select``.
-#: On a virtual machine a process asleep in ``select`` takes 50–150 µs to wake and runs
-#: slower for a while after (the reference autopilot polls for its frames for the same
-#: reason, ``rig.autopilots.reference.process.FRAME_POLL_S``): the RTL loop at IMU 1 kHz
-#: with the reference autopilot ran 1.59–1.79× polling and 1.37–1.59× sleeping, four
-#: runs of each taken in turns. A slower autopilot (an answer later than this) gets the sleep, and
-#: polling yields the CPU between polls, to whatever else is ready to run.
+#: With a peer that asks for it (``SimulatorLink.accept``'s ``poll_answers``: the reference
+#: autopilot) and while its answers come within this long of the rig starting to wait
+#: (wall time), the rig polls for the next one this long before it sleeps in ``select``,
+#: yielding the CPU between polls. On a virtual machine a process asleep in ``select``
+#: takes 50–150 µs to wake and runs slower for a while after (the reference autopilot
+#: polls for its frames for the same reason, ``rig.autopilots.reference.process.
+#: FRAME_POLL_S``): the RTL loop at IMU 1 kHz with the reference autopilot ran 1.59–1.79×
+#: polling and 1.37–1.59× sleeping, four runs of each taken in turns. Not with PX4: its
+#: threads share the cores with the rig, and PX4 + TLM at 250 Hz ran 7.04–7.60× with the
+#: rig polling and 7.88–8.66× with it sleeping.
 ANSWER_POLL_S = 0.001
 #: How long a closed link waits for the autopilot's process to be seen ended, so the error
 #: names how it ended: the kernel closes a killed process's sockets before its parent can
@@ -146,6 +148,7 @@ class SimulatorLink:
         self._first_sent_wall_s = 0.0  # time.monotonic() then
         self._awaited_us: int | None = None  # the frame whose answer is being waited for
         self._last_wait_s = math.inf  # how long the last answer was waited for (wall time)
+        self._poll_answers = False  # accept() says
         self._conn: socket.socket | None = None
         self._server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self._server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -164,14 +167,20 @@ class SimulatorLink:
         return f"TCP 127.0.0.1:{self.ports.simulator_tcp}"
 
     def accept(
-        self, waiting_for: str = "the autopilot", *, answers_every_frame: bool = False
+        self,
+        waiting_for: str = "the autopilot",
+        *,
+        answers_every_frame: bool = False,
+        poll_answers: bool = False,
     ) -> None:
         """Wait (bounded) for the autopilot to connect, then read what it sends first.
 
         ``answers_every_frame``: the peer answers every frame from the first (the reference
         autopilot), so the link is in lockstep at once. Freewheeling until a first answer
         (PX4 boots) lets wall time decide how many frames pass unanswered: a run would not
-        give the same log twice.
+        give the same log twice. ``poll_answers``: the peer runs alone and answers quickly
+        (the reference autopilot), so the rig polls for its answers before sleeping
+        (:data:`ANSWER_POLL_S`).
         """
         deadline = time.monotonic() + self.timeouts.connect_s
         while self._conn is None:
@@ -194,6 +203,7 @@ class SimulatorLink:
                 self._conn = conn
         self._server.close()  # one autopilot per link: PX4 does not reconnect anyway
         self.lockstep = answers_every_frame
+        self._poll_answers = poll_answers
 
     def send(self, *messages: mavlink.MAVLink_message) -> None:
         """Write messages to the autopilot (MAVLink 2 frames)."""
@@ -282,7 +292,7 @@ class SimulatorLink:
         deadline = time.monotonic() + self.timeouts.answer_s
         self._awaited_us = time_us
         waiting = time.perf_counter()
-        if self._last_wait_s < ANSWER_POLL_S:
+        if self._poll_answers and self._last_wait_s < ANSWER_POLL_S:
             self._poll(waiting + ANSWER_POLL_S)
         while self._latest is None or self._latest.time_us < time_us:
             remaining = deadline - time.monotonic()
