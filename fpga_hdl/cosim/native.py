@@ -67,7 +67,7 @@ from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
 from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, HARNESS_TOPLEVEL, SPI_DEVICES, CosimHarness
 from fpga_hdl.cosim.runner import missing_simulator_reason, simulator_environment, verilator_root
-from fpga_hdl.host.host_port import WORD_BITS, FaultInputs, HostPortMap, HostWord, fault_word
+from fpga_hdl.host.host_port import WORD_BITS, FaultInputs, HostPortMap, fault_word
 from fpga_hdl.top import PWM_TICK_HZ, UART_CLK_HZ, sensor_top_host_map
 
 __all__ = [
@@ -287,12 +287,6 @@ _WORD_MASK = (1 << WORD_BITS) - 1
 assert _HOST_WORD.size * 8 == 8 + WORD_BITS, "the struct holds one host-port word"
 
 
-def _field_range(word: HostWord) -> tuple[int, int]:
-    """The values a staged field takes (:meth:`HostPortMap.encode` checks the same)."""
-    low = -(1 << (word.width - 1)) if word.signed else 0
-    return low, low + (1 << word.width) - 1
-
-
 def _bytes_of(bits: int) -> int:
     return (bits + 7) // 8
 
@@ -369,7 +363,7 @@ class NativeHost:
         self._read = (ctypes.c_uint8 * (WORD_BITS // 8 * len(host_map.reads)))()
         # HostPortMap.encode finds each word by a linear search, 11 times a frame (about
         # 12 µs of the loop's budget): each word's address and range from a table built once.
-        self._writes = {(word.channel, word.field): (word.address, *_field_range(word))
+        self._writes = {(word.channel, word.field): (word.address, *word.limits)
                         for word in host_map.writes}  # fmt: skip
         self._reads = [((word.channel, word.field), word.address * WORD_BITS,
                         (1 << word.width) - 1, word.width if word.signed else 0)

@@ -117,6 +117,12 @@ class HostWord:
     width: int
     signed: bool
 
+    @property
+    def limits(self) -> tuple[int, int]:
+        """The lowest and highest value the word holds."""
+        low = -(1 << (self.width - 1)) if self.signed else 0
+        return low, low + (1 << self.width) - 1
+
 
 @dataclass(frozen=True)
 class HostPortMap:
@@ -142,8 +148,7 @@ class HostPortMap:
     def encode(self, channel: str, field: str, value: int) -> tuple[int, int]:
         """(address, 32-bit data) writing ``value`` into a staged field, range-checked."""
         word = self._find(self.writes, channel, field)
-        low = -(1 << (word.width - 1)) if word.signed else 0
-        high = (1 << (word.width - 1)) - 1 if word.signed else (1 << word.width) - 1
+        low, high = word.limits
         if not low <= value <= high:
             raise ValueError(
                 f"host-port value {channel}.{field}={value} outside {low}..{high} "
