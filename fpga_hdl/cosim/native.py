@@ -285,6 +285,7 @@ class _Model:
 _HOST_WORD = struct.Struct("<BI")
 _WORD_MASK = (1 << WORD_BITS) - 1
 assert _HOST_WORD.size * 8 == 8 + WORD_BITS, "the struct holds one host-port word"
+assert struct.calcsize("<I") * 8 == WORD_BITS, "a result word reads as one uint32"
 
 
 def _bytes_of(bits: int) -> int:
@@ -365,9 +366,9 @@ class NativeHost:
         # 12 µs of the loop's budget): each word's address and range from a table built once.
         self._writes = {(word.channel, word.field): (word.address, *word.limits)
                         for word in host_map.writes}  # fmt: skip
-        self._reads = [((word.channel, word.field), word.address * WORD_BITS,
-                        (1 << word.width) - 1, word.width if word.signed else 0)
-                       for word in host_map.reads]  # fmt: skip
+        self._reads = [((word.channel, word.field), word.address, (1 << word.width) - 1,
+                        word.width if word.signed else 0) for word in host_map.reads]  # fmt: skip
+        self._read_words = struct.Struct(f"<{len(host_map.reads)}I")
 
     def load(
         self,
@@ -404,10 +405,10 @@ class NativeHost:
     def results(self) -> dict[tuple[str, str], int]:
         """Every result word, keyed by (channel, field), sign-extended where signed."""
         self._model.call("nh_host_read", self._read, len(self._read))
-        packed = int.from_bytes(self._read, "little")
+        words = self._read_words.unpack(self._read)
         values = {}
-        for key, shift, mask, signed_width in self._reads:
-            raw = packed >> shift & mask
+        for key, address, mask, signed_width in self._reads:
+            raw = words[address] & mask
             if signed_width and raw >> (signed_width - 1):
                 raw -= 1 << signed_width
             values[key] = raw

@@ -78,7 +78,7 @@ from rig.mavlink.sim_messages import (
     distance_sensor,
     hil_gps,
     hil_optical_flow,
-    hil_sensor,
+    hil_sensor_frame,
     hil_state_quaternion,
 )
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
@@ -578,10 +578,11 @@ class _Loop:
             self.log.optical_flow(self.time_us, out.flow.pixel_flow_rad,
                                   out.flow.integration_timespan_us, out.flow.quality)  # fmt: skip
 
-    def _sensor_messages(self, out: ChipReadout) -> list[mavlink.MAVLink_message]:
-        """What the drivers read this frame, as PX4's simulator messages."""
-        messages = [
-            hil_sensor(
+    def _sensor_messages(self, out: ChipReadout) -> list[mavlink.MAVLink_message | bytes]:
+        """What the drivers read this frame, as PX4's simulator messages (HIL_SENSOR, in
+        every frame, packed at once)."""
+        messages: list[mavlink.MAVLink_message | bytes] = [
+            hil_sensor_frame(
                 self.link.mav, self.time_us, accel_mps2=out.accel_mps2, gyro_radps=out.gyro_radps,
                 mag_gauss=out.mag_gauss, baro=out.baro_pa_degc,
             )

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from fastcrc.crc16 import mcrf4xx
 
 from rig.errors import AutopilotProtocolError
 from rig.mavlink.px4_api import (
@@ -86,6 +87,35 @@ def hil_sensor(
     temperature only travels with the baro group, as PX4 reads it only then. Units sent:
     m/s² FRD specific force, rad/s, gauss, hPa, °C.
     """
+    fields = _hil_sensor_fields(time_us, accel_mps2, gyro_radps, mag_gauss, baro, imu_id)
+    return mav.hil_sensor_encode(*fields)
+
+
+def hil_sensor_frame(
+    mav: mavlink.MAVLink,
+    time_us: int,
+    *,
+    accel_mps2: Sequence[float],
+    gyro_radps: Sequence[float],
+    mag_gauss: Sequence[float] | None = None,
+    baro: tuple[float, float] | None = None,
+    imu_id: int = 0,
+) -> bytes:
+    """:func:`hil_sensor` as the MAVLink 2 frame ``pack`` makes of it (:func:`frame_bytes`):
+    the message of every lockstep frame, sent without a message object."""
+    fields = _hil_sensor_fields(time_us, accel_mps2, gyro_radps, mag_gauss, baro, imu_id)
+    return frame_bytes(mav, _SENSOR, fields)
+
+
+def _hil_sensor_fields(
+    time_us: int,
+    accel_mps2: Sequence[float],
+    gyro_radps: Sequence[float],
+    mag_gauss: Sequence[float] | None,
+    baro: tuple[float, float] | None,
+    imu_id: int,
+) -> tuple[int | float, ...]:
+    """HIL_SENSOR's fields in wire order (which is also its constructor's order)."""
     if time_us <= 0:
         raise ValueError(
             f"HIL_SENSOR time_usec must be > 0 (PX4 sleeps in real time), got {time_us}"
@@ -109,10 +139,8 @@ def hil_sensor(
         pressure_pa, temperature_degc = baro
         pressure_hpa = pressure_pa / 100.0
         altitude_m = pressure_altitude_m(pressure_pa)
-    return mav.hil_sensor_encode(
-        time_us, *accel, *gyro, *mag, pressure_hpa, 0.0, altitude_m, temperature_degc,
-        fields, imu_id,
-    )  # fmt: skip
+    return (time_us, *accel, *gyro, *mag, pressure_hpa, 0.0, altitude_m, temperature_degc,
+            fields, imu_id)  # fmt: skip
 
 
 def hil_gps(
@@ -317,9 +345,8 @@ def single_frame_fields(
             and frame[1] == length and frame[2] == 0
             and int.from_bytes(frame[7:10], "little") == message.id):  # fmt: skip
         return None  # not one whole unsigned frame of this message
-    checksum = mavlink.x25crc(frame[1 : _HEADER_BYTES + length])
-    checksum.accumulate(bytes((message.crc_extra,)))
-    if checksum.crc != int.from_bytes(frame[-2:], "little"):
+    sent_checksum = int.from_bytes(frame[-2:], "little")
+    if _checksum(frame[: _HEADER_BYTES + length], message.crc_extra) != sent_checksum:
         return None
     # MAVLink 2 drops a payload's trailing zero bytes: put them back.
     payload = frame[_HEADER_BYTES : _HEADER_BYTES + length].ljust(unpacker.size, b"\0")
@@ -327,6 +354,34 @@ def single_frame_fields(
 
 
 _HEADER_BYTES = 10  # STX, length, incompat and compat flags, sequence, system, component, id
+_HEADER = struct.Struct("<BBBBBBBHB")  # the same, the 24-bit id as its low 16 and high 8 bits
+
+
+def frame_bytes(
+    mav: mavlink.MAVLink, message: type[mavlink.MAVLink_message], fields: Sequence[Any]
+) -> bytes:
+    """One unsigned MAVLink 2 frame of ``message`` with its payload ``fields`` in wire
+    order, from ``mav``'s system, component and sequence: byte for byte what pymavlink's
+    ``pack`` makes (the inverse of :func:`single_frame_fields`).
+
+    Written by hand for the message of every lockstep frame: pymavlink's ``pack`` builds a
+    header object and a bytearray for each frame (5 µs hot, and HIL_SENSOR's message
+    object 4 µs more); this takes under 2 µs. The tests check equality with ``pack``.
+    """
+    # MAVLink 2 drops a payload's trailing zero bytes, keeping at least one.
+    payload = message.unpacker.pack(*fields).rstrip(b"\0") or b"\0"
+    header = _HEADER.pack(mavlink.PROTOCOL_MARKER_V2, len(payload), 0, 0, mav.seq, mav.srcSystem,
+                          mav.srcComponent, message.id & 0xFFFF, message.id >> 16)  # fmt: skip
+    frame = header + payload
+    return frame + _checksum(frame, message.crc_extra).to_bytes(2, "little")
+
+
+def _checksum(frame: bytes, crc_extra: int) -> int:
+    """MAVLink's CRC-16/MCRF4XX over a frame's bytes after STX, then the message's
+    CRC_EXTRA (pymavlink computes it with fastcrc too, but through an object per frame)."""
+    return mcrf4xx(frame[1:] + bytes((crc_extra,)), 0xFFFF)
+
+
 _ACTUATOR = mavlink.MAVLink_hil_actuator_controls_message
 _SENSOR = mavlink.MAVLink_hil_sensor_message
 

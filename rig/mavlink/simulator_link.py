@@ -205,10 +205,14 @@ class SimulatorLink:
         self.lockstep = answers_every_frame
         self._poll_answers = poll_answers
 
-    def send(self, *messages: mavlink.MAVLink_message) -> None:
-        """Write messages to the autopilot (MAVLink 2 frames)."""
+    def send(self, *messages: mavlink.MAVLink_message | bytes) -> None:
+        """Write messages to the autopilot as MAVLink 2 frames (``bytes``: one packed
+        already, as :func:`rig.mavlink.sim_messages.hil_sensor_frame` makes it)."""
         started = time.perf_counter()
-        payload = b"".join(message.pack(self.mav) for message in messages)
+        payload = b"".join(
+            message if isinstance(message, bytes) else message.pack(self.mav)
+            for message in messages
+        )
         packed = time.perf_counter()
         self.stats.encode_s += packed - started
         try:
@@ -221,7 +225,7 @@ class SimulatorLink:
         self.stats.send_s += time.perf_counter() - packed
 
     def exchange(
-        self, time_us: int, messages: list[mavlink.MAVLink_message]
+        self, time_us: int, messages: list[mavlink.MAVLink_message | bytes]
     ) -> ActuatorControls | None:
         """Send one sensor frame and return the motor commands for the next step.
 
@@ -231,7 +235,7 @@ class SimulatorLink:
         self.send_frame(time_us, messages)
         return self.answer(time_us)
 
-    def send_frame(self, time_us: int, messages: list[mavlink.MAVLink_message]) -> None:
+    def send_frame(self, time_us: int, messages: list[mavlink.MAVLink_message | bytes]) -> None:
         """Send the sensor frame stamped ``time_us`` (its HIL_SENSOR and what goes with it)."""
         self.send(*messages)
         self._sent_us = time_us

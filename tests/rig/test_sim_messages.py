@@ -18,11 +18,14 @@ from rig.mavlink.sim_messages import (
     GYRO_FIFO_SCALE_RADPS,
     actuator_controls_from_frame,
     decode_actuator_controls,
+    frame_bytes,
     hil_gps,
     hil_sensor,
+    hil_sensor_frame,
     hil_sensor_from_frame,
     hil_state_quaternion,
     pressure_altitude_m,
+    single_frame_fields,
 )
 
 
@@ -240,6 +243,44 @@ def test_hil_sensor_from_a_frame_equals_pymavlinks_decoding():
         fast = hil_sensor_from_frame(frame)
         assert fast is not None
         assert fast.to_dict() == parsed.to_dict()
+
+
+def test_hil_sensor_frames_are_pymavlinks_packing_byte_for_byte():
+    """The frame the rig sends every frame, packed by hand, against pymavlink's ``pack``
+    of the same message: each field group, another IMU's id, clamped values, the sender's
+    system, component and sequence, and payloads whose trailing zeros MAVLink 2 drops."""
+    rng = np.random.default_rng(13)
+    mav = mavlink.MAVLink(None, 1, 51)
+    for k in range(300):
+        groups = {"mag_gauss": tuple(rng.normal(0, 0.5, 3))} if k % 3 else {}
+        if k % 5 == 0:
+            groups["baro"] = (float(rng.uniform(80e3, 101e3)), float(rng.uniform(-10, 40)))
+        imu = {"accel_mps2": rng.normal(0, 200, 3), "gyro_radps": rng.normal(0, 40, 3)}
+        mav.seq, mav.srcSystem, mav.srcComponent = k % 256, 1 + k % 3, 51 + k % 7
+        time_us = int(rng.integers(1, 2**40))
+        inputs = {**imu, "imu_id": k % 3 // 2, **groups}
+        assert hil_sensor_frame(mav, time_us, **inputs) == hil_sensor(mav, time_us, **inputs).pack(
+            mav
+        )
+    with pytest.raises(ValueError, match="time_usec must be > 0"):
+        hil_sensor_frame(mav, 0, accel_mps2=(0, 0, 0), gyro_radps=(0, 0, 0))
+
+
+def test_a_packed_frame_keeps_one_payload_byte_and_unpacks_to_its_fields():
+    """An all-zero payload keeps one byte, as pymavlink's; the fast unpacking of a frame
+    gives back the fields it was packed from (wire order: HIL_ACTUATOR_CONTROLS's flags
+    come before its controls)."""
+    mav = mavlink.MAVLink(None, 1, 1)
+    actuator = mavlink.MAVLink_hil_actuator_controls_message
+    zeros = (0, 0, *[0.0] * 16, 0)
+    frame = frame_bytes(mav, actuator, zeros)
+    assert frame == mav.hil_actuator_controls_encode(0, [0.0] * 16, 0, 0).pack(mav)
+    assert frame[1] == 1
+    fields = (2**40 + 3, 1, *[0.25] * 4, *[0.0] * 12, 129)
+    frame = frame_bytes(mav, actuator, fields)
+    assert single_frame_fields(frame, actuator) == fields
+    message = mav.hil_actuator_controls_encode(2**40 + 3, [0.25] * 4 + [0.0] * 12, 129, 1)
+    assert frame == message.pack(mav)
 
 
 def _sensor_frame(time_us, **packing):

@@ -45,7 +45,7 @@ from rig.mavlink.px4_api import (
     Ports,
     mavlink,
 )
-from rig.mavlink.sim_messages import hil_sensor_from_frame
+from rig.mavlink.sim_messages import frame_bytes, hil_sensor_from_frame
 
 #: PX4 asks the simulator for ground truth every 5000 µs
 #: (``SimulatorMavlink::request_hil_state_quaternion``).
@@ -55,6 +55,7 @@ GROUND_TRUTH_INTERVAL_US = 5000
 CONNECT_RETRY_S = 0.01
 #: ``HIL_ACTUATOR_CONTROLS.controls``: PX4's 16 outputs, the motors first.
 _ACTUATOR_OUTPUTS = 16
+_ACTUATOR = mavlink.MAVLink_hil_actuator_controls_message
 #: With the simulator quiet this long (wall time), heartbeats keep ground stations informed.
 IDLE_HEARTBEAT_S = 1.0
 #: In lockstep the autopilot's clock stands still while the simulator sends nothing, as
@@ -311,8 +312,9 @@ class Autopilot:
             controls = self.fc.step(frame, message.time_usec)
             mode = CUSTOM_MODE_ENABLED | (SAFETY_ARMED if controls.armed else 0)
             outputs = [*controls.motors, *[0.0] * (_ACTUATOR_OUTPUTS - len(controls.motors))]
-            self._send_sim(mavlink.MAVLink_hil_actuator_controls_message(
-                message.time_usec, outputs, mode, LOCKSTEP_FLAG))  # fmt: skip
+            assert self.sim is not None, "run() connects before any message arrives"
+            self.sim.sendall(frame_bytes(self.sim_mav, _ACTUATOR, (  # wire order
+                message.time_usec, LOCKSTEP_FLAG, *outputs, mode)))  # fmt: skip
             # Logged once the simulator has its answer: in lockstep it waits for nothing else.
             self.fc.write_log(message.time_usec)
             self.ground.stream(message.time_usec)
