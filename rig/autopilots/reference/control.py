@@ -27,7 +27,7 @@ from rig.autopilots.reference.params import Parameters
 # The per-frame parts of the cascade (gyro filters, attitude and rate control, allocation) are
 # compiled with numba: each is a few dozen operations on 3- and 4-vectors, which numpy runs at
 # ~1 µs per operation and compiled code at ~1 ns, and together they ran every IMU frame. The
-# position loop runs at 50 Hz and stays in numpy. The same convention helpers as everywhere:
+# position loop runs at 50 Hz on plain floats (``_Vector``). The same convention helpers:
 _quat_to_dcm = njit(cache=True)(frames.quat_to_dcm)
 _quat_multiply = njit(cache=True)(frames.quat_multiply)
 _quat_conjugate = njit(cache=True)(frames.quat_conjugate)
@@ -331,34 +331,54 @@ def _attitude_rates(
     return np.minimum(np.maximum(rates_sp, -rate_limit), rate_limit)
 
 
-def limit_tilt(body_z: NDArray[np.float64], max_tilt_rad: float) -> NDArray[np.float64]:
+def limit_tilt(body_z: _Vector, max_tilt_rad: float) -> _Vector:
     """Bring the body z axis (unit, in NED; level is ``(0, 0, 1)``) back into a cone of
     ``max_tilt_rad`` about the world z axis (PX4 ``ControlMath::limitTilt``)."""
-    world_z = np.array([0.0, 0.0, 1.0])
-    dot = min(max(float(body_z @ world_z), -1.0), 1.0)
+    x, y, z = body_z
+    dot = min(max(z, -1.0), 1.0)  # body z · world z
     if math.acos(dot) <= max_tilt_rad:
         return body_z
-    rejection = body_z - dot * world_z
-    norm = float(np.linalg.norm(rejection))
-    rejection = rejection / norm if norm > 1e-9 else np.array([1.0, 0.0, 0.0])
-    return math.cos(max_tilt_rad) * world_z + math.sin(max_tilt_rad) * rejection
+    rejection = (x, y, z - dot)  # body z less its part along world z
+    norm = _norm(*rejection)
+    rx, ry, rz = (r / norm for r in rejection) if norm > 1e-9 else (1.0, 0.0, 0.0)
+    sine = math.sin(max_tilt_rad)
+    return sine * rx, sine * ry, math.cos(max_tilt_rad) + sine * rz
 
 
 def constrain_xy(
-    v0: NDArray[np.float64], v1: NDArray[np.float64], max_norm: float
-) -> NDArray[np.float64]:
+    v0: tuple[float, float], v1: tuple[float, float], max_norm: float
+) -> tuple[float, float]:
     """``v0 + s·v1`` with the largest ``s ≤ 1`` whose norm fits ``max_norm``, keeping ``v0``
     first (PX4 ``ControlMath::constrainXY``: the position term wins over feed-forward)."""
-    total = v0 + v1
-    if np.linalg.norm(total) <= max_norm:
-        return total
-    n0 = float(np.linalg.norm(v0))
+    (x0, y0), (x1, y1) = v0, v1
+    if _norm(x0 + x1, y0 + y1) <= max_norm:
+        return x0 + x1, y0 + y1
+    n0 = _norm(x0, y0)
     if n0 >= max_norm:
-        return v0 / n0 * max_norm
+        return x0 / n0 * max_norm, y0 / n0 * max_norm
     # |v0 + s v1| = max_norm, s in [0, 1]: a quadratic in s
-    a, b, c = float(v1 @ v1), 2.0 * float(v0 @ v1), n0**2 - max_norm**2
+    a, b, c = x1 * x1 + y1 * y1, 2.0 * (x0 * x1 + y0 * y1), n0**2 - max_norm**2
     s = (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
-    return v0 + s * v1
+    return x0 + s * x1, y0 + s * y1
+
+
+def _norm(*values: float) -> float:
+    """The Euclidean norm of a few floats (as numpy's: the root of the sum of squares)."""
+    return math.sqrt(sum(v * v for v in values))
+
+
+def _finite(value: float) -> float:
+    """``np.nan_to_num`` of one float: NaN (not controlled) is 0, an infinity the largest
+    float of its sign."""
+    if math.isnan(value):
+        return 0.0
+    return min(max(value, -_FLOAT_MAX), _FLOAT_MAX)
+
+
+_FLOAT_MAX = float(np.finfo(np.float64).max)
+#: A 3-vector of the position loop: plain floats (numpy's per-operation cost was most of
+#: the 50 Hz loop's time, and the autopilot's answer waits for it).
+_Vector = tuple[float, float, float]
 
 
 def thrust_to_attitude(
@@ -366,17 +386,24 @@ def thrust_to_attitude(
 ) -> tuple[NDArray[np.float64], float]:
     """Attitude whose body z is against the thrust vector, with the requested heading, and the
     collective thrust (PX4 ``ControlMath::bodyzToAttitude``)."""
-    magnitude = float(np.linalg.norm(thrust_ned))
-    body_z = -thrust_ned / magnitude if magnitude > 1e-9 else np.array([0.0, 0.0, 1.0])
-    y_c = np.array([-math.sin(yaw_rad), math.cos(yaw_rad), 0.0])
-    body_x = cross3(y_c, body_z)
+    tx, ty, tz = np.asarray(thrust_ned, dtype=float).tolist()
+    magnitude = _norm(tx, ty, tz)
+    body_z = (-tx / magnitude, -ty / magnitude, -tz / magnitude) if magnitude > 1e-9 else (
+        0.0, 0.0, 1.0)  # fmt: skip
+    body_x = _cross((-math.sin(yaw_rad), math.cos(yaw_rad), 0.0), body_z)
     if body_z[2] < 0.0:
-        body_x = -body_x
+        body_x = (-body_x[0], -body_x[1], -body_x[2])
     if abs(body_z[2]) < 1e-6:  # thrust horizontal: keep the nose along the heading
-        body_x = np.array([0.0, 0.0, 1.0])
-    body_x /= np.linalg.norm(body_x)
-    body_y = cross3(body_z, body_x)
-    return quat_from_dcm(np.column_stack([body_x, body_y, body_z])), magnitude
+        body_x = (0.0, 0.0, 1.0)
+    norm = _norm(*body_x)
+    body_x = (body_x[0] / norm, body_x[1] / norm, body_x[2] / norm)
+    body_y = _cross(body_z, body_x)
+    # the rotation's columns are the body axes in NED
+    return quat_from_dcm(np.array(list(zip(body_x, body_y, body_z, strict=True)))), magnitude
+
+
+def _cross(a: _Vector, b: _Vector) -> _Vector:
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
 
 
 class FilteredDerivative:
@@ -427,13 +454,13 @@ class PositionController:
         self.configure(params)
 
     def configure(self, params: Parameters) -> None:
-        self.gain_pos = np.array([params["MPC_XY_P"], params["MPC_XY_P"], params["MPC_Z_P"]])
+        self.gain_pos = (params["MPC_XY_P"], params["MPC_XY_P"], params["MPC_Z_P"])
         xy_p, z_p = params["MPC_XY_VEL_P_ACC"], params["MPC_Z_VEL_P_ACC"]
         xy_i, z_i = params["MPC_XY_VEL_I_ACC"], params["MPC_Z_VEL_I_ACC"]
         xy_d, z_d = params["MPC_XY_VEL_D_ACC"], params["MPC_Z_VEL_D_ACC"]
-        self.gain_vel_p = np.array([xy_p, xy_p, z_p])
-        self.gain_vel_i = np.array([xy_i, xy_i, z_i])
-        self.gain_vel_d = np.array([xy_d, xy_d, z_d])
+        self.gain_vel_p = (xy_p, xy_p, z_p)
+        self.gain_vel_i = (xy_i, xy_i, z_i)
+        self.gain_vel_d = (xy_d, xy_d, z_d)
         self.hover_thrust = params["MPC_THR_HOVER"]
         self.thrust_min = max(params["MPC_THR_MIN"], 10e-4)
         self.thrust_max = params["MPC_THR_MAX"]
@@ -462,54 +489,72 @@ class PositionController:
         ``velocity_limits_mps`` is (horizontal, up, down); ``acceleration_sp`` the
         feed-forward (PX4 adds the PID's output to the trajectory's acceleration).
         """
-        vel_from_pos = np.nan_to_num((position_sp - position_ned_m) * self.gain_pos)
-        feed_forward = np.nan_to_num(velocity_sp)
-        vel_sp = np.empty(3)
-        vel_sp[:2] = constrain_xy(vel_from_pos[:2], feed_forward[:2], velocity_limits_mps[0])
-        # the up limit wins, as in PX4's constrain: during a take-off ramp it is negative
-        vel_sp[2] = max(
-            min(vel_from_pos[2] + feed_forward[2], velocity_limits_mps[2]),
-            -velocity_limits_mps[1],
-        )
-        # an axis with neither a position nor a velocity set-point is not controlled: zero
-        # acceleration (level flight for x/y), as PX4 does for NaN set-points
-        free = np.isnan(position_sp) & np.isnan(velocity_sp)
-        vel_error = np.where(free, 0.0, vel_sp - velocity_ned_mps)
-        acc_sp = vel_error * self.gain_vel_p + np.where(free, 0.0, self.velocity_integral)
-        accel_ned_mps2 = self.velocity_derivative.update(velocity_ned_mps, dt_s)
-        acc_sp -= np.where(free, 0.0, accel_ned_mps2 * self.gain_vel_d)
-        if acceleration_sp is not None:
-            acc_sp += np.nan_to_num(acceleration_sp)
-        thrust = self._acceleration_to_thrust(acc_sp)
+        position = np.asarray(position_ned_m, dtype=float).tolist()
+        velocity = np.asarray(velocity_ned_mps, dtype=float).tolist()
+        position_wanted = np.asarray(position_sp, dtype=float).tolist()
+        velocity_wanted = np.asarray(velocity_sp, dtype=float).tolist()
+        vel_from_pos = [
+            _finite((wanted - p) * gain)
+            for wanted, p, gain in zip(position_wanted, position, self.gain_pos, strict=True)
+        ]
+        feed_forward = [_finite(v) for v in velocity_wanted]
+        horizontal, up, down = velocity_limits_mps
+        vel_sp = (
+            *constrain_xy((vel_from_pos[0], vel_from_pos[1]), (feed_forward[0], feed_forward[1]),
+                          horizontal),
+            # the up limit wins, as in PX4's constrain: during a take-off ramp it is negative
+            max(min(vel_from_pos[2] + feed_forward[2], down), -up),
+        )  # fmt: skip
+        accel_ned_mps2 = self.velocity_derivative.update(velocity_ned_mps, dt_s).tolist()
+        feed_forward_acc = (0.0, 0.0, 0.0) if acceleration_sp is None else [
+            _finite(a) for a in np.asarray(acceleration_sp, dtype=float).tolist()]  # fmt: skip
+        vel_error = [0.0, 0.0, 0.0]
+        acc_sp = [0.0, 0.0, 0.0]
+        integral = self.velocity_integral.tolist()
+        for i in range(3):
+            # an axis with neither a position nor a velocity set-point is not controlled:
+            # zero acceleration (level flight for x/y), as PX4 does for NaN set-points
+            if math.isnan(position_wanted[i]) and math.isnan(velocity_wanted[i]):
+                acc_sp[i] = feed_forward_acc[i]
+                continue
+            vel_error[i] = vel_sp[i] - velocity[i]
+            damping = accel_ned_mps2[i] * self.gain_vel_d[i]
+            acc_sp[i] = vel_error[i] * self.gain_vel_p[i] + integral[i] - damping
+            acc_sp[i] += feed_forward_acc[i]
+        tx, ty, tz = self._acceleration_to_thrust(acc_sp)
 
-        if (thrust[2] >= -self.thrust_min and vel_error[2] >= 0.0) or (
-            thrust[2] <= -self.thrust_max and vel_error[2] <= 0.0
+        if (tz >= -self.thrust_min and vel_error[2] >= 0.0) or (
+            tz <= -self.thrust_max and vel_error[2] <= 0.0
         ):
             vel_error[2] = 0.0  # vertical anti-windup: stop integrating into a limit
-        xy_norm = float(np.linalg.norm(thrust[:2]))
+        xy_norm = _norm(tx, ty)
         allocated_xy = min(xy_norm, self.thrust_xy_margin)
-        thrust[2] = max(thrust[2], -math.sqrt(self.thrust_max**2 - allocated_xy**2))
-        xy_max = math.sqrt(max(self.thrust_max**2 - thrust[2] ** 2, 0.0))
+        tz = max(tz, -math.sqrt(self.thrust_max**2 - allocated_xy**2))
+        xy_max = math.sqrt(max(self.thrust_max**2 - tz**2, 0.0))
         if xy_norm > xy_max:
-            thrust[:2] *= xy_max / xy_norm
+            tx, ty = tx * (xy_max / xy_norm), ty * (xy_max / xy_norm)
         # horizontal tracking anti-windup (Rundqwist 1990), as PX4
-        acc_produced = thrust[:2] * (STANDARD_GRAVITY_MPS2 / self.hover_thrust)
-        acc_limited = (
-            acc_produced if acc_sp[:2] @ acc_sp[:2] > acc_produced @ acc_produced else acc_sp[:2]
-        )
-        vel_error[:2] -= (2.0 / self.gain_vel_p[0]) * (acc_sp[:2] - acc_limited)
+        produced = STANDARD_GRAVITY_MPS2 / self.hover_thrust
+        ax, ay = tx * produced, ty * produced
+        if acc_sp[0] * acc_sp[0] + acc_sp[1] * acc_sp[1] <= ax * ax + ay * ay:
+            ax, ay = acc_sp[0], acc_sp[1]
+        tracking = 2.0 / self.gain_vel_p[0]
+        vel_error[0] -= tracking * (acc_sp[0] - ax)
+        vel_error[1] -= tracking * (acc_sp[1] - ay)
         if not freeze_integral:
-            self.velocity_integral += vel_error * self.gain_vel_i * dt_s
+            self.velocity_integral += np.multiply(vel_error, self.gain_vel_i) * dt_s
             z = self.velocity_integral[2]
             self.velocity_integral[2] = math.copysign(min(abs(z), STANDARD_GRAVITY_MPS2), z)
-        return thrust, vel_sp, acc_sp
+        return np.array([tx, ty, tz]), np.array(vel_sp), np.array(acc_sp)
 
-    def _acceleration_to_thrust(self, acc_sp: NDArray[np.float64]) -> NDArray[np.float64]:
-        body_z = np.array([-acc_sp[0], -acc_sp[1], STANDARD_GRAVITY_MPS2])
-        body_z = limit_tilt(body_z / np.linalg.norm(body_z), self.tilt_max_rad)
-        collective = acc_sp[2] * (self.hover_thrust / STANDARD_GRAVITY_MPS2) - self.hover_thrust
+    def _acceleration_to_thrust(self, acc_sp: list[float]) -> _Vector:
+        ax, ay, az = acc_sp
+        norm = _norm(-ax, -ay, STANDARD_GRAVITY_MPS2)
+        body_z = limit_tilt((-ax / norm, -ay / norm, STANDARD_GRAVITY_MPS2 / norm),
+                            self.tilt_max_rad)  # fmt: skip
+        collective = az * (self.hover_thrust / STANDARD_GRAVITY_MPS2) - self.hover_thrust
         collective = min(collective / body_z[2], -self.thrust_min)
-        return body_z * collective
+        return body_z[0] * collective, body_z[1] * collective, body_z[2] * collective
 
 
 #: PX4 ``FLT_EPSILON``: below it a scale or thrust coefficient counts as zero.

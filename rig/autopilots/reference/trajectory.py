@@ -54,20 +54,24 @@ class Limits:
     max_error_xy: float
 
 
+#: One axis's (acceleration, velocity, position): plain floats, as PX4's own scalars (numpy
+#: arrays of three cost the autopilot's 50 Hz position loop a third of its time).
+_State = tuple[float, float, float]
+
+
 class _Axis:
     """One axis: its velocity moves to a target velocity in three phases (jerk ±j, then
     none, then ∓j), each as short as the limits allow, or stretched to a given total."""
 
     def __init__(self) -> None:
-        self.state = np.zeros(3)  # acceleration, velocity, position
-        self._start = np.zeros(3)
+        self.state: _State = (0.0, 0.0, 0.0)
+        self._start: _State = (0.0, 0.0, 0.0)
         self._elapsed = 0.0
         self._phases = (0.0, 0.0, 0.0)
         self._jerk = 0.0
 
     def reset(self, accel: float, velocity: float, position: float) -> None:
-        self.state = np.array([accel, velocity, position])
-        self._start = self.state.copy()
+        self.state = self._start = (accel, velocity, position)
         self._elapsed = 0.0
         self._phases = (0.0, 0.0, 0.0)
 
@@ -85,7 +89,7 @@ class _Axis:
             state = _evaluate(state, jerk, t)
             remaining -= t
         if remaining > 0.0:
-            state = _evaluate(np.array([0.0, state[1], state[2]]), 0.0, remaining)
+            state = _evaluate((0.0, state[1], state[2]), 0.0, remaining)
         self.state = state
 
     def plan(self, velocity_sp: float, max_speed: float, max_accel: float, max_jerk: float,
@@ -93,7 +97,7 @@ class _Axis:
         """Plan from the current state to ``velocity_sp`` (clipped to ``max_speed``): in the
         least time, or in ``total_s`` when another axis takes longer."""
         accel, velocity, _ = self.state
-        self._start, self._elapsed = self.state.copy(), 0.0
+        self._start, self._elapsed = self.state, 0.0
         target = min(max(velocity_sp, -max_speed), max_speed)
         # The velocity reached by bringing the acceleration to zero now decides the sign.
         coast = velocity + accel * abs(accel) / (2.0 * max_jerk)
@@ -123,13 +127,13 @@ class _Axis:
         self._phases, self._jerk = (t1, t2, t3), jerk
 
 
-def _evaluate(state: NDArray[np.float64], jerk: float, t: float) -> NDArray[np.float64]:
+def _evaluate(state: _State, jerk: float, t: float) -> _State:
     accel, velocity, position = state
-    return np.array([
+    return (
         accel + jerk * t,
         velocity + accel * t + 0.5 * jerk * t * t,
         position + velocity * t + 0.5 * accel * t * t + jerk * t**3 / 6.0,
-    ])  # fmt: skip
+    )
 
 
 def _first_phase_fastest(accel: float, dv: float, jerk: float) -> float:
@@ -192,36 +196,42 @@ class PositionSmoothing:
                limits: Limits) -> None:  # fmt: skip
         """Advance ``dt_s`` (slower while the vehicle lags the trajectory horizontally,
         stopped at ``max_error_xy`` behind it), then plan towards ``target``."""
-        behind = self.position[:2] - vehicle[:2]
+        x, y, _ = self._axes
+        behind_x, behind_y = x.state[2] - float(vehicle[0]), y.state[2] - float(vehicle[1])
         stretch = 1.0
-        if limits.max_error_xy > 0.0 and behind @ self.velocity[:2] >= 0.0:
-            stretch = 1.0 - min(float(np.linalg.norm(behind)) / limits.max_error_xy, 1.0)
+        if limits.max_error_xy > 0.0 and behind_x * x.state[1] + behind_y * y.state[1] >= 0.0:
+            stretch = 1.0 - min(_norm(behind_x, behind_y) / limits.max_error_xy, 1.0)
         for axis in self._axes:
             axis.advance(dt_s * stretch)
-        offset = np.asarray(target, dtype=float) - self.position
+        offset = [float(t) - axis.state[2] for t, axis in zip(target, self._axes, strict=True)]
         up = offset[2] < 0.0
         accel_z, speed_z = (limits.accel_up, limits.speed_up) if up else (
             limits.accel_down, limits.speed_down)  # fmt: skip
-        distance_xy = float(np.linalg.norm(offset[:2]))
+        distance_xy = _norm(offset[0], offset[1])
         speed_xy = min(limits.speed_xy, max_speed_from_distance(
             limits.jerk, limits.accel_xy, distance_xy, 0.0))  # fmt: skip
         speed_z = min(speed_z, max_speed_from_distance(limits.jerk, accel_z, abs(offset[2]), 0.0))
-        norm = float(np.linalg.norm(offset))
-        velocity_sp = np.zeros(3) if norm < 1e-6 else offset / norm * math.hypot(speed_xy, speed_z)
-        for bound, part in ((speed_xy, slice(0, 2)), (speed_z, slice(2, 3))):
-            size = float(np.linalg.norm(velocity_sp[part]))
+        norm = _norm(*offset)
+        speed = math.hypot(speed_xy, speed_z)
+        velocity_sp = [0.0, 0.0, 0.0] if norm < 1e-6 else [o / norm * speed for o in offset]
+        for bound, part in ((speed_xy, (0, 1)), (speed_z, (2,))):
+            size = _norm(*(velocity_sp[i] for i in part))
             if size > bound:
                 # The whole vector, so the path stays straight; a part that is nearly
                 # there (both under 0.5 m/s) alone, so it cannot stall the other.
-                scaled = (
-                    part if bound < _NEARLY_THERE_MPS and size < _NEARLY_THERE_MPS else slice(0, 3)
-                )
-                velocity_sp[scaled] *= bound / size
+                near = bound < _NEARLY_THERE_MPS and size < _NEARLY_THERE_MPS
+                for i in part if near else (0, 1, 2):
+                    velocity_sp[i] *= bound / size
         accels = (limits.accel_xy, limits.accel_xy, accel_z)
         speeds = (limits.speed_xy, limits.speed_xy, speed_z)
         for axis, v, a, s in zip(self._axes, velocity_sp, accels, speeds, strict=True):
-            axis.plan(float(v), s, a, limits.jerk)
+            axis.plan(v, s, a, limits.jerk)
         longest = max(axis.total_s for axis in self._axes)
         for axis, v, a, s in zip(self._axes, velocity_sp, accels, speeds, strict=True):
             if 1e-9 < axis.total_s < longest:
-                axis.plan(float(v), s, a, limits.jerk, longest)
+                axis.plan(v, s, a, limits.jerk, longest)
+
+
+def _norm(*values: float) -> float:
+    """The Euclidean norm of a few floats (as numpy's: the root of the sum of squares)."""
+    return math.sqrt(sum(v * v for v in values))
