@@ -45,7 +45,7 @@ from rig.mavlink.px4_api import (
     Ports,
     mavlink,
 )
-from rig.mavlink.sim_messages import frame_bytes, hil_sensor_from_frame
+from rig.mavlink.sim_messages import autopilot_messages_from_read, frame_bytes
 
 #: PX4 asks the simulator for ground truth every 5000 µs
 #: (``SimulatorMavlink::request_hil_state_quaternion``).
@@ -276,8 +276,8 @@ class Autopilot:
                 data = sim.recv(65536)
                 if not data:
                     return f"the simulator closed the link at t={self.fc.time_us / 1e6:.3f} s"
-                sensor = hil_sensor_from_frame(data) if self.sim_mav.buf_len() == 0 else None
-                messages = [sensor] if sensor is not None else self.sim_mav.parse_buffer(data) or []
+                fast = autopilot_messages_from_read(data) if self.sim_mav.buf_len() == 0 else None
+                messages = fast if fast is not None else self.sim_mav.parse_buffer(data) or []
                 for message in messages:
                     self._handle_sim(message)
 
