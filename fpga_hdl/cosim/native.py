@@ -414,9 +414,9 @@ class NativeHost:
             values[key] = raw
         return values
 
-    def pwm_capture(self) -> list[ChannelCapture]:
-        """The PWM capture's results per channel, as the host port shows them."""
-        return channel_captures(self.results())
+    def pwm_capture(self, channels: int = CHANNELS) -> list[ChannelCapture]:
+        """The PWM capture's results for the first ``channels``, as the host port shows them."""
+        return channel_captures(self.results(), channels)
 
 
 class NativeUart:

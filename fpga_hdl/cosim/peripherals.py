@@ -226,9 +226,9 @@ class HarnessHost:
             values[(word.channel, word.field)] = raw
         return values
 
-    async def pwm_capture(self) -> list[ChannelCapture]:
-        """The PWM capture's results per channel, as the host port shows them."""
-        return channel_captures(await self.results())
+    async def pwm_capture(self, channels: int = CHANNELS) -> list[ChannelCapture]:
+        """The PWM capture's results for the first ``channels``, as the host port shows them."""
+        return channel_captures(await self.results(), channels)
 
 
 class HarnessPwm:

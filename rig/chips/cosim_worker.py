@@ -177,7 +177,7 @@ class RtlChips:
                 "cannot be read then; lower the sensor rates or the frame rate"
             )
         await self._wait_until_ps(read_ps)
-        captures = (await self.harness.host.pwm_capture())[: self.motors]
+        captures = await self.harness.host.pwm_capture(self.motors)
         widths_us = tuple(capture.width_ticks * self.tick_us for capture in captures)
         return widths_us, tuple(capture.timeout for capture in captures)
 

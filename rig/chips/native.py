@@ -129,7 +129,7 @@ class NativeChips:
             previous_us = start_us
         self._check_bus_time(now_us)
         self._run_to(self._read_tick(now_us) + 1)  # every edge up to now's, then the read
-        captures = self.harness.host.pwm_capture()[: self.motors]
+        captures = self.harness.host.pwm_capture(self.motors)
         widths_us = tuple(capture.width_ticks * self.tick_us for capture in captures)
         return widths_us, tuple(capture.timeout for capture in captures)
 

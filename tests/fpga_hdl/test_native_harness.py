@@ -102,6 +102,8 @@ def test_the_capture_clock_runs_only_when_asked(harness):
     assert captures[0].width_ticks == 100
     assert captures[0].period_ticks == 400
     assert captures[1].timeout  # never a pulse on channel 1
+    assert len(captures) == CHANNELS
+    assert harness.host.pwm_capture(2) == captures[:2]  # a read of the first channels only
 
 
 def test_the_capture_clock_by_event_equals_every_tick():

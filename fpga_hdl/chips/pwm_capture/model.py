@@ -114,11 +114,13 @@ _CHANNEL_KEYS = tuple(
 )
 
 
-def channel_captures(results: Mapping[tuple[str, str], int]) -> list[ChannelCapture]:
-    """The PWM capture's per-channel results out of the host port's result words (the
-    cocotb and the compiled harness read the same words)."""
+def channel_captures(
+    results: Mapping[tuple[str, str], int], channels: int = CHANNELS
+) -> list[ChannelCapture]:
+    """The PWM capture's results for the first ``channels`` out of the host port's result
+    words (the cocotb and the compiled harness read the same words)."""
     timeout = results[("pwm", "timeout")]
     return [
         ChannelCapture(results[width], results[period], bool(timeout >> ch & 1))
-        for ch, width, period in _CHANNEL_KEYS
+        for ch, width, period in _CHANNEL_KEYS[:channels]
     ]
