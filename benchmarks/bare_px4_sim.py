@@ -21,8 +21,8 @@ from quad_model import QuadModel, SensorReadings, SensorSuite, load_vehicle
 from quad_model.environment import Environment
 from rig.autopilots.px4 import Px4Build, Px4Sitl, px4_parameters
 from rig.mavlink.ground_link import GroundLink
-from rig.mavlink.px4_api import Ports
-from rig.mavlink.sim_messages import hil_gps, hil_sensor
+from rig.mavlink.px4_api import Ports, mavlink
+from rig.mavlink.sim_messages import hil_gps, hil_sensor_frame
 from rig.mavlink.simulator_link import LinkTimeouts, SimulatorLink
 
 
@@ -91,10 +91,12 @@ def fly_bare(build: Px4Build, *, instance: int, imu_hz: int, arm_s: float, simul
     return BareRun(simulated_s, wall_s, altitude_m)
 
 
-def _sensor_messages(link: SimulatorLink, time_us: int, readings: SensorReadings) -> list:
+def _sensor_messages(
+    link: SimulatorLink, time_us: int, readings: SensorReadings
+) -> list[mavlink.MAVLink_message | bytes]:
     """HIL_SENSOR (mag and baro when sampled) and HIL_GPS at its epochs, from SI samples."""
     imu, mag, baro, gps = readings.imu, readings.mag, readings.baro, readings.gps
-    messages = [hil_sensor(
+    messages: list[mavlink.MAVLink_message | bytes] = [hil_sensor_frame(
         link.mav, time_us, accel_mps2=imu.accel_mps2, gyro_radps=imu.gyro_radps,
         mag_gauss=None if mag is None else mag.field_gauss,
         baro=None if baro is None else (baro.pressure_pa, baro.temperature_degc),

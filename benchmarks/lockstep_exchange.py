@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from rig.mavlink.px4_api import LOCKSTEP_FLAG, mavlink
-from rig.mavlink.sim_messages import actuator_controls_from_frame, hil_sensor
+from rig.mavlink.sim_messages import actuator_controls_from_frame, hil_sensor_frame
 
 REPO = Path(__file__).resolve().parent.parent
 MODES = ("pymavlink", "bytes")
@@ -37,8 +37,9 @@ _MOTORS = 4
 def _sensor(mav: mavlink.MAVLink, frame: int) -> bytes:
     """One HIL_SENSOR as the rig sends it at an IMU-only frame (accel and gyro)."""
     time_us = (frame + 1) * 1000
-    message = hil_sensor(mav, time_us, accel_mps2=(0.1, -0.2, -9.8), gyro_radps=(0.01, 0.02, -0.03))
-    return message.pack(mav)
+    return hil_sensor_frame(
+        mav, time_us, accel_mps2=(0.1, -0.2, -9.8), gyro_radps=(0.01, 0.02, -0.03)
+    )
 
 
 def _controls(mav: mavlink.MAVLink, time_us: int) -> bytes:

@@ -150,6 +150,13 @@ def cross3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     )
 
 
+def euclidean_norm(*components: float) -> float:
+    """The norm of a vector given as plain floats, computed as numpy's ``linalg.norm`` (the
+    root of the sum of squares; ``math.hypot`` rounds differently): the reference
+    autopilot's position loop runs on floats, where numpy costs more than the arithmetic."""
+    return math.sqrt(sum(c * c for c in components))
+
+
 def quat_from_axis_angle(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
     """Quaternion of a right-handed rotation by ``angle_rad`` about ``axis``."""
     a = np.asarray(axis, dtype=float)

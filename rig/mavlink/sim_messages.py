@@ -70,27 +70,6 @@ def pressure_altitude_m(pressure_pa: float) -> float:
     return _ISA_T0_K / _ISA_LAPSE_KPM * (1.0 - (pressure_pa / _ISA_P0_PA) ** _ISA_EXPONENT)
 
 
-def hil_sensor(
-    mav: mavlink.MAVLink,
-    time_us: int,
-    *,
-    accel_mps2: Sequence[float],
-    gyro_radps: Sequence[float],
-    mag_gauss: Sequence[float] | None = None,
-    baro: tuple[float, float] | None = None,
-    imu_id: int = 0,
-) -> mavlink.MAVLink_hil_sensor_message:
-    """HIL_SENSOR for one IMU frame, plus the mag and baro groups when they have new data.
-
-    Every frame carries accel and gyro (a frame without gyro advances PX4's clock but gets
-    no answer, which stalls lockstep). ``baro`` is ``(pressure_pa, temperature_degc)``:
-    temperature only travels with the baro group, as PX4 reads it only then. Units sent:
-    m/s² FRD specific force, rad/s, gauss, hPa, °C.
-    """
-    fields = _hil_sensor_fields(time_us, accel_mps2, gyro_radps, mag_gauss, baro, imu_id)
-    return mav.hil_sensor_encode(*fields)
-
-
 def hil_sensor_frame(
     mav: mavlink.MAVLink,
     time_us: int,
@@ -101,8 +80,15 @@ def hil_sensor_frame(
     baro: tuple[float, float] | None = None,
     imu_id: int = 0,
 ) -> bytes:
-    """:func:`hil_sensor` as the MAVLink 2 frame ``pack`` makes of it (:func:`frame_bytes`):
-    the message of every lockstep frame, sent without a message object."""
+    """HIL_SENSOR for one IMU frame, plus the mag and baro groups when they have new data,
+    as the MAVLink 2 frame pymavlink's ``pack`` makes of it (:func:`frame_bytes`): the
+    message of every lockstep frame, sent without a message object.
+
+    Every frame carries accel and gyro (a frame without gyro advances PX4's clock but gets
+    no answer, which stalls lockstep). ``baro`` is ``(pressure_pa, temperature_degc)``:
+    temperature only travels with the baro group, as PX4 reads it only then. Units sent:
+    m/s² FRD specific force, rad/s, gauss, hPa, °C.
+    """
     fields = _hil_sensor_fields(time_us, accel_mps2, gyro_radps, mag_gauss, baro, imu_id)
     return frame_bytes(mav, _SENSOR, fields)
 

@@ -14,14 +14,16 @@ import pytest
 
 from rig.errors import AutopilotNotConnected, AutopilotProtocolError, AutopilotStalled
 from rig.mavlink.px4_api import mavlink
-from rig.mavlink.sim_messages import hil_sensor
+from rig.mavlink.sim_messages import hil_sensor_frame
 from rig.mavlink.simulator_link import LinkTimeouts
 
 FRAME_US = 1000
 
 
 def _frame(link, k):
-    return [hil_sensor(link.mav, k * FRAME_US, accel_mps2=(0, 0, -9.81), gyro_radps=(0, 0, k))]
+    return [
+        hil_sensor_frame(link.mav, k * FRAME_US, accel_mps2=(0, 0, -9.81), gyro_radps=(0, 0, k))
+    ]
 
 
 def _run_frames(link, count, start=1):

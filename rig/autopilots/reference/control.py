@@ -21,7 +21,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from quad_model import frames
-from quad_model.frames import STANDARD_GRAVITY_MPS2, cross3, quat_from_dcm
+from quad_model.frames import STANDARD_GRAVITY_MPS2, cross3, euclidean_norm, quat_from_dcm
 from rig.autopilots.reference.params import Parameters
 
 # The per-frame parts of the cascade (gyro filters, attitude and rate control, allocation) are
@@ -339,7 +339,7 @@ def limit_tilt(body_z: _Vector, max_tilt_rad: float) -> _Vector:
     if math.acos(dot) <= max_tilt_rad:
         return body_z
     rejection = (x, y, z - dot)  # body z less its part along world z
-    norm = _norm(*rejection)
+    norm = euclidean_norm(*rejection)
     rx, ry, rz = (r / norm for r in rejection) if norm > 1e-9 else (1.0, 0.0, 0.0)
     sine = math.sin(max_tilt_rad)
     return sine * rx, sine * ry, math.cos(max_tilt_rad) + sine * rz
@@ -351,20 +351,15 @@ def constrain_xy(
     """``v0 + s·v1`` with the largest ``s ≤ 1`` whose norm fits ``max_norm``, keeping ``v0``
     first (PX4 ``ControlMath::constrainXY``: the position term wins over feed-forward)."""
     (x0, y0), (x1, y1) = v0, v1
-    if _norm(x0 + x1, y0 + y1) <= max_norm:
+    if euclidean_norm(x0 + x1, y0 + y1) <= max_norm:
         return x0 + x1, y0 + y1
-    n0 = _norm(x0, y0)
+    n0 = euclidean_norm(x0, y0)
     if n0 >= max_norm:
         return x0 / n0 * max_norm, y0 / n0 * max_norm
     # |v0 + s v1| = max_norm, s in [0, 1]: a quadratic in s
     a, b, c = x1 * x1 + y1 * y1, 2.0 * (x0 * x1 + y0 * y1), n0**2 - max_norm**2
     s = (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
     return x0 + s * x1, y0 + s * y1
-
-
-def _norm(*values: float) -> float:
-    """The Euclidean norm of a few floats (as numpy's: the root of the sum of squares)."""
-    return math.sqrt(sum(v * v for v in values))
 
 
 def _finite(value: float) -> float:
@@ -386,24 +381,18 @@ def thrust_to_attitude(
 ) -> tuple[NDArray[np.float64], float]:
     """Attitude whose body z is against the thrust vector, with the requested heading, and the
     collective thrust (PX4 ``ControlMath::bodyzToAttitude``)."""
-    tx, ty, tz = np.asarray(thrust_ned, dtype=float).tolist()
-    magnitude = _norm(tx, ty, tz)
-    body_z = (-tx / magnitude, -ty / magnitude, -tz / magnitude) if magnitude > 1e-9 else (
-        0.0, 0.0, 1.0)  # fmt: skip
-    body_x = _cross((-math.sin(yaw_rad), math.cos(yaw_rad), 0.0), body_z)
+    thrust = np.asarray(thrust_ned, dtype=float)
+    magnitude = euclidean_norm(*thrust.tolist())
+    body_z = -thrust / magnitude if magnitude > 1e-9 else np.array([0.0, 0.0, 1.0])
+    body_x = cross3(np.array([-math.sin(yaw_rad), math.cos(yaw_rad), 0.0]), body_z)
     if body_z[2] < 0.0:
-        body_x = (-body_x[0], -body_x[1], -body_x[2])
+        body_x = -body_x
     if abs(body_z[2]) < 1e-6:  # thrust horizontal: keep the nose along the heading
-        body_x = (0.0, 0.0, 1.0)
-    norm = _norm(*body_x)
-    body_x = (body_x[0] / norm, body_x[1] / norm, body_x[2] / norm)
-    body_y = _cross(body_z, body_x)
+        body_x = np.array([0.0, 0.0, 1.0])
+    body_x = body_x / euclidean_norm(*body_x.tolist())
+    body_y = cross3(body_z, body_x)
     # the rotation's columns are the body axes in NED
-    return quat_from_dcm(np.array(list(zip(body_x, body_y, body_z, strict=True)))), magnitude
-
-
-def _cross(a: _Vector, b: _Vector) -> _Vector:
-    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+    return quat_from_dcm(np.column_stack((body_x, body_y, body_z))), magnitude
 
 
 class FilteredDerivative:
@@ -527,7 +516,7 @@ class PositionController:
             tz <= -self.thrust_max and vel_error[2] <= 0.0
         ):
             vel_error[2] = 0.0  # vertical anti-windup: stop integrating into a limit
-        xy_norm = _norm(tx, ty)
+        xy_norm = euclidean_norm(tx, ty)
         allocated_xy = min(xy_norm, self.thrust_xy_margin)
         tz = max(tz, -math.sqrt(self.thrust_max**2 - allocated_xy**2))
         xy_max = math.sqrt(max(self.thrust_max**2 - tz**2, 0.0))
@@ -549,7 +538,7 @@ class PositionController:
 
     def _acceleration_to_thrust(self, acc_sp: list[float]) -> _Vector:
         ax, ay, az = acc_sp
-        norm = _norm(-ax, -ay, STANDARD_GRAVITY_MPS2)
+        norm = euclidean_norm(-ax, -ay, STANDARD_GRAVITY_MPS2)
         body_z = limit_tilt((-ax / norm, -ay / norm, STANDARD_GRAVITY_MPS2 / norm),
                             self.tilt_max_rad)  # fmt: skip
         collective = az * (self.hover_thrust / STANDARD_GRAVITY_MPS2) - self.hover_thrust

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from quad_model.frames import euclidean_norm
+
 #: Below this speed (m/s) a part of the velocity set-point is clipped alone (PX4's
 #: ``clampToXYNorm``/``clampToZNorm`` accuracy).
 _NEARLY_THERE_MPS = 0.5
@@ -200,22 +202,22 @@ class PositionSmoothing:
         behind_x, behind_y = x.state[2] - float(vehicle[0]), y.state[2] - float(vehicle[1])
         stretch = 1.0
         if limits.max_error_xy > 0.0 and behind_x * x.state[1] + behind_y * y.state[1] >= 0.0:
-            stretch = 1.0 - min(_norm(behind_x, behind_y) / limits.max_error_xy, 1.0)
+            stretch = 1.0 - min(euclidean_norm(behind_x, behind_y) / limits.max_error_xy, 1.0)
         for axis in self._axes:
             axis.advance(dt_s * stretch)
         offset = [float(t) - axis.state[2] for t, axis in zip(target, self._axes, strict=True)]
         up = offset[2] < 0.0
         accel_z, speed_z = (limits.accel_up, limits.speed_up) if up else (
             limits.accel_down, limits.speed_down)  # fmt: skip
-        distance_xy = _norm(offset[0], offset[1])
+        distance_xy = euclidean_norm(offset[0], offset[1])
         speed_xy = min(limits.speed_xy, max_speed_from_distance(
             limits.jerk, limits.accel_xy, distance_xy, 0.0))  # fmt: skip
         speed_z = min(speed_z, max_speed_from_distance(limits.jerk, accel_z, abs(offset[2]), 0.0))
-        norm = _norm(*offset)
+        norm = euclidean_norm(*offset)
         speed = math.hypot(speed_xy, speed_z)
         velocity_sp = [0.0, 0.0, 0.0] if norm < 1e-6 else [o / norm * speed for o in offset]
         for bound, part in ((speed_xy, (0, 1)), (speed_z, (2,))):
-            size = _norm(*(velocity_sp[i] for i in part))
+            size = euclidean_norm(*(velocity_sp[i] for i in part))
             if size > bound:
                 # The whole vector, so the path stays straight; a part that is nearly
                 # there (both under 0.5 m/s) alone, so it cannot stall the other.
@@ -230,8 +232,3 @@ class PositionSmoothing:
         for axis, v, a, s in zip(self._axes, velocity_sp, accels, speeds, strict=True):
             if 1e-9 < axis.total_s < longest:
                 axis.plan(v, s, a, limits.jerk, longest)
-
-
-def _norm(*values: float) -> float:
-    """The Euclidean norm of a few floats (as numpy's: the root of the sum of squares)."""
-    return math.sqrt(sum(v * v for v in values))

@@ -20,7 +20,7 @@ import numpy as np
 
 from quad_model import QuadModel, SensorSuite, load_vehicle
 from rig.mavlink.px4_api import ActuatorMode, Ports, mavlink
-from rig.mavlink.sim_messages import hil_gps, hil_sensor
+from rig.mavlink.sim_messages import hil_gps, hil_sensor_frame
 
 WAIT_S = 10.0
 
@@ -79,11 +79,11 @@ class MiniRig:
                               eph_m=gps.eph_m, epv_m=gps.epv_m, fix_type=gps.fix_type,
                               satellites_visible=gps.satellites_visible)  # fmt: skip
                 data += fix.pack(self.mav)
-            data += hil_sensor(
+            data += hil_sensor_frame(
                 self.mav, time_us, accel_mps2=imu.accel_mps2, gyro_radps=imu.gyro_radps,
                 mag_gauss=None if mag is None else mag.field_gauss,
                 baro=None if baro is None else (baro.pressure_pa, baro.temperature_degc),
-            ).pack(self.mav)  # fmt: skip
+            )  # fmt: skip
             self.sim.sendall(data)
             self.throttle = np.array(self._await_controls(time_us))
             collect()

@@ -19,7 +19,7 @@ from rig.autopilots.reference.process import (
     wait_readable,
 )
 from rig.mavlink.px4_api import Ports, mavlink
-from rig.mavlink.sim_messages import hil_gps, hil_sensor
+from rig.mavlink.sim_messages import hil_gps, hil_sensor_frame
 from tests.rig.autopilot.gcs_client import GcsClient
 from tests.rig.autopilot.mini_rig import MiniRig
 
@@ -28,16 +28,16 @@ pytestmark = pytest.mark.closed_loop
 
 def test_hil_messages_decode_to_si_units():
     mav = mavlink.MAVLink(None)
-    sensor = hil_sensor(mav, 1000, accel_mps2=(0.1, -0.2, -9.8), gyro_radps=(0.01, 0.0, -0.02),
-                        mag_gauss=(0.2, 0.01, 0.43), baro=(95000.0, 20.0))  # fmt: skip
-    frame = sensor_frame(sensor, None)
+    sensor = hil_sensor_frame(mav, 1000, accel_mps2=(0.1, -0.2, -9.8),
+                              gyro_radps=(0.01, 0.0, -0.02), mag_gauss=(0.2, 0.01, 0.43),
+                              baro=(95000.0, 20.0))  # fmt: skip
+    frame = sensor_frame(mav.decode(bytearray(sensor)), None)
     assert frame.accel_mps2 == pytest.approx([0.1, -0.2, -9.8], abs=0.005)  # int16 FIFO step
     assert frame.gyro_radps == pytest.approx([0.01, 0.0, -0.02], abs=1e-3)
     assert frame.mag_gauss == pytest.approx([0.2, 0.01, 0.43])
     assert frame.baro_pressure_pa == pytest.approx(95000.0)
-    no_mag = sensor_frame(
-        hil_sensor(mav, 2000, accel_mps2=(0, 0, -9.8), gyro_radps=(0, 0, 0)), None
-    )
+    imu_only = hil_sensor_frame(mav, 2000, accel_mps2=(0, 0, -9.8), gyro_radps=(0, 0, 0))
+    no_mag = sensor_frame(mav.decode(bytearray(imu_only)), None)
     assert no_mag.mag_gauss is None
     assert no_mag.baro_pressure_pa is None
     fix = gps_fix(hil_gps(mav, 1000, lat_deg=47.5, lon_deg=8.5, alt_amsl_m=500.25,
