@@ -79,7 +79,7 @@ from rig.mavlink.sim_messages import (
     hil_gps,
     hil_optical_flow,
     hil_sensor_frame,
-    hil_state_quaternion,
+    hil_state_quaternion_frame,
 )
 from rig.mavlink.simulator_link import LinkStats, LinkTimeouts, SimulatorLink
 from rig.scenarios.faults import FaultInjector, check_motors, describe
@@ -615,12 +615,12 @@ class _Loop:
             )  # fmt: skip
         return messages
 
-    def _state_message(self, truth: VehicleTruth) -> mavlink.MAVLink_message:
+    def _state_message(self, truth: VehicleTruth) -> bytes:
         home = self.scenario.environment.home
         lat, lon, alt = ned_to_geodetic(
             truth.position_ned_m, home.lat_deg, home.lon_deg, home.alt_amsl_m
         )
-        return hil_state_quaternion(
+        return hil_state_quaternion_frame(
             self.link.mav, self.time_us, q_body_to_ned=truth.attitude_quat,
             rates_frd_radps=truth.angular_rate_frd_radps, lat_deg=lat, lon_deg=lon,
             alt_amsl_m=alt, vel_ned_mps=truth.velocity_ned_mps,

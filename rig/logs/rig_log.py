@@ -18,8 +18,6 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-import numpy as np
-
 from fpga_hdl.chips.ublox.driver import GpsFix
 from quad_model.frames import yaw_from_quat
 from quad_model.model import VehicleTruth
@@ -78,7 +76,7 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
                                    ("float[3]", "force_frd_n"), ("float[3]", "moment_frd_nm")],
 }  # fmt: skip
 
-_ZERO_3 = np.zeros(3)
+_ZERO_3 = (0.0, 0.0, 0.0)
 #: ``distance_sensor`` constants (PX4 msg/DistanceSensor.msg): MAV_DISTANCE_SENSOR_LASER,
 #: ROTATION_DOWNWARD_FACING.
 _LASER, _DOWNWARD_FACING = 0, 25
@@ -102,7 +100,7 @@ class RigLog:
         self.writer = ULogWriter(path, TOPICS, info=info, parameters=parameters)
         self.path = self.writer.path
         self._home = (home_lat_deg, home_lon_deg, home_alt_m)
-        self._previous_rates: np.ndarray | None = None
+        self._previous_rates: list[float] | None = None
         self._previous_rates_us = 0
         self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0, "lidarlite": 0, "pmw3901": 0}
         self._rows: dict[str, Callable[..., None]] = {}
@@ -115,13 +113,15 @@ class RigLog:
         return write
 
     def truth(self, time_us: int, truth: VehicleTruth) -> None:
-        # Rows in the topics' field order (TOPICS): see ULogWriter.row_writer for why.
+        # Rows in the topics' field order (TOPICS): see ULogWriter.row_writer for why. On
+        # plain floats: numpy's per-operation cost was most of this, logged every frame at
+        # 250 Hz (the same IEEE operations).
         q = truth.attitude_quat.tolist()
-        rates = truth.angular_rate_frd_radps
-        derivative = _ZERO_3
+        rates = truth.angular_rate_frd_radps.tolist()
+        derivative: Sequence[float] = _ZERO_3
         if self._previous_rates is not None and time_us > self._previous_rates_us:
             dt_s = (time_us - self._previous_rates_us) / 1e6
-            derivative = (rates - self._previous_rates) / dt_s
+            derivative = [(r - p) / dt_s for r, p in zip(rates, self._previous_rates, strict=True)]
         self._previous_rates, self._previous_rates_us = rates, time_us
         lat, lon, alt = self._home
         row = self._row
@@ -131,8 +131,8 @@ class RigLog:
             *truth.velocity_ned_mps.tolist(), *truth.acceleration_ned_mps2.tolist(),
             yaw_from_quat(q), alt, True, True, True, True,
         )  # fmt: skip
-        row("vehicle_angular_velocity_groundtruth")(time_us, time_us, *rates.tolist(),
-                                                    *derivative.tolist())  # fmt: skip
+        row("vehicle_angular_velocity_groundtruth")(time_us, time_us, *rates,
+                                                    *derivative)  # fmt: skip
         row("battery_status_groundtruth")(time_us, truth.battery_voltage_v,
                                           truth.battery_current_a)  # fmt: skip
         no_rotors = (math.nan,) * (MAX_ROTORS - truth.rotor_speed_radps.size)
