@@ -277,7 +277,9 @@ def test_hil_sensor_frames_are_pymavlinks_packing_byte_for_byte():
         time_us = int(rng.integers(1, 2**40))
         inputs = {**imu, "imu_id": k % 3 // 2, **groups}
         frame = hil_sensor_frame(mav, time_us, **inputs)
-        assert _parsed(frame).pack(mav) == frame
+        parsed = _parsed(frame)
+        assert parsed.get_type() == "HIL_SENSOR"
+        assert parsed.pack(mav) == frame
     with pytest.raises(ValueError, match="time_usec must be > 0"):
         hil_sensor_frame(mav, 0, accel_mps2=(0, 0, 0), gyro_radps=(0, 0, 0))
 
@@ -298,7 +300,9 @@ def test_hil_state_quaternion_frames_are_pymavlinks_packing_byte_for_byte():
             vel_ned_mps=rng.normal(0, 5 if k % 4 else 500, 3),
             specific_force_frd_mps2=rng.normal(0, 10 if k % 5 else 500, 3),
         )  # fmt: skip
-        assert _parsed(frame).pack(mav) == frame
+        parsed = _parsed(frame)
+        assert parsed.get_type() == "HIL_STATE_QUATERNION"
+        assert parsed.pack(mav) == frame
 
 
 def test_a_packed_frame_keeps_one_payload_byte_and_unpacks_to_its_fields():
