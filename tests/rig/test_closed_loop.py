@@ -147,10 +147,15 @@ def test_the_reference_autopilot_flies_the_vehicles_airframe_unless_told_otherwi
 def test_same_seed_same_flight(tmp_path, free_instance):
     """With the reference autopilot the link is in lockstep from the first frame and
     commands wait for their ACK before the next sensor frame, so a run is deterministic:
-    the same seed gives the same rig.ulg and autopilot.ulg, byte for byte."""
+    the same seed gives the same rig.ulg and autopilot.ulg, byte for byte. The rig's SIGINT
+    comes right after the last answer; the autopilot takes it between frames, so the last
+    frame's rows are in its log."""
     runs = [fly(tmp_path / f"run{k}", free_instance, "same", takeoff(2.0), 4.0, seed=9)[0]
             for k in range(2)]  # fmt: skip
     first, second = runs
+    for run in runs:
+        last = pyulog.ULog(str(run.autopilot_log), ["estimator_groundtruth_error"])
+        assert last.get_dataset("estimator_groundtruth_error").data["timestamp"][-1] == 4_000_000
     assert first.rig_log.read_bytes() == second.rig_log.read_bytes()
     assert first.autopilot_log.read_bytes() == second.autopilot_log.read_bytes()
     assert first.link.freewheel_frames == 0  # every frame answered, from the first

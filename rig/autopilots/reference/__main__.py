@@ -31,9 +31,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"instance {args.instance}: {error}")
     try:
         reason = autopilot.run()
-        print(f"rig.autopilots.reference: {reason}; stopping", file=sys.stderr)
+        if reason is not None:
+            print(f"rig.autopilots.reference: {reason}; stopping", file=sys.stderr)
     except KeyboardInterrupt:
-        pass  # the rig stops us with SIGINT: close the log cleanly
+        pass  # SIGINT before the rig's link is served: close the log cleanly
     except LogWriteFailed as error:  # a full disk: the log is whole up to its last message
         print(f"rig.autopilots.reference: {error}; stopping", file=sys.stderr)
         return 1

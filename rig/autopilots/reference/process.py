@@ -13,10 +13,12 @@ from __future__ import annotations
 import math
 import os
 import select
+import signal
 import socket
 import sys
 import time
 from pathlib import Path
+from types import FrameType, TracebackType
 
 import numpy as np
 
@@ -200,6 +202,39 @@ def wait_readable(socks: list[socket.socket], poll_s: float, timeout_s: float
     return readable
 
 
+class StopRequest:
+    """SIGINT, the rig's way to stop its autopilot, taken between frames.
+
+    The handler only notes the signal; Python's wake-up fd makes the serving loop's
+    ``select`` return at once, and the loop stops at the top of its next turn. A
+    KeyboardInterrupt could instead land inside the last frame's ``write_log`` (the rig
+    sends SIGINT as soon as it has that frame's answer), and two runs of one seed would
+    then differ in their last log rows.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.wake, self._wake_write = socket.socketpair()
+        for end in (self.wake, self._wake_write):
+            end.setblocking(False)
+
+    def __enter__(self) -> StopRequest:
+        self._previous_fd = signal.set_wakeup_fd(self._wake_write.fileno(),
+                                                 warn_on_full_buffer=False)  # fmt: skip
+        self._previous_handler = signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 traceback: TracebackType | None) -> None:  # fmt: skip
+        signal.signal(signal.SIGINT, self._previous_handler)
+        signal.set_wakeup_fd(self._previous_fd)
+        self.wake.close()
+        self._wake_write.close()
+
+    def _note(self, signum: int, frame: FrameType | None) -> None:
+        self.requested = True
+
+
 class Autopilot:
     """The process: the flight controller, the simulator link and the ground-station links."""
 
@@ -254,15 +289,22 @@ class Autopilot:
         ))  # fmt: skip
         return sock
 
-    def run(self) -> str:
-        """Serve until the simulator closes the link; returns why it stopped."""
+    def run(self) -> str | None:
+        """Serve until the simulator closes the link (returns why) or SIGINT comes (returns
+        None once the frame in hand is answered and logged)."""
         warm_up()
         sim = self.connect()
         self._last_frame_wall_s = time.monotonic()
-        while True:
+        with StopRequest() as stop:
+            return self._serve(sim, stop)
+
+    def _serve(self, sim: socket.socket, stop: StopRequest) -> str | None:
+        socks = [sim, stop.wake, *(link.sock for link in self.links)]
+        while not stop.requested:
             poll_s = FRAME_POLL_S if self._frame_gap_s < FRAME_POLL_S else 0.0
-            readable = wait_readable([sim, *(link.sock for link in self.links)], poll_s,
-                                     IDLE_HEARTBEAT_S)  # fmt: skip
+            readable = wait_readable(socks, poll_s, IDLE_HEARTBEAT_S)
+            if stop.wake in readable:
+                stop.wake.recv(64)  # the signal numbers Python wrote: the flag says enough
             if not readable:
                 self.ground.heartbeat()
             if sim not in readable:
@@ -280,6 +322,7 @@ class Autopilot:
                 messages = fast if fast is not None else self.sim_mav.parse_buffer(data) or []
                 for message in messages:
                     self._handle_sim(message)
+        return None
 
     def close(self) -> None:
         if self.sim is not None:
