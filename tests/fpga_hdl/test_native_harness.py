@@ -14,7 +14,9 @@ import subprocess
 import sys
 
 import pytest
+from amaranth.hdl import Shape
 
+from fpga_hdl.build import verilog_by_inputs, verilog_text
 from fpga_hdl.buses.transactions import UnknownDevice
 from fpga_hdl.buses.uart import divider_for, line_cycles
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
@@ -27,9 +29,18 @@ from fpga_hdl.chips.ublox.driver import (
 )
 from fpga_hdl.chips.ublox.link import TlmUbloxUart, receiver_solution
 from fpga_hdl.chips.ublox.model import UbloxM8Model
-from fpga_hdl.cosim.harness import CosimHarness
+from fpga_hdl.cosim.harness import (
+    HARNESS_TOPLEVEL,
+    I2C_READ_DEPTH,
+    I2C_WRITE_DEPTH,
+    PWM_COUNTER_BITS,
+    SPI_DEPTH,
+    UART_RX_DEPTH,
+    UART_TX_DEPTH,
+    CosimHarness,
+)
 from fpga_hdl.cosim.runner import missing_simulator_reason
-from fpga_hdl.top import UART_CLK_HZ
+from fpga_hdl.top import PWM_TICK_HZ, UART_CLK_HZ
 from fpga_hdl.verification.scoreboard import Scoreboard
 from tests.fpga_hdl.transcript import run_script, tlm_transcript
 
@@ -313,11 +324,33 @@ def test_an_unknown_spi_device_is_refused_before_the_simulator(harness):
         _run(harness.spi.transfer("gps", b"\x00", sclk_hz=1e6))
 
 
+def test_the_verilog_found_by_its_inputs_is_the_harness_converted_now():
+    """The compiled harness's Verilog is found again by its parameters and fpga_hdl's
+    sources, without Amaranth; what is found is what a conversion gives now, and the
+    sizes its drivers are given are the design's."""
+    found = verilog_by_inputs(CosimHarness, HARNESS_TOPLEVEL, {"pwm_tick_hz": PWM_TICK_HZ,
+                                                             "spi_mode": 0})  # fmt: skip
+    harness = CosimHarness(pwm_tick_hz=PWM_TICK_HZ, spi_mode=0)
+    assert found.path.read_text() == verilog_text(harness, HARNESS_TOPLEVEL)
+    widths = {
+        name: Shape.cast(harness.signature.members[name].shape).width
+        for name in ("spi_tx", "i2c_tx", "i2c_rx", "uart_tx", "uart_rx", "pwm_period_ticks")
+    }
+    assert widths == {
+        "spi_tx": 8 * SPI_DEPTH,
+        "i2c_tx": 8 * I2C_WRITE_DEPTH,
+        "i2c_rx": 8 * I2C_READ_DEPTH,
+        "uart_tx": 8 * UART_TX_DEPTH,
+        "uart_rx": 8 * UART_RX_DEPTH,
+        "pwm_period_ticks": PWM_COUNTER_BITS,
+    }
+
+
 def test_the_library_is_built_once_per_content():
     from fpga_hdl.cosim.native import build_native_harness
 
-    first = build_native_harness(CosimHarness())
-    assert build_native_harness(CosimHarness()) == first
+    first = build_native_harness()
+    assert build_native_harness() == first
     assert first.is_file()
     assert first.parent.parent.name == "native"
 
