@@ -156,6 +156,10 @@ class SensorTop(wiring.Component):
     uart_skippable : bool
         The same for the GPS receiver (``UbloxM8Core``'s ``skip`` and ``quiet``, reached as
         ``gps.skip``).
+    i2c_skippable : bool
+        The same for the I2C chips: each says when it is ``settled`` (``mag.settled``,
+        ``range.settled``), so the harness's I2C clock can skip the edges between bus
+        events.
     i2c_domain : str
         The clock domain of the I2C chips (the IST8310 and the LIDAR-Lite, targets and
         registers): ``sync`` on the FPGA. The co-simulation harness names one of its own,
@@ -237,6 +241,7 @@ class SensorTop(wiring.Component):
         uart_clk_hz: float = UART_CLK_HZ,
         pwm_skippable: bool = False,
         uart_skippable: bool = False,
+        i2c_skippable: bool = False,
         i2c_domain: str = "sync",
         spi_idle_sclk: int | None = None,
     ) -> None:
@@ -249,9 +254,9 @@ class SensorTop(wiring.Component):
         self.uart_clk_hz = uart_clk_hz
         self.imu = Mpu6000(sys_clk_hz=sys_clk_hz)
         self.baro = Ms5611(sys_clk_hz=sys_clk_hz)
-        self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz)
+        self.mag = Ist8310Core(sys_clk_hz=sys_clk_hz, skippable=i2c_skippable)
         self.gps = UbloxM8Core(sys_clk_hz=uart_clk_hz, skippable=uart_skippable)
-        self.range = LidarLiteCore(sys_clk_hz=sys_clk_hz)
+        self.range = LidarLiteCore(sys_clk_hz=sys_clk_hz, skippable=i2c_skippable)
         self.flow = Pmw3901(sys_clk_hz=sys_clk_hz)
         self.capture = PwmCapture(
             tick_hz=pwm_tick_hz, timeout_s=pwm_timeout_s, skippable=pwm_skippable

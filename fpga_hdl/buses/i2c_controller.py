@@ -24,10 +24,11 @@ import math
 from dataclasses import dataclass, replace
 
 from amaranth.build import Platform
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, ValueLike
+from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value, ValueLike
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from fpga_hdl.buses.by_event import skip_members
 from fpga_hdl.buses.i2c_target import FAST_MODE, STANDARD_MODE, I2cTiming
 from fpga_hdl.buses.transactions import check_clock_hz
 
@@ -139,9 +140,15 @@ class I2cController(wiring.Component):
         1 releases SDA, 0 pulls it low (open drain).
     sda_i : In(1)
         SDA as seen on the bus (the wired-AND of every driver).
+    skip : In(:attr:`quiet_bits`), quiet : Out(:attr:`quiet_bits`)
+        ``skippable`` only (the compiled co-simulation's build, never synthesis): between
+        two actions only the duration counter moves, so ``quiet`` says how many coming
+        edges that is, and the next edge stands for ``1 + skip`` cycles
+        (:mod:`fpga_hdl.buses.by_event`).
     """
 
-    def __init__(self, *, sys_clk_hz: float, write_depth: int = 8, read_depth: int = 16) -> None:
+    def __init__(self, *, sys_clk_hz: float, write_depth: int = 8, read_depth: int = 16,
+                 skippable: bool = False) -> None:  # fmt: skip
         for name, depth in (("write_depth", write_depth), ("read_depth", read_depth)):
             if not (isinstance(depth, int) and depth >= 1):
                 raise ValueError(f"{name} must be a positive integer, not {depth!r}")
@@ -150,6 +157,10 @@ class I2cController(wiring.Component):
         self.fast_mode = I2cBitCycles.for_rate(RATES_HZ[1], sys_clk_hz)
         self.write_depth = write_depth
         self.read_depth = read_depth
+        self.skippable = skippable
+        longest = max(*vars(self.standard).values(), *vars(self.fast_mode).values())
+        #: The duration counter's width: ``skip`` and ``quiet`` have it too.
+        self.quiet_bits = Shape.cast(range(longest + 1)).width
         super().__init__(
             {
                 "request": In(1),
@@ -167,6 +178,7 @@ class I2cController(wiring.Component):
                 "sda_o": Out(1, init=1),
                 "sda_i": In(1),
             }
+            | (skip_members(self.quiet_bits) if skippable else {})
         )
 
     def transfer_cycles(self, write_len: int, read_len: int, *, fast: bool = True) -> int:
@@ -184,8 +196,8 @@ class I2cController(wiring.Component):
         def cycles(field: str) -> Value:
             return Mux(fast, getattr(self.fast_mode, field), getattr(self.standard, field))
 
-        longest = max(max(vars(self.standard).values()), max(vars(self.fast_mode).values()))
-        wait = Signal(range(longest + 1))
+        wait = Signal(self.quiet_bits)
+        cycles_now = 1 + self.skip if self.skippable else 1  # what this edge stands for
         write_len = Signal.like(self.write_len)
         read_len = Signal.like(self.read_len)
         address = Signal(7)
@@ -204,7 +216,7 @@ class I2cController(wiring.Component):
                 m.d.sync += [*actions, wait.eq(duration - 1)]
                 m.next = state
             with m.Else():
-                m.d.sync += wait.eq(wait - 1)
+                m.d.sync += wait.eq(wait - cycles_now)
 
         def load(value: ValueLike, *, send: bool, is_address: bool = False) -> None:
             m.d.sync += [
@@ -297,4 +309,7 @@ class I2cController(wiring.Component):
             with m.State("BUS_FREE"):  # t_BUF before the next START may come
                 after("IDLE", 1, self.acknowledge.eq(self.request))
         m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
+        if self.skippable:  # every state waits out ``wait`` before it acts; idle, a request
+            idle = Mux(self.request != self.acknowledge, 0, (1 << self.quiet_bits) - 1)
+            m.d.comb += self.quiet.eq(Mux(self.busy, wait, idle))
         return m

@@ -11,8 +11,8 @@ import math
 from dataclasses import dataclass
 
 from amaranth.build import Platform
-from amaranth.hdl import Assert, Cat, Const, Module, Signal, ValueLike
-from amaranth.lib import enum, wiring
+from amaranth.hdl import Assert, Cat, Const, Module, Signal, Value, ValueLike
+from amaranth.lib import data, enum, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
@@ -26,6 +26,8 @@ __all__ = [
     "I2cTargetChecker",
     "I2cTiming",
     "TargetSampling",
+    "i2c_chip_members",
+    "settle_i2c_chip",
 ]
 
 
@@ -163,6 +165,45 @@ def _pipeline(filter_samples: int) -> int:
     return SYNC_STAGES + filter_samples + 1
 
 
+#: :class:`I2cTarget`'s ports (a skippable one adds ``settled``).
+_TARGET_MEMBERS: dict[str, wiring.Member] = {
+    "i2c": In(I2C),
+    "fault": In(BUS_FAULT),
+    "start": Out(1),
+    "stop": Out(1),
+    "busy": Out(1),
+    "write_stb": Out(1),
+    "write_data": Out(8),
+    "read_stb": Out(1),
+    "read_data": In(8),
+}
+
+
+def i2c_chip_members(layout: data.Layout, *, skippable: bool) -> dict[str, wiring.Member]:
+    """The ports of a chip core on the I2C bus (an :class:`I2cTarget` and its registers):
+    the bus, the host port's sample, strobe, pending flag, time and fault inputs, and with
+    ``skippable`` the core's ``settled`` (:func:`settle_i2c_chip`)."""
+    members: dict[str, wiring.Member] = {
+        "i2c": In(I2C),
+        "sample": In(layout),
+        "sample_stb": In(1),
+        "sample_pending": Out(1),
+        "now_us": In(32),
+        "fault": In(BUS_FAULT),
+    }
+    return members | ({"settled": Out(1)} if skippable else {})
+
+
+def settle_i2c_chip(m: Module, chip: wiring.Component, target: "I2cTarget",
+                    latch: wiring.Component) -> None:  # fmt: skip
+    """Drive a skippable chip core's ``settled``: its target is settled and its sample
+    latch (:func:`fpga_hdl.host.host_port.chip_sample_latch`) neither copies nor is
+    offered a sample. Its registers change only on the target's strobes and the latch's
+    copy, and what it compares with ``now_us`` is combinational (the time holds while the
+    bus runs alone), so the coming edges change nothing."""
+    m.d.comb += chip.settled.eq(target.settled & ~latch.copying & ~chip.sample_stb)
+
+
 # amaranth is untyped here, so mypy checks shape= against object.__init_subclass__; amaranth's
 # enum metaclass takes it
 class _State(enum.Enum, shape=3):  # type: ignore[call-arg]
@@ -229,30 +270,28 @@ class I2cTarget(wiring.Component):
         register pointer and applies read side effects on this strobe.
     read_data : In(8)
         Next byte to send, presented by the chip before the engine asks for it.
+    settled : Out(1)
+        ``skippable`` only (the compiled co-simulation's build, never synthesis): the
+        bus pins have passed every synchroniser and filter stage, no edge or START/STOP is
+        pending and no SDA change waits out its hold time, so the coming edges change
+        nothing here until SCL or SDA changes.
     """
 
-    i2c: In(I2C)
-    fault: In(BUS_FAULT)
-    start: Out(1)
-    stop: Out(1)
-    busy: Out(1)
-    write_stb: Out(1)
-    write_data: Out(8)
-    read_stb: Out(1)
-    read_data: In(8)
-
-    def __init__(self, *, address: int, sys_clk_hz: float, assertions: bool = False) -> None:
+    def __init__(self, *, address: int, sys_clk_hz: float, assertions: bool = False,
+                 skippable: bool = False) -> None:  # fmt: skip
         if not isinstance(address, int) or not 0x08 <= address <= 0x77:
             raise ValueError(f"I2C address must be a 7-bit address in 0x08..0x77, not {address!r}")
         self.address = address
         self.sampling = TargetSampling.for_clock(sys_clk_hz)
         self.assertions = assertions
-        super().__init__()
+        self.skippable = skippable
+        super().__init__(_TARGET_MEMBERS | ({"settled": Out(1)} if skippable else {}))
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
 
-        scl, sda = self._filtered(m, self.i2c.scl, "scl"), self._filtered(m, self.i2c.sda_i, "sda")
+        scl, scl_settled = self._filtered(m, self.i2c.scl, "scl")
+        sda, sda_settled = self._filtered(m, self.i2c.sda_i, "sda")
         scl_prev = Signal(init=1)
         sda_prev = Signal(init=1)
         m.d.sync += [scl_prev.eq(scl), sda_prev.eq(sda)]
@@ -351,6 +390,11 @@ class I2cTarget(wiring.Component):
                         # the controller can send STOP or a repeated START.
                         m.d.sync += state.eq(_State.IDLE)
 
+        if self.skippable:
+            m.d.comb += self.settled.eq(
+                scl_settled & sda_settled
+                & (scl == scl_prev) & (sda == sda_prev) & ~hold_pending
+            )  # fmt: skip
         if self.assertions:
             m.submodules.checker = checker = I2cTargetChecker()
             drive_phase = (
@@ -367,8 +411,13 @@ class I2cTarget(wiring.Component):
             ]
         return m
 
-    def _filtered(self, m: Module, pin: Signal, name: str) -> Signal:
-        """Re-time ``pin`` and suppress pulses shorter than t_SP (N equal samples rule)."""
+    def _filtered(self, m: Module, pin: Signal, name: str) -> tuple[Signal, Value]:
+        """Re-time ``pin`` and suppress pulses shorter than t_SP (N equal samples rule).
+
+        Also whether every stage holds the pin's level (always 0 unless ``skippable``): the
+        synchroniser's own stages are hidden in it, so a skippable build keeps a copy of
+        them, reset-less and initialised alike, to see a pulse still inside it.
+        """
         synced = Signal(init=1, name=f"{name}_sync")
         m.submodules[f"{name}_ff"] = FFSynchronizer(pin, synced, init=1, stages=SYNC_STAGES)
         history = Signal(self.sampling.filter_samples - 1, init=-1, name=f"{name}_history")
@@ -379,7 +428,12 @@ class I2cTarget(wiring.Component):
             m.d.sync += filtered.eq(1)
         with m.Elif(~window.any()):
             m.d.sync += filtered.eq(0)
-        return filtered
+        if not self.skippable:
+            return filtered, Const(0)
+        stages = Signal(SYNC_STAGES, init=-1, reset_less=True, name=f"{name}_stages")
+        m.d.sync += stages.eq(Cat(pin, stages[:-1]))
+        every = Cat(pin, stages, history, filtered)
+        return filtered, every.all() | ~every.any()
 
 
 class I2cTargetChecker(wiring.Component):

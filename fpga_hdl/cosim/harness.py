@@ -48,7 +48,9 @@ while a UART exchange is requested or under way, or ``rst`` is high: a fix the h
 crosses into the receiver in the exchange's first cycles, before its first start bit, so
 the line times are those of a free-running clock. The compiled harness runs it by event
 too: one edge for ``1 + uart_skip`` cycles while ``uart_quiet`` (the u-blox core's and the
-peer's) says only bit timers and counters move through them.
+peer's) says only bit timers and counters move through them. The I2C clock likewise:
+one edge for ``1 + i2c_skip`` cycles while ``i2c_quiet`` (the controller's duration
+counter, while both chips say they are ``settled``) says nothing else moves.
 Verilator needs ``--timing`` for these delays (``fpga_hdl.cosim.runner`` adds it when a
 design brings behavioural Verilog).
 
@@ -489,13 +491,13 @@ class CosimHarness(wiring.Component):
             check_spi_mode(spi_mode)
         self.top = SensorTop(
             sys_clk_hz=sys_clk_hz, pwm_tick_hz=pwm_tick_hz, uart_clk_hz=uart_clk_hz,
-            pwm_skippable=True, uart_skippable=True, i2c_domain="i2c",
+            pwm_skippable=True, uart_skippable=True, i2c_skippable=True, i2c_domain="i2c",
             spi_idle_sclk=None if spi_mode is None else int(spi_mode == 3),
         )  # fmt: skip
         self.spi = SpiController(sys_clk_hz=sys_clk_hz, devices=len(SPI_DEVICES),
                                  depth=SPI_DEPTH)  # fmt: skip
         self.i2c = I2cController(sys_clk_hz=sys_clk_hz, write_depth=I2C_WRITE_DEPTH,
-                                 read_depth=I2C_READ_DEPTH)  # fmt: skip
+                                 read_depth=I2C_READ_DEPTH, skippable=True)  # fmt: skip
         # Its outputs settle through the capture's synchroniser and result registers.
         self.pwm_generator = PwmGenerator(counter_bits=PWM_COUNTER_BITS,
                                           settle_edges=LATENCY_TICKS + 1)  # fmt: skip
@@ -513,7 +515,9 @@ class CosimHarness(wiring.Component):
         members |= {f"{device}_cs_n": Out(1) for device in SPI_DEVICES}
         members |= {"i2c_scl": Out(1), "i2c_sda": Out(1), "pwm": Out(8)}
         members |= {"gps_tx": Out(1), "gps_rx": Out(1)}
-        for clock, bits in (("pwm", SKIP_BITS), ("uart", DIVIDER_BITS)):  # clocked by event
+        clocked_by_event = (("pwm", SKIP_BITS), ("uart", DIVIDER_BITS),
+                            ("i2c", self.i2c.quiet_bits))  # fmt: skip
+        for clock, bits in clocked_by_event:
             members |= {f"{clock}_{name}": member for name, member in skip_members(bits).items()}
         members |= {name: Out(32) for name in ("sync_cycles", "spi_cycles", "i2c_cycles",
                                                "pwm_cycles", "uart_cycles")}  # fmt: skip
@@ -637,7 +641,7 @@ class CosimHarness(wiring.Component):
         ]
         m.d.sync += self.sync_cycles.eq(self.sync_cycles + 1)
         m.d.spi_ctrl += self.spi_cycles.eq(self.spi_cycles + 1)
-        m.d.i2c_alone += self.i2c_cycles.eq(self.i2c_cycles + 1)
+        m.d.i2c_alone += self.i2c_cycles.eq(self.i2c_cycles + 1 + self.i2c_skip)
         m.d.pwm_out += self.pwm_cycles.eq(self.pwm_cycles + 1 + self.pwm_skip)
         m.d.uart_peer += self.uart_cycles.eq(self.uart_cycles + 1 + self.uart_skip)
 
@@ -670,6 +674,11 @@ class CosimHarness(wiring.Component):
             top.i2c_sda_i.eq(sda),
             i2c.sda_i.eq(sda),
         ]
+        # The I2C clock by event: the controller's duration counter is all that moves while
+        # both chips are settled. (The system clock's edges that clock the bus while the
+        # host writer runs are single cycles: ``i2c_skip`` is 0 then.)
+        settled = top.mag.settled & top.range.settled
+        m.d.comb += [i2c.skip.eq(self.i2c_skip), self.i2c_quiet.eq(Mux(settled, i2c.quiet, 0))]
         m.d.comb += top.pwm.eq(self.pwm_generator.pwm.pulses)
         # Advancing the capture clock by event: one edge for 1 + ``pwm_skip`` ticks, as
         # many as both the generator and the capture core say are quiet.

@@ -227,6 +227,7 @@ _SIGNATURES = {
     "nh_pwm_cycles": ([ctypes.c_void_p, ctypes.c_uint64], ctypes.c_int),
     "nh_pwm_by_event": ([ctypes.c_void_p, ctypes.c_int], ctypes.c_int),
     "nh_uart_by_event": ([ctypes.c_void_p, ctypes.c_int], ctypes.c_int),
+    "nh_i2c_by_event": ([ctypes.c_void_p, ctypes.c_int], ctypes.c_int),
     "nh_uart": ([ctypes.c_void_p, ctypes.c_uint32, ctypes.c_char_p, ctypes.c_size_t,
                  ctypes.c_uint32, _u8p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint32),
                  ctypes.POINTER(ctypes.c_uint32)], ctypes.c_int),
@@ -502,9 +503,10 @@ class NativeHarness:
 
     Builds the library on first use (about half a minute; then cached). ``close`` frees
     the model; the library stays loaded for the process's other harnesses. The capture
-    clock and the UART clock advance by event (one edge for each quiet stretch, see
-    ``native_harness.cpp``); ``pwm_by_event=False`` and ``uart_by_event=False`` clock every
-    cycle, the reference the tests compare them with. ``spi_mode`` is the SPI bus's
+    clock, the UART clock and the I2C clock advance by event (one edge for each quiet
+    stretch, see ``native_harness.cpp``); ``pwm_by_event=False``, ``uart_by_event=False``
+    and ``i2c_by_event=False`` clock every cycle, the reference the tests compare them
+    with. ``spi_mode`` is the SPI bus's
     mode, built in: a transfer clocks only the chip it selects (SensorTop's
     ``spi_idle_sclk``).
     """
@@ -516,6 +518,7 @@ class NativeHarness:
         spi_mode: int = 0,
         pwm_by_event: bool = True,
         uart_by_event: bool = True,
+        i2c_by_event: bool = True,
     ) -> None:
         self.pwm_tick_hz = pwm_tick_hz
         library = build_native_harness(pwm_tick_hz=pwm_tick_hz, spi_mode=spi_mode)
@@ -528,6 +531,7 @@ class NativeHarness:
         self.uart = NativeUart(model, UART_TX_DEPTH, UART_RX_DEPTH)
         model.call("nh_pwm_by_event", int(pwm_by_event))
         model.call("nh_uart_by_event", int(uart_by_event))
+        model.call("nh_i2c_by_event", int(i2c_by_event))
         # Read once a frame: the counters and their pointers made once (half the call's cost).
         self._counts = [ctypes.c_uint64() for _ in range(3)]
         self._count_refs = [ctypes.byref(count) for count in self._counts]

@@ -23,7 +23,11 @@
 // one per tick. nh_pwm_by_event turns it off: the tests compare both, tick for tick. The
 // UART clock likewise (`uart_quiet`, `uart_skip`): between the bit edges and samples of
 // both ends of the GPS line only bit timers move, so a byte costs a few dozen edges
-// instead of ten bit times; nh_uart_by_event turns it off.
+// instead of ten bit times; nh_uart_by_event turns it off. The I2C clock likewise
+// (`i2c_quiet`, `i2c_skip`): while both chips are settled (their synchronisers and filters
+// hold the bus's levels, no SDA change waits out its hold time) only the controller's
+// duration counter moves until its next SCL or SDA change, so a bit costs the edges
+// around its bus events; nh_i2c_by_event turns it off.
 //
 // Costs: every call that clocks the design adds its wall time and cycles to a slot
 // (nh_costs): one per SPI device, per I2C address, the host writes, the host reads, the
@@ -162,10 +166,12 @@ struct Harness {
     std::string error;
     bool by_event = true;  // capture-clock edges stand for every quiet tick
     bool uart_by_event = true;  // UART edges likewise for every quiet cycle
+    bool i2c_by_event = true;  // I2C edges likewise
 
     Harness() {
         model.pwm_skip = 0;
         model.uart_skip = 0;
+        model.i2c_skip = 0;
     }
 
     void sync_cycle() {
@@ -188,6 +194,11 @@ struct Harness {
         model.rootp->I2C_CLOCK = 1;
         clock_edge(model);
         ++sys_cycles;
+    }
+
+    // One I2C edge standing for every cycle `i2c_quiet` says is quiet (see the top).
+    void i2c_event() {
+        sys_cycles += skipping_edge(model.rootp->I2C_CLOCK, model.i2c_skip, model.i2c_quiet);
     }
 
     void pwm_cycle() {
@@ -215,14 +226,26 @@ struct Harness {
         ++uart_cycles;
     }
 
-    // One UART edge standing for every cycle `uart_quiet` says is quiet (see the top): the
-    // skip is a port, so the edge evaluates the inputs too.
+    // One UART edge standing for every cycle `uart_quiet` says is quiet (see the top).
     void uart_event() {
-        const uint64_t cycles = std::max<uint64_t>(model.uart_quiet, 1);
-        model.uart_skip = static_cast<SData>(cycles - 1);
-        model.rootp->UART_CLOCK = 1;
-        evaluate(model);
-        uart_cycles += cycles;
+        uart_cycles += skipping_edge(model.rootp->UART_CLOCK, model.uart_skip, model.uart_quiet);
+    }
+
+    // One edge of `clock` standing for the cycles `quiet` says are quiet (at least one),
+    // returned. The skip is a port, so an edge that changes it evaluates the inputs too;
+    // one with the skip as it was (mostly none, around bus events) is a clock edge alone.
+    template <typename Skip, typename Quiet>
+    uint64_t skipping_edge(CData& clock, Skip& skip, const Quiet& quiet) {
+        const uint64_t cycles = std::max<uint64_t>(quiet, 1);
+        const auto next = static_cast<Skip>(cycles - 1);
+        clock = 1;
+        if (next == skip) {
+            clock_edge(model);
+        } else {
+            skip = next;
+            evaluate(model);
+        }
+        return cycles;
     }
 
     // The gated clock's rule: whole cycles while `enable` is high, checked after each.
@@ -245,7 +268,12 @@ struct Harness {
     }
 
     bool run_i2c(const char* what) {
-        return run_gated(model.rootp->I2C_ENABLE, [this] { i2c_cycle(); }, "I2C", what);
+        if (!i2c_by_event) {
+            return run_gated(model.rootp->I2C_ENABLE, [this] { i2c_cycle(); }, "I2C", what);
+        }
+        const bool ran = run_gated(model.rootp->I2C_ENABLE, [this] { i2c_event(); }, "I2C", what);
+        model.i2c_skip = 0;  // the system clock's edges clock the bus one cycle each
+        return ran;
     }
 
     bool run_uart(const char* what) {
@@ -497,6 +525,13 @@ EXPORT int nh_pwm_by_event(void* handle, int enabled) {
 EXPORT int nh_uart_by_event(void* handle, int enabled) {
     auto* h = static_cast<Harness*>(handle);
     h->uart_by_event = enabled != 0;
+    return 0;
+}
+
+// Whether I2C edges stand for every quiet cycle (1, the default) or one cycle each.
+EXPORT int nh_i2c_by_event(void* handle, int enabled) {
+    auto* h = static_cast<Harness*>(handle);
+    h->i2c_by_event = enabled != 0;
     return 0;
 }
 

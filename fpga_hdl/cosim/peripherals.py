@@ -284,6 +284,7 @@ class Harness:
         dut.pwm_run.value = 0
         dut.pwm_skip.value = 0  # every tick an edge: the simulator's clock is exact
         dut.uart_skip.value = 0  # and every UART cycle
+        dut.i2c_skip.value = 0  # and every I2C cycle
         self.pwm.write([0] * CHANNELS, period_ticks=0)
         tick_ps = round(1e12 / self.pwm_tick_hz)
         dut.rst.value = 1

@@ -17,8 +17,10 @@ import pytest
 from amaranth.hdl import Shape
 
 from fpga_hdl.build import verilog_by_inputs, verilog_text
-from fpga_hdl.buses.transactions import UnknownDevice
+from fpga_hdl.buses.transactions import I2cNack, UnknownDevice
 from fpga_hdl.buses.uart import divider_for, line_cycles
+from fpga_hdl.chips.ist8310 import regs as ist
+from fpga_hdl.chips.lidarlite import regs as lidar
 from fpga_hdl.chips.pwm_capture.core import CHANNELS
 from fpga_hdl.chips.ublox import ubx
 from fpga_hdl.chips.ublox.driver import (
@@ -258,6 +260,62 @@ def test_the_uart_clock_by_event_equals_every_cycle():
     finally:
         for harness in harnesses:
             harness.close()
+
+
+def test_the_i2c_clock_by_event_equals_every_cycle():
+    """One I2C edge per quiet stretch (the default) against one edge per cycle: the same
+    bytes, NACKs and cycle counts through random transfers to the IST8310, the LIDAR-Lite
+    and an absent address at both rates (probes, register writes that start measurements,
+    reads of up to the buffer's length, with and without auto-increment), samples, time
+    and mute/flip faults loaded between them, and a sample loaded while the host writer
+    clocks the bus between two transfers."""
+    from fpga_hdl.cosim.native import NativeHarness
+
+    by_event, every_cycle = NativeHarness(), NativeHarness(i2c_by_event=False)
+    harnesses = (by_event, every_cycle)
+    rng = random.Random(36)
+    addresses = (ist.DEFAULT_ADDRESS, lidar.DEFAULT_ADDRESS, 0x30)
+    nacks = reads = 0
+    now_us = 1
+    try:
+        for harness in harnesses:
+            harness.reset()
+        for _ in range(400):
+            if rng.random() < 0.3:
+                now_us += rng.choice([1, 100, 6_000, 20_000])
+                samples = {
+                    "mag": {axis: rng.randrange(-32768, 32768) for axis in "xyz"},
+                    "range": {"distance_cm": rng.randrange(1 << 16),
+                              "signal_strength": rng.randrange(256),
+                              "peak_strength": rng.randrange(256)},
+                }  # fmt: skip
+                faults = {chip: rng.choice([(False, 0)] * 6 + [(True, 0), (False, 0x5A)])
+                          for chip in ("mag", "range")}  # fmt: skip
+                for harness in harnesses:
+                    harness.host.load(samples, now_us=now_us, faults=faults)
+            address = rng.choice(addresses)
+            register = rng.choice([0x00, 0x01, 0x02, 0x0C, 0x0F, 0x8F, 0x0A, 0x41, 0x03])
+            noise = bytes(rng.randrange(256) for _ in range(I2C_WRITE_DEPTH))
+            write = rng.choice([b"", bytes([register]), bytes([register, rng.choice([1, 4])]),
+                                noise])  # fmt: skip
+            read_len = rng.choice([0, 1, 2, 6, I2C_READ_DEPTH]) if write else rng.choice([0, 1])
+            scl_hz = rng.choice([100e3, 400e3])
+            results = []
+            for harness in harnesses:
+                try:
+                    results.append(_run(harness.i2c.write_read(address, write, read_len,
+                                                               scl_hz=scl_hz)))  # fmt: skip
+                except I2cNack as nack:
+                    results.append(f"nack {nack.byte_index}")
+            assert results[0] == results[1], (hex(address), write.hex(), read_len, scl_hz)
+            assert by_event.cycles() == every_cycle.cycles()
+            nacks += isinstance(results[0], str)
+            reads += isinstance(results[0], bytes) and len(results[0]) > 0
+    finally:
+        for harness in harnesses:
+            harness.close()
+    assert nacks > 20  # the absent address and the muted chips refused
+    assert reads > 100  # the others answered
 
 
 def test_nav_pvt_follows_cfg_rate_on_the_rtl_as_on_the_twin():

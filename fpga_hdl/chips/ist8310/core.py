@@ -3,10 +3,13 @@
 from amaranth.build import Platform
 from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
-from amaranth.lib.wiring import In, Out
 
-from fpga_hdl.buses.i2c_target import I2cTarget, TargetSampling
-from fpga_hdl.buses.signatures import BUS_FAULT, I2C
+from fpga_hdl.buses.i2c_target import (
+    I2cTarget,
+    TargetSampling,
+    i2c_chip_members,
+    settle_i2c_chip,
+)
 from fpga_hdl.chips.ist8310 import regs
 from fpga_hdl.chips.ist8310.regs import Register
 from fpga_hdl.host.host_port import chip_sample_latch
@@ -51,31 +54,31 @@ class Ist8310Core(wiring.Component):
     fault : In(BUS_FAULT)
         While ``mute`` is 1 the chip does not answer (no ACK); ``flip`` is XORed into
         every byte the chip sends.
+    settled : Out(1)
+        ``skippable`` only: nothing changes at the coming edges until the bus does
+        (:func:`~fpga_hdl.buses.i2c_target.settle_i2c_chip`).
     """
 
-    i2c: In(I2C)
-    sample: In(regs.SAMPLE_LAYOUT)
-    sample_stb: In(1)
-    sample_pending: Out(1)
-    now_us: In(32)
-    fault: In(BUS_FAULT)
-
-    def __init__(self, *, sys_clk_hz: float, address: int = regs.DEFAULT_ADDRESS) -> None:
+    def __init__(self, *, sys_clk_hz: float, address: int = regs.DEFAULT_ADDRESS,
+                 skippable: bool = False) -> None:  # fmt: skip
         regs.check_address(address)
         self.address = address
         self.sampling = TargetSampling.for_clock(sys_clk_hz)
-        super().__init__()
+        self.skippable = skippable
+        super().__init__(i2c_chip_members(regs.SAMPLE_LAYOUT, skippable=skippable))
 
     def elaborate(self, platform: Platform | None) -> Module:
         m = Module()
         m.submodules.target = target = I2cTarget(
-            address=self.address, sys_clk_hz=self.sampling.sys_clk_hz
+            address=self.address, sys_clk_hz=self.sampling.sys_clk_hz, skippable=self.skippable
         )
         wiring.connect(m, wiring.flipped(self.i2c), target.i2c)
         wiring.connect(m, wiring.flipped(self.fault), target.fault)
 
         # Double buffer: the visible sample changes only between transactions.
         latch = chip_sample_latch(m, self, regs.SAMPLE_LAYOUT, busy=target.busy)
+        if self.skippable:
+            settle_i2c_chip(m, self, target, latch)
         visible = latch.visible
 
         stored = {reg: Signal(8, name=reg.name.lower()) for reg in regs.STORED_REGISTERS}
