@@ -8,10 +8,13 @@ NACKs included; the rig's layer compares the PWM capture with the TLM frame by f
 """
 
 import asyncio
+import contextlib
 import random
 import struct
 import subprocess
 import sys
+from collections.abc import Iterator
+from typing import Any
 
 import pytest
 from amaranth.hdl import Shape
@@ -74,6 +77,22 @@ def harness():
     harness.close()
 
 
+@contextlib.contextmanager
+def _compared(**every_cycle: bool) -> Iterator[tuple[Any, Any]]:
+    """A harness clocked by event (the default) and one clocking every cycle of what
+    ``every_cycle`` names, both reset: the two a by-event test compares."""
+    from fpga_hdl.cosim.native import NativeHarness
+
+    harnesses = (NativeHarness(), NativeHarness(**every_cycle))
+    try:
+        for harness in harnesses:
+            harness.reset()
+        yield harnesses
+    finally:
+        for harness in harnesses:
+            harness.close()
+
+
 class _HostChips:
     def __init__(self, harness) -> None:
         self.harness = harness
@@ -123,15 +142,10 @@ def test_the_capture_clock_by_event_equals_every_tick():
     """One edge per quiet stretch (the default) against one edge per tick: the same results
     at every read and the same tick count, through pulses, period starts, width changes,
     widths of 0, 1 and beyond the period, a stopped generator and the 0.1 s timeout."""
-    from fpga_hdl.cosim.native import NativeHarness
-
-    by_event, every_tick = NativeHarness(), NativeHarness(pwm_by_event=False)
-    harnesses = (by_event, every_tick)
     rng = random.Random(36)
     timeouts = 0
-    try:
-        for harness in harnesses:
-            harness.reset()
+    with _compared(pwm_by_event=False) as harnesses:
+        by_event, every_tick = harnesses
         for _ in range(1500):
             if rng.random() < 0.3:
                 period = rng.choice([2500, 2500, 2500, 3000, 20, 5, 2, 0])
@@ -146,9 +160,6 @@ def test_the_capture_clock_by_event_equals_every_tick():
             assert captures == every_tick.host.pwm_capture()
             assert by_event.cycles() == every_tick.cycles()
             timeouts += sum(capture.timeout for capture in captures)
-    finally:
-        for harness in harnesses:
-            harness.close()
     assert timeouts > 0  # the programs reached the capture's timeout
 
 
@@ -222,10 +233,6 @@ def test_the_uart_clock_by_event_equals_every_cycle():
     switches, ACKs, NAKs, MON-VER), CFG-RATE, fixes at 10 Hz loaded just before an
     exchange or while a NAV-PVT is still on the line, the mute and flip faults, and
     bytes the receiver drops (garbage, a bad checksum, a frame split over exchanges)."""
-    from fpga_hdl.cosim.native import NativeHarness
-
-    by_event, every_cycle = NativeHarness(), NativeHarness(uart_by_event=False)
-    harnesses = (by_event, every_cycle)
     rng = random.Random(36)
     rate = ubx.frame(ubx.CLASS_CFG, ubx.ID_CFG_RATE, struct.pack("<HHH", 100, 1, 0))
     bad = bytearray(rate)
@@ -237,9 +244,8 @@ def test_the_uart_clock_by_event_equals_every_cycle():
         assert by_event.uart.line_cycles == every_cycle.uart.line_cycles
         assert by_event.cycles() == every_cycle.cycles()
 
-    try:
-        for harness in harnesses:
-            harness.reset()
+    with _compared(uart_by_event=False) as harnesses:
+        by_event, every_cycle = harnesses
         for step in px4_configuration():
             exchange(step.frame, step.baud)
         exchange(rate, 115200)
@@ -257,9 +263,6 @@ def test_the_uart_clock_by_event_equals_every_cycle():
             if k % 7 == 3:  # the next fix lands while this one's NAV-PVT is on the line
                 exchange(b"", 115200)
         assert by_event.cycles()[2] > 1_000_000  # whole frames really crossed the line
-    finally:
-        for harness in harnesses:
-            harness.close()
 
 
 def test_the_i2c_clock_by_event_equals_every_cycle():
@@ -269,17 +272,12 @@ def test_the_i2c_clock_by_event_equals_every_cycle():
     reads of up to the buffer's length, with and without auto-increment), samples, time
     and mute/flip faults loaded between them, and a sample loaded while the host writer
     clocks the bus between two transfers."""
-    from fpga_hdl.cosim.native import NativeHarness
-
-    by_event, every_cycle = NativeHarness(), NativeHarness(i2c_by_event=False)
-    harnesses = (by_event, every_cycle)
     rng = random.Random(36)
     addresses = (ist.DEFAULT_ADDRESS, lidar.DEFAULT_ADDRESS, 0x30)
     nacks = reads = 0
     now_us = 1
-    try:
-        for harness in harnesses:
-            harness.reset()
+    with _compared(i2c_by_event=False) as harnesses:
+        by_event, every_cycle = harnesses
         for _ in range(400):
             if rng.random() < 0.3:
                 now_us += rng.choice([1, 100, 6_000, 20_000])
@@ -311,9 +309,6 @@ def test_the_i2c_clock_by_event_equals_every_cycle():
             assert by_event.cycles() == every_cycle.cycles()
             nacks += isinstance(results[0], str)
             reads += isinstance(results[0], bytes) and len(results[0]) > 0
-    finally:
-        for harness in harnesses:
-            harness.close()
     assert nacks > 20  # the absent address and the muted chips refused
     assert reads > 100  # the others answered
 
