@@ -506,9 +506,8 @@ class NativeHarness:
     clock, the UART clock and the I2C clock advance by event (one edge for each quiet
     stretch, see ``native_harness.cpp``); ``pwm_by_event=False``, ``uart_by_event=False``
     and ``i2c_by_event=False`` clock every cycle, the reference the tests compare them
-    with. ``spi_mode`` is the SPI bus's
-    mode, built in: a transfer clocks only the chip it selects (SensorTop's
-    ``spi_idle_sclk``).
+    with. ``spi_mode`` is the SPI bus's mode, built in: a transfer clocks only the chip it
+    selects (SensorTop's ``spi_idle_sclk``).
     """
 
     def __init__(
