@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Collection, Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,9 +39,9 @@ PWM_TICK_HZ = 1e6
 PWM_TIMEOUT_S = 0.1
 
 
-@dataclass(frozen=True)
-class Pulse:
-    """One PWM pulse on ``channel``: rising edge at ``start_us``, ``width_us`` long."""
+class Pulse(NamedTuple):
+    """One PWM pulse on ``channel``: rising edge at ``start_us``, ``width_us`` long (a named
+    tuple: the rig makes one per motor and PWM period)."""
 
     channel: int
     start_us: int
@@ -184,29 +184,29 @@ class PwmCapture:
         between those events the width and timeout registers hold (a rise changes only
         the period, which the rig does not use).
         """
-        model = self.model
-        for pulse in pulses:
-            start_us, fall_us = pulse.start_us, pulse.start_us + pulse.width_us
+        model, latency_us = self.model, self._latency_us
+        recents, last_us, next_change_us = self._recent, self._last_us, self._next_change_us
+        for channel, start_us, width_us in pulses:
+            fall_us = start_us + width_us
             start_s = start_us / 1e6
-            self._recent[pulse.channel].append(
-                model.sampled(start_s, start_s + pulse.width_us / 1e6)
-            )
-            self._last_us[pulse.channel] = (start_us, fall_us)
-            seen_fall_us = fall_us + self._latency_us  # seen by a read
-            next_change_us = self._next_change_us[pulse.channel]
-            self._next_change_us[pulse.channel] = min(next_change_us, seen_fall_us)
+            recents[channel].append(model.sampled(start_s, start_s + width_us / 1e6))
+            last_us[channel] = (start_us, fall_us)
+            seen_fall_us = fall_us + latency_us  # seen by a read
+            if seen_fall_us < next_change_us[channel]:
+                next_change_us[channel] = seen_fall_us
         now = None
-        for channel, recent in enumerate(self._recent):
-            if now_us < self._next_change_us[channel]:
+        widths_us, timed_out = self._widths_us, self._timed_out
+        for channel, recent in enumerate(recents):
+            if now_us < next_change_us[channel]:
                 continue
             if now is None:
                 now = model.last_edge(now_us / 1e6)
-            result = model.capture_sampled(recent, now)
-            self._widths_us[channel] = result.width_ticks * self._tick_us
-            self._timed_out[channel] = result.timeout
-            last_rise_us, last_fall_us = self._last_us[channel]
-            seen_fall_us = last_fall_us + self._latency_us  # seen by a read
+            width_ticks, _, timeout = model.capture_sampled(recent, now)
+            widths_us[channel] = width_ticks * self._tick_us
+            timed_out[channel] = timeout
+            last_rise_us, last_fall_us = last_us[channel]
+            seen_fall_us = last_fall_us + latency_us  # seen by a read
             pending_fall = seen_fall_us if seen_fall_us > now_us else math.inf
-            timeout_at = math.inf if result.timeout else last_rise_us + self._timeout_us
-            self._next_change_us[channel] = min(pending_fall, timeout_at)
-        return tuple(self._widths_us), tuple(self._timed_out)
+            timeout_at = math.inf if timeout else last_rise_us + self._timeout_us
+            next_change_us[channel] = min(pending_fall, timeout_at)
+        return tuple(widths_us), tuple(timed_out)

@@ -79,27 +79,30 @@ class PwmCaptureModel:
         """:meth:`capture` for pulses already turned into clock edges (:meth:`sampled`),
         read just after edge ``now``: a caller that keeps a pulse train samples each pulse
         once instead of at every read."""
-        events = []
-        latency = self.latency_ticks
-        for rise_edge, fall_edge in sampled:
-            if rise_edge != fall_edge:  # a pulse between two samples is never seen
-                events += [(rise_edge + latency, True), (fall_edge + latency, False)]
-
+        # One pass over the pulses, rise then fall, without building an event list: the
+        # rig recomputes every motor's channel at each pulse end.
+        latency, timeout_ticks = self.latency_ticks, self.timeout_ticks
         width = period = 0
         timeout, armed, last_rise = True, False, 0
-        for edge, is_rise in events:
-            if edge > now:
+        for rise_edge, fall_edge in sampled:
+            if rise_edge == fall_edge:  # a pulse between two samples is never seen
+                continue
+            rise = rise_edge + latency
+            if rise > now:
                 break
-            deadline = last_rise + self.timeout_ticks
-            if armed and (deadline < edge or (deadline == edge and not is_rise)):
+            if armed and last_rise + timeout_ticks < rise:  # a rise on the deadline is in time
                 armed, timeout, width, period = False, True, 0, 0
-            if is_rise:
-                if armed:
-                    period = edge - last_rise
-                armed, last_rise = True, edge
-            elif armed:
-                width, timeout = edge - last_rise, False
-        if armed and last_rise + self.timeout_ticks <= now:
+            if armed:
+                period = rise - last_rise
+            armed, last_rise = True, rise
+            fall = fall_edge + latency
+            if fall > now:
+                break
+            if last_rise + timeout_ticks <= fall:  # a fall on the deadline is too late
+                armed, timeout, width, period = False, True, 0, 0
+            else:
+                width, timeout = fall - last_rise, False
+        if armed and last_rise + timeout_ticks <= now:
             timeout, width, period = True, 0, 0
         return ChannelCapture(width, period, timeout)
 
