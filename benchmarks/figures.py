@@ -68,9 +68,23 @@ def chips_detail(result: RunResult) -> str:
     return "chips per frame: " + " · ".join(parts) if parts else ""
 
 
+def late_detail(result: RunResult) -> str:
+    """How often the autopilot set a frame's pace: its answer was not there yet when the
+    rig, its own work for the frame done, asked for it (the two share the machine's cores,
+    so the frame is the longer of the two)."""
+    link = result.link
+    if not link.answers:
+        return ""
+    wait_us = result.budget.autopilot_wait_us * result.frames / max(link.late_answers, 1)
+    return (f"autopilot's answer late in {link.late_answers / link.answers:.0%} of frames "
+            f"(about {wait_us:.0f} µs each)")  # fmt: skip
+
+
 def run_detail(result: RunResult) -> str:
-    """A flown case's detail: its frame budget, and the compiled chips' share (RTL)."""
-    return "; ".join(filter(None, [budget_detail(result.budget), chips_detail(result)]))
+    """A flown case's detail: its frame budget, how often the autopilot set the pace, and
+    the compiled chips' share (RTL)."""
+    parts = [budget_detail(result.budget), late_detail(result), chips_detail(result)]
+    return "; ".join(filter(None, parts))
 
 
 def lowest_of(runs: list[Figure], goal: str = "") -> Figure:

@@ -92,6 +92,9 @@ class LinkStats:
 
     frames_sent: int = 0
     answers: int = 0
+    #: Answers not there yet when the rig asked for them: frames in which the autopilot's
+    #: compute outlasted the work the rig overlaps with it (the autopilot set the pace).
+    late_answers: int = 0
     stale_answers: int = 0
     #: Answers stamped like the one before: PX4 may publish its outputs twice in one step.
     repeated_answers: int = 0
@@ -297,7 +300,10 @@ class SimulatorLink:
         self._awaited_us = time_us
         waiting = time.perf_counter()
         if self._poll_answers and self._last_wait_s < ANSWER_POLL_S:
-            self._poll(waiting + ANSWER_POLL_S)
+            there = self._poll(waiting + ANSWER_POLL_S)
+        else:
+            there = bool(select.select([self._connection()], [], [], 0)[0])
+        self.stats.late_answers += not there
         while self._latest is None or self._latest.time_us < time_us:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -314,14 +320,18 @@ class SimulatorLink:
         self._last_wait_s = time.perf_counter() - waiting
         self.stats.answers += 1
 
-    def _poll(self, until_s: float) -> None:
+    def _poll(self, until_s: float) -> bool:
         """Poll for the autopilot's bytes until they are there or ``until_s`` (a
-        ``perf_counter`` time) has passed, yielding the CPU between polls."""
+        ``perf_counter`` time) has passed, yielding the CPU between polls; whether they
+        were there at the first look."""
         conn = self._connection()
         started = time.perf_counter()
-        while not select.select([conn], [], [], 0)[0] and time.perf_counter() < until_s:
+        there = ready = bool(select.select([conn], [], [], 0)[0])
+        while not ready and time.perf_counter() < until_s:
             os.sched_yield()
+            ready = bool(select.select([conn], [], [], 0)[0])
         self.stats.wait_s += time.perf_counter() - started
+        return there
 
     def _receive(self, timeout_s: float) -> None:
         """Read what is there (waiting at most ``timeout_s``) and handle each message."""

@@ -20,6 +20,9 @@ Behaviours:
 - ``twice``: answers ``--after`` frames, then sends every answer twice (PX4 may publish
   its outputs twice in one lockstep step).
 
+``--answer-delay-ms D`` holds each answer D ms: an autopilot that computes longer than the
+rig's own work between sending a frame and asking for its answer.
+
 Each received frame is appended to ``--record`` (one JSON line: msg type and fields), so a
 test can check what reached the autopilot.
 """
@@ -67,6 +70,7 @@ def main() -> None:
     parser.add_argument("--arm-after", type=int, default=0)
     parser.add_argument("--record", default=None)
     parser.add_argument("--ignore-sigint", action="store_true", help="a hung shutdown")
+    parser.add_argument("--answer-delay-ms", type=float, default=0.0)
     args = parser.parse_args()
     if args.ignore_sigint:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -136,6 +140,7 @@ def answer_frames(sock: socket.socket, mav: mavlink.MAVLink, record, args) -> No
             else:
                 controls, mode = [0.0] * 16, 1
             answer = mav.hil_actuator_controls_encode(message.time_usec, controls, mode, 1)
+            time.sleep(args.answer_delay_ms / 1e3)
             copies = 2 if misbehaving and args.behaviour == "twice" else 1
             sock.sendall(answer.pack(mav) * copies)
 

@@ -89,6 +89,24 @@ def test_lockstep_uses_the_answer_to_each_frame(listening_link, start_double):
     assert answer.time_us == link.stats.frames_sent * FRAME_US
 
 
+def test_the_link_counts_the_answers_the_rig_had_to_wait_for(listening_link, start_double):
+    """An answer not there when the rig asks means the autopilot set the pace of that
+    frame: a run's budget says how often."""
+    link = listening_link()
+    start_double(link.ports.simulator_tcp, "px4", "--answer-delay-ms", "20")
+    link.accept()
+    while not link.lockstep:
+        _run_frames(link, 1, start=link.stats.frames_sent + 1)
+    late = link.stats.late_answers
+    _run_frames(link, 5, start=link.stats.frames_sent + 1)  # asked at once: 20 ms to go
+    assert link.stats.late_answers == late + 5
+    for k in range(link.stats.frames_sent + 1, link.stats.frames_sent + 6):
+        link.send_frame(k * FRAME_US, _frame(link, k))
+        time.sleep(0.2)  # the rig's own work outlasts the autopilot's
+        assert link.answer(k * FRAME_US).time_us == k * FRAME_US
+    assert link.stats.late_answers == late + 5
+
+
 def test_hung_autopilot_is_reported_as_the_stalled_side(listening_link, start_double):
     link = listening_link(LinkTimeouts(connect_s=10, answer_s=0.3))
     process = start_double(link.ports.simulator_tcp, "hang", "--after", "20")
