@@ -299,11 +299,11 @@ class SimulatorLink:
         deadline = time.monotonic() + self.timeouts.answer_s
         self._awaited_us = time_us
         waiting = time.perf_counter()
-        if self._poll_answers and self._last_wait_s < ANSWER_POLL_S:
-            there = self._poll(waiting + ANSWER_POLL_S)
-        else:
-            there = bool(select.select([self._connection()], [], [], 0)[0])
-        self.stats.late_answers += not there
+        self._receive(0.0)  # what has arrived: the answer, unless the autopilot is late
+        if self._latest is None or self._latest.time_us < time_us:
+            self.stats.late_answers += 1
+            if self._poll_answers and self._last_wait_s < ANSWER_POLL_S:
+                self._poll(waiting + ANSWER_POLL_S)
         while self._latest is None or self._latest.time_us < time_us:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -320,18 +320,14 @@ class SimulatorLink:
         self._last_wait_s = time.perf_counter() - waiting
         self.stats.answers += 1
 
-    def _poll(self, until_s: float) -> bool:
+    def _poll(self, until_s: float) -> None:
         """Poll for the autopilot's bytes until they are there or ``until_s`` (a
-        ``perf_counter`` time) has passed, yielding the CPU between polls; whether they
-        were there at the first look."""
+        ``perf_counter`` time) has passed, yielding the CPU between polls."""
         conn = self._connection()
         started = time.perf_counter()
-        there = ready = bool(select.select([conn], [], [], 0)[0])
-        while not ready and time.perf_counter() < until_s:
+        while not select.select([conn], [], [], 0)[0] and time.perf_counter() < until_s:
             os.sched_yield()
-            ready = bool(select.select([conn], [], [], 0)[0])
         self.stats.wait_s += time.perf_counter() - started
-        return there
 
     def _receive(self, timeout_s: float) -> None:
         """Read what is there (waiting at most ``timeout_s``) and handle each message."""
