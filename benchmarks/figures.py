@@ -71,13 +71,14 @@ def chips_detail(result: RunResult) -> str:
 def late_detail(result: RunResult) -> str:
     """How often the autopilot set a frame's pace: its answer was not there yet when the
     rig, its own work for the frame done, asked for it (the two share the machine's cores,
-    so the frame is the longer of the two)."""
+    so such a frame is the autopilot's compute, not the rig's work)."""
     link = result.link
     if not link.answers:
         return ""
-    wait_us = result.budget.autopilot_wait_us * result.frames / max(link.late_answers, 1)
-    return (f"autopilot's answer late in {link.late_answers / link.answers:.0%} of frames "
-            f"(about {wait_us:.0f} µs each)")  # fmt: skip
+    late = f"autopilot's answer late in {link.late_answers:,} of {link.answers:,} frames"
+    if not link.late_answers:
+        return late
+    return f"{late}, {link.late_wait_s / link.late_answers * 1e6:.0f} µs each"
 
 
 def run_detail(result: RunResult) -> str:

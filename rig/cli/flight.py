@@ -106,12 +106,12 @@ def speed_shortfall(result: RunResult, speed: float) -> str | None:
         return None
     frame_us = result.simulated_s / max(result.frames, 1) * 1e6
     budget, link = result.budget, result.link
-    late = link.late_answers / link.answers if link.answers else 0.0
     return (
         f"could not keep --speed {speed:g}: it ran at {result.real_time_factor:.2f}x real time; "
         f"each {frame_us:,.0f} µs frame took {budget.total_us:,.0f} µs here, "
         f"{budget.chips_us:,.0f} of them in the chips and {budget.autopilot_wait_us:,.0f} "
-        f"waiting for the autopilot, whose answer came late in {late:.0%} of frames "
+        f"waiting for the autopilot, whose answer came late in {link.late_answers:,} of "
+        f"{link.answers:,} frames "
         "(make bench has the breakdown)"
     )
 

@@ -93,8 +93,10 @@ class LinkStats:
     frames_sent: int = 0
     answers: int = 0
     #: Answers not there yet when the rig asked for them: frames in which the autopilot's
-    #: compute outlasted the work the rig overlaps with it (the autopilot set the pace).
+    #: compute outlasted the work the rig overlaps with it (the autopilot set the pace),
+    #: and the wall time from asking for those to having them.
     late_answers: int = 0
+    late_wait_s: float = 0.0
     stale_answers: int = 0
     #: Answers stamped like the one before: PX4 may publish its outputs twice in one step.
     repeated_answers: int = 0
@@ -300,10 +302,9 @@ class SimulatorLink:
         self._awaited_us = time_us
         waiting = time.perf_counter()
         self._receive(0.0)  # what has arrived: the answer, unless the autopilot is late
-        if self._latest is None or self._latest.time_us < time_us:
-            self.stats.late_answers += 1
-            if self._poll_answers and self._last_wait_s < ANSWER_POLL_S:
-                self._poll(waiting + ANSWER_POLL_S)
+        late = self._latest is None or self._latest.time_us < time_us
+        if late and self._poll_answers and self._last_wait_s < ANSWER_POLL_S:
+            self._poll(waiting + ANSWER_POLL_S)
         while self._latest is None or self._latest.time_us < time_us:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -319,6 +320,9 @@ class SimulatorLink:
         self._awaited_us = None
         self._last_wait_s = time.perf_counter() - waiting
         self.stats.answers += 1
+        if late:
+            self.stats.late_answers += 1
+            self.stats.late_wait_s += self._last_wait_s
 
     def _poll(self, until_s: float) -> None:
         """Poll for the autopilot's bytes until they are there or ``until_s`` (a

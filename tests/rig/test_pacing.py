@@ -93,7 +93,7 @@ def test_a_run_that_could_not_keep_its_speed_says_so_and_where_the_time_went():
     assert line is not None
     assert "could not keep --speed 1: it ran at 0.70x real time" in line
     assert "each 1,000 µs frame took 1,340 µs here, 1,000 of them in the chips" in line
-    assert "100 waiting for the autopilot, whose answer came late in 25% of frames" in line
+    assert "100 waiting for the autopilot, whose answer came late in 17,500 of 70,000" in line
     assert speed_shortfall(_result(70.0, 70.5, 500.0, 100.0), 1.0) is None  # kept: paced
     assert speed_shortfall(slow, 0.5) is None  # half speed asked, 0.7 achieved
     assert speed_shortfall(slow, math.inf) is None  # as fast as it can: nothing to keep
