@@ -35,7 +35,6 @@ and the error propagates as one line.
 
 from __future__ import annotations
 
-import gc
 import math
 import time
 from collections.abc import Callable
@@ -442,11 +441,6 @@ class _Loop:
         # would otherwise spend behind the wall clock.
         truth, readings = self._advance(1)
         self._sense(1, readings)
-        # What start-up made (modules, the compiled model, the chips, the links) lives as
-        # long as the run: kept out of the collector, a full collection does not scan it
-        # all again (a 0.1 s stall in a PX4 run's frames).
-        gc.freeze()
-        self._closers.append(gc.unfreeze)
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
         self._spent_s = dict.fromkeys(self._spent_s, 0.0)  # and so does the budget
         pacer = Pacer(self.options.speed)
