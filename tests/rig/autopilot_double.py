@@ -140,7 +140,8 @@ def answer_frames(sock: socket.socket, mav: mavlink.MAVLink, record, args) -> No
             else:
                 controls, mode = [0.0] * 16, 1
             answer = mav.hil_actuator_controls_encode(message.time_usec, controls, mode, 1)
-            time.sleep(args.answer_delay_ms / 1e3)
+            if args.answer_delay_ms:
+                time.sleep(args.answer_delay_ms / 1e3)
             copies = 2 if misbehaving and args.behaviour == "twice" else 1
             sock.sendall(answer.pack(mav) * copies)
 
