@@ -111,8 +111,7 @@ def speed_shortfall(result: RunResult, speed: float) -> str | None:
         f"each {frame_us:,.0f} µs frame took {budget.total_us:,.0f} µs here, "
         f"{budget.chips_us:,.0f} of them in the chips and {budget.autopilot_wait_us:,.0f} "
         f"waiting for the autopilot, whose answer came late in {link.late_answers:,} of "
-        f"{link.answers:,} frames "
-        "(make bench has the breakdown)"
+        f"{link.answers:,} frames (make bench has the breakdown)"
     )
 
 
