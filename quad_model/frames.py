@@ -11,7 +11,6 @@ functions, so there is one definition of each convention, used by the rig too.
 """
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 from numba import njit
@@ -92,10 +91,11 @@ def euler_from_quat(q: ArrayLike) -> NDArray[np.float64]:
     return np.array([roll, pitch, yaw_from_quat((w, x, y, z))])
 
 
-def yaw_from_quat(q: Sequence[float] | NDArray[np.float64]) -> float:
-    """The Z-Y-X yaw (heading) in rad of a body→NED quaternion, alone (a logger's hot path)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+def yaw_from_quat(q: ArrayLike) -> NDArray[np.float64]:
+    """The Z-Y-X yaw (heading) in rad of body→NED quaternions (``w, x, y, z`` along the
+    last axis), alone: a log's heading column."""
+    w, x, y, z = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
 def yaw_quat(yaw_rad: float) -> NDArray[np.float64]:

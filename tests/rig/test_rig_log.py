@@ -8,7 +8,7 @@ from pyulog import ULog
 
 from quad_model import QuadModel, load_vehicle
 from quad_model.frames import yaw_from_quat
-from rig.logs.rig_log import TOPICS, RigLog
+from rig.logs.rig_log import TOPICS, TRUTH_BLOCK, RigLog
 from rig.logs.ulog_writer import ULogWriter
 
 HOME = (47.397742, 8.545594, 488.0)
@@ -26,9 +26,12 @@ def test_every_frame_row_matches_the_by_name_write(tmp_path):
                  home_lon_deg=HOME[1], home_alt_m=HOME[2])  # fmt: skip
     expected = ULogWriter(tmp_path / "names.ulg", TOPICS)
     previous = None
-    for frame in range(1, 4):
+    # Past a block of truth (written at once), with a repeated time at the block's edge.
+    times = [frame * 4000 for frame in range(1, TRUTH_BLOCK + 4)]
+    times[TRUTH_BLOCK] = times[TRUTH_BLOCK - 1]
+    for frame, t in enumerate(times, start=1):
         model.advance(np.array([0.6, 0.5, 0.55, 0.45]), 0.004)
-        truth, t = model.truth, frame * 4000
+        truth = model.truth
         accel, gyro = (0.1 * frame, -0.2, -9.8), (0.01, 0.02 * frame, -0.03)
         controls, widths = (0.5, 0.6, 0.7, 0.8), (1500.0, 1600.0, 1700.0, 1800.0)
         log.truth(t, truth)
@@ -38,8 +41,9 @@ def test_every_frame_row_matches_the_by_name_write(tmp_path):
         log.optical_flow(t, (0.01 * frame, -0.02), 20_000, 200)
 
         rates = truth.angular_rate_frd_radps
-        derivative = np.zeros(3) if previous is None else (rates - previous) / 0.004
-        previous = rates
+        moved = previous is not None and t > previous[0]
+        derivative = (rates - previous[1]) / ((t - previous[0]) / 1e6) if moved else np.zeros(3)
+        previous = (t, rates)
         q = truth.attitude_quat
         p, v, a = truth.position_ned_m, truth.velocity_ned_mps, truth.acceleration_ned_mps2
         expected.write("vehicle_attitude_groundtruth", t, timestamp_sample=t, q=q,

@@ -57,6 +57,34 @@ def test_round_trip_values_instances_info_parameters_and_messages(tmp_path):
     ]
 
 
+def test_records_write_the_bytes_of_row_by_row_writes(tmp_path):
+    """A block of records is the same data messages as the rows written one by one, for
+    every kind of field (arrays, bool, char, a second instance)."""
+    rows = [(1000 * i, [0.5 * i, 0.1, -0.2, 0.3], 0.25 * i) for i in range(1, 6)]
+    with ULogWriter(tmp_path / "rows.ulg", TOPICS) as log:
+        for t, q, yawspeed in rows:
+            log.write("vehicle_attitude", t, q=q, yawspeed=yawspeed)
+        log.write("vehicle_status", 10, nav_state=4, armed=True, name="hover")
+        log.write("sensor_accel", 20, multi_id=1, device_id=8, x=1.0, y=2.0, z=3.0)
+    with ULogWriter(tmp_path / "records.ulg", TOPICS) as log:
+        attitude = log.records("vehicle_attitude", len(rows))
+        attitude["timestamp"] = [t for t, _, _ in rows]
+        attitude["q"] = [q for _, q, _ in rows]
+        attitude["yawspeed"] = [yawspeed for _, _, yawspeed in rows]
+        log.write_records("vehicle_attitude", attitude)
+        status = log.records("vehicle_status", 1)
+        status["timestamp"], status["nav_state"], status["armed"] = 10, 4, True
+        status["name"] = b"hover"
+        log.write_records("vehicle_status", status)
+        accel = log.records("sensor_accel", 1)
+        accel["timestamp"], accel["device_id"], accel["x"], accel["y"], accel["z"] = (
+            20, 8, 1.0, 2.0, 3.0)  # fmt: skip
+        log.write_records("sensor_accel", accel, multi_id=1)
+        with pytest.raises(ULogWriteError, match="records not made by records"):
+            log.write_records("sensor_accel", attitude)
+    assert (tmp_path / "records.ulg").read_bytes() == (tmp_path / "rows.ulg").read_bytes()
+
+
 def test_killed_writer_leaves_a_readable_log(tmp_path):
     """A process killed mid-run (no close, no atexit) keeps everything flushed before it."""
     path = tmp_path / "killed.ulg"
