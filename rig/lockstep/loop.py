@@ -444,7 +444,7 @@ class _Loop:
         self._sense(1, readings)
         # The start-up (imports, the autopilot's connection, the chips) leaves thousands of
         # new long-lived objects, so the collector's next full pass would fall in the first
-        # seconds of the run: 70-110 ms in which no frame moves, a stall a paced run shows.
+        # seconds of the run: 70-180 ms in which no frame moves, a stall a paced run shows.
         # Collected now, the next full pass is many minutes of frames away.
         gc.collect()
         self._wall_start = time.monotonic()  # the RTF counts the frames, not the start-up
