@@ -86,17 +86,17 @@ def _median(runs: list[Figure]) -> Figure:
     return Figure(middle.name, value, middle.unit, detail=f"{spread}; {middle.detail}")
 
 
-def _share(runs: list[Figure], anchors: list[Figure], goal: float) -> Figure:
+def lowest_share(runs: list[Figure], anchors: list[Figure], goal: float) -> Figure:
     """The lowest of the rounds' shares of the anchor: in each round the anchor flew just
     before the rig, so a spell of the machine's pace falls on both."""
     name = f"{runs[0].name}, share of the anchor"
     if any(math.isnan(run.value) for run in (*runs, *anchors)):
         return Figure(name, math.nan, "% of the anchor", detail="a flight failed (see above)")
-    shares = sorted(
-        run.value / anchor.value * 100 for run, anchor in zip(runs, anchors, strict=True)
-    )
-    detail = f"lowest of {len(shares)} rounds ({', '.join(f'{s:.0f}' for s in shares)} %)"
-    return Figure(name, shares[0], "% of the anchor", f"≥ {goal:.0%}", detail)
+    rounds = sorted((run.value / anchor.value * 100, run.value, anchor.value)
+                    for run, anchor in zip(runs, anchors, strict=True))  # fmt: skip
+    each = ", ".join(f"{share:.0f} % ({rig:.2f}× / {bare:.2f}×)" for share, rig, bare in rounds)
+    detail = f"lowest of {len(rounds)} rounds (rig / anchor): {each}"
+    return Figure(name, rounds[0][0], "% of the anchor", f"≥ {goal:.0%}", detail)
 
 
 def figures() -> Iterator[Figure]:
@@ -123,4 +123,4 @@ def figures() -> Iterator[Figure]:
             yield _median(layer_runs)
         for (label, rate), goal in GOAL_SHARES.items():
             if rate == imu_hz:
-                yield _share(runs[label], anchors, goal)
+                yield lowest_share(runs[label], anchors, goal)

@@ -3,11 +3,13 @@
 answer each other (the benchmarks themselves run in ``make bench``)."""
 
 import json
+import math
 from pathlib import Path
 
 import pytest
 
 from benchmarks.__main__ import main, merged_record
+from benchmarks.bench_px4 import lowest_share
 from benchmarks.figures import Figure, chips_detail, lowest_of
 from benchmarks.lockstep_exchange import MODES, exchange_us
 from fpga_hdl.cosim.native import CallCost
@@ -90,6 +92,23 @@ def test_repeated_runs_count_the_lowest_and_show_the_spread():
     assert figure.detail == "lowest of 3 runs (0.70, 0.80, 0.90); run 0.7"
     failed = Figure("RTL", float("nan"), "× real time", detail="failed: stalled")
     assert lowest_of([*runs, failed]) is failed  # a failure is never hidden by the others
+
+
+def test_a_px4_goal_counts_the_lowest_round_against_its_own_anchor():
+    """Each round's share is the rig over the anchor flown with it, not over the median
+    anchor: the rounds' medians would read 8/10 = 80 % here."""
+    rig = [Figure("PX4 + rig, TLM", value, "× real time") for value in (8.0, 6.0, 9.0)]
+    anchors = [Figure("anchor", value, "× real time") for value in (10.0, 12.0, 9.0)]
+    figure = lowest_share(rig, anchors, 0.8)
+    assert (figure.name, figure.value, figure.goal) == (
+        "PX4 + rig, TLM, share of the anchor",
+        50.0,
+        "≥ 80%",
+    )
+    assert figure.detail == ("lowest of 3 rounds (rig / anchor): 50 % (6.00× / 12.00×), "
+                             "80 % (8.00× / 10.00×), 100 % (9.00× / 9.00×)")  # fmt: skip
+    failed = Figure("anchor", float("nan"), "× real time", detail="failed: stalled")
+    assert math.isnan(lowest_share(rig, [*anchors[:2], failed], 0.8).value)
 
 
 def test_the_chips_budget_is_per_frame_and_most_expensive_first():
