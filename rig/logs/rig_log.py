@@ -106,9 +106,8 @@ class RigLog:
         self.path = self.writer.path
         self._home = (home_lat_deg, home_lon_deg, home_alt_m)
         self._truths: list[tuple[int, VehicleTruth]] = []
-        #: The last written snapshot's rates and time (the next one's rate derivative).
-        self._previous_rates: np.ndarray | None = None
-        self._previous_us = 0
+        #: The last written snapshot's time and rates (the next one's rate derivative).
+        self._last: tuple[int, np.ndarray] | None = None
         self._errors = {"ist8310": 0, "ms5611": 0, "mpu6000": 0, "lidarlite": 0, "pmw3901": 0}
         self._rows: dict[str, Callable[..., None]] = {}
 
@@ -138,16 +137,15 @@ class RigLog:
             return np.array([getattr(truth, name) for truth in truths])
 
         q, rates = column("attitude_quat"), column("angular_rate_frd_radps")
-        # d(rate)/dt since the snapshot before (zero for the first, and at a repeated time)
-        first = self._previous_rates is None
-        before = rates[:1] if self._previous_rates is None else self._previous_rates
-        previous = np.vstack((before, rates[:-1]))
-        dt_s = np.diff(times_us, prepend=self._previous_us) / 1e6
+        # d(rate)/dt since the snapshot before: zero at a repeated time, so for the first
+        # snapshot of the run (it stands in for the one before it)
+        last_us, last_rates = self._last or (int(times_us[0]), rates[0])
+        previous = np.vstack((last_rates, rates[:-1]))
+        dt_s = np.diff(times_us, prepend=last_us) / 1e6
         moved = dt_s > 0
-        moved[0] &= not first
         derivative = np.zeros_like(rates)
         derivative[moved] = (rates[moved] - previous[moved]) / dt_s[moved, None]
-        self._previous_rates, self._previous_us = rates[-1], int(times_us[-1])
+        self._last = (int(times_us[-1]), rates[-1])
 
         records = self.writer.records
         attitude = records("vehicle_attitude_groundtruth", len(truths))

@@ -168,9 +168,7 @@ class ULogWriter:
         Runs for every logged sample, so it avoids numpy conversions: scalars go to
         ``struct`` as they are, arrays as their flattened list.
         """
-        spec = self._topics.get(topic)
-        if spec is None:
-            raise ULogWriteError(f"topic {topic!r} was not declared when the log was opened")
+        spec = self._topic(topic)
         if len(values) != len(spec.fields):
             raise _field_error(spec, values)
         prefix = self._data_prefixes.get((topic, multi_id)) or self._subscribe(spec, multi_id)
@@ -207,9 +205,7 @@ class ULogWriter:
         a caller that builds the row itself skips that (the rig log's tests check its rows
         against :meth:`write`'s).
         """
-        spec = self._topics.get(topic)
-        if spec is None:
-            raise ULogWriteError(f"topic {topic!r} was not declared when the log was opened")
+        spec = self._topic(topic)
         prefix = self._data_prefixes.get((topic, multi_id)) or self._subscribe(spec, multi_id)
         pack, pending, maybe_flush = spec.packer.pack, self._pending, self._maybe_flush
 
@@ -227,24 +223,28 @@ class ULogWriter:
     def records(self, topic: str, rows: int) -> np.ndarray:
         """``rows`` zeroed samples of ``topic`` as numpy records (``timestamp`` and the
         declared fields by name), to fill and hand to :meth:`write_records`."""
-        spec = self._topics.get(topic)
-        if spec is None:
-            raise ULogWriteError(f"topic {topic!r} was not declared when the log was opened")
-        return np.zeros(rows, spec.record)
+        return np.zeros(rows, self._topic(topic).record)
 
     def write_records(self, topic: str, records: np.ndarray, multi_id: int = 0) -> None:
-        """Append many samples of ``topic`` at once, from :meth:`records`.
+        """Append many samples of ``topic`` at once, from :meth:`records` (their headers are
+        set here).
 
         For a topic a run gathers in blocks: filling arrays field by field costs a fraction
         of packing each row (the rig's ground truth, five topics every frame).
         """
-        spec = self._topics[topic]
+        spec = self._topic(topic)
         if records.dtype != spec.record:
             raise ULogWriteError(f"topic {topic!r}: records not made by records({topic!r})")
         prefix = self._data_prefixes.get((topic, multi_id)) or self._subscribe(spec, multi_id)
         records["_header"] = np.void(prefix)
         self._pending += records.tobytes()
         self._maybe_flush()
+
+    def _topic(self, topic: str) -> _Topic:
+        spec = self._topics.get(topic)
+        if spec is None:
+            raise ULogWriteError(f"topic {topic!r} was not declared when the log was opened")
+        return spec
 
     def _subscribe(self, spec: _Topic, multi_id: int) -> bytes:
         """Add the subscription of an instance; returns its data-message prefix."""
