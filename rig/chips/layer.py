@@ -43,9 +43,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Coroutine, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, TypeVar
 
 from fpga_hdl.buses.transactions import (
     BusError,
@@ -120,16 +121,23 @@ class ChipFault:
 NO_FAULT = ChipFault()
 
 
-@dataclass(frozen=True)
-class ChipFrame:
-    """What the rig gives the chips for one frame; ``None`` where nothing new is loaded."""
+#: No chip faulted: the frames' default fault map (read-only: every frame shares it).
+NO_FAULTS: Mapping[str, ChipFault] = MappingProxyType({})
+
+
+class ChipFrame(NamedTuple):
+    """What the rig gives the chips for one frame; ``None`` where nothing new is loaded.
+
+    A named tuple, as :class:`ChipReadout`: the rig builds one each frame, and a frozen
+    dataclass's initialiser cost four times as much.
+    """
 
     now_us: int
     imu: mpu_regs.Mpu6000Sample | None
     mag: ist_regs.Ist8310Sample | None
     baro_d1_d2: tuple[int, int] | None
     read_mag: bool
-    faults: Mapping[str, ChipFault] = field(default_factory=dict)
+    faults: Mapping[str, ChipFault] = NO_FAULTS
     #: PWM pulses that started since the previous frame (the autopilot's outputs).
     pulses: tuple[Pulse, ...] = ()
     #: The SI samples the words came from; only :class:`BypassSensorLayer` reads them.
@@ -142,8 +150,7 @@ class ChipFrame:
     flow: Pmw3901Sample | None = None
 
 
-@dataclass(frozen=True)
-class ChipReadout:
+class ChipReadout(NamedTuple):
     """What the autopilot-side drivers decoded this frame (SI, sensor axes = body FRD)."""
 
     accel_mps2: tuple[float, float, float]

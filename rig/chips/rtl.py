@@ -30,7 +30,6 @@ import os
 import socket
 import tempfile
 import threading
-from dataclasses import replace
 from pathlib import Path
 
 from rig.chips.channel import (
@@ -160,7 +159,7 @@ class RtlSensorLayer(SensorLayer):
         frame, self._sensed = self._sensed, None
         if frame is None:
             raise CosimError("finish() without a sensed frame: call sense() first")
-        return decode_readout(self._request(encode_frame(replace(frame, pulses=pulses))))
+        return decode_readout(self._request(encode_frame(frame._replace(pulses=pulses))))
 
     def close(self) -> None:
         """Ask the simulator to finish (it writes its results), then release everything."""

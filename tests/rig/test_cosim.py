@@ -217,7 +217,7 @@ def test_rtl_readouts_equal_tlm_readouts_with_bus_faults_and_pwm(rtl_layer, nati
             shown = tuple(first if new == first else old
                           for new, old in zip(_boundary(OCTO), pwm[-3], strict=True))  # fmt: skip
             assert pwm[-2] == shown, f"frame {len(pwm) - 1}"
-        clean = healthy.frame(ChipFrame(**{**frame.__dict__, "faults": {}}))
+        clean = healthy.frame(frame._replace(faults={}))
         if (rtl.accel_mps2, rtl.baro_pa_degc) != (clean.accel_mps2, clean.baro_pa_degc):
             corrupted.add(frame.now_us // 1000)
         assert len(rtl.pwm_widths_us) == OCTO
@@ -355,7 +355,7 @@ def test_bypass_layer_passes_the_si_samples_and_commanded_widths():
     assert out.pwm_widths_us == (1500.0, 1501.0, 1502.0, 1503.0, 1504.0, 1505.0)
     assert out.pwm_timed_out == (False,) * hexa
     camera = Pmw3901Sample(77, -385, 90, 0)
-    out = bypass.frame(ChipFrame(**{**frame.__dict__, "now_us": 9000, "flow": camera}))
+    out = bypass.frame(frame._replace(now_us=9000, flow=camera))
     assert out.flow == FlowReport((0.2, -1.0), 9000, 90, 9000)
 
 

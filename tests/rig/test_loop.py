@@ -14,7 +14,6 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -256,7 +255,7 @@ def test_reading_the_sensors_while_the_autopilot_computes_changes_nothing(
             self._frame = frame
 
         def finish(self, pulses):
-            return run_now(self.engine.frame(replace(self._frame, pulses=pulses)))
+            return run_now(self.engine.frame(self._frame._replace(pulses=pulses)))
 
     spin = ("--behaviour", "px4", "--throttle", "0.6", "--arm-after", "100")
     _, overlapped, _ = fly(tmp_path, free_instance, *spin, name="overlapped", seed=7)
