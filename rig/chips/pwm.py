@@ -163,6 +163,8 @@ class PwmCapture:
             tick_hz=tick_hz, timeout_s=timeout_s, latency_ticks=PWM_RESULT_LATENCY_TICKS
         )
         self._tick_us = 1e6 / tick_hz
+        #: The tick in whole picoseconds, as the RTL layers count it: edges from integer µs.
+        self._tick_ps = round(1e12 / tick_hz)
         self._timeout_us = timeout_s * 1e6
         self._latency_us = PWM_RESULT_LATENCY_TICKS * self._tick_us
         #: Per channel, the last three pulses as the clock edges that sample them.
@@ -183,13 +185,18 @@ class PwmCapture:
         result latency) or its timeout may have run out since the last result:
         between those events the width and timeout registers hold (a rise changes only
         the period, which the rig does not use).
+
+        The clock edges that sample a pulse come from its whole µs in integer picoseconds,
+        as the RTL layers replay it: through seconds as floats (the model's ``sampled``),
+        an edge after 32 s of flight could land a tick late.
         """
-        model, latency_us = self.model, self._latency_us
+        model, latency_us, tick_ps = self.model, self._latency_us, self._tick_ps
         recents, last_us, next_change_us = self._recent, self._last_us, self._next_change_us
         for channel, start_us, width_us in pulses:
             fall_us = start_us + width_us
-            start_s = start_us / 1e6
-            recents[channel].append(model.sampled(start_s, start_s + width_us / 1e6))
+            # The first edge at or after each time: a ceiling division.
+            rise_edge = -(-start_us * 1_000_000 // tick_ps)
+            recents[channel].append((rise_edge, -(-fall_us * 1_000_000 // tick_ps)))
             last_us[channel] = (start_us, fall_us)
             seen_fall_us = fall_us + latency_us  # seen by a read
             if seen_fall_us < next_change_us[channel]:
@@ -200,7 +207,7 @@ class PwmCapture:
             if now_us < next_change_us[channel]:
                 continue
             if now is None:
-                now = model.last_edge(now_us / 1e6)
+                now = now_us * 1_000_000 // tick_ps  # the last edge at or before now
             width_ticks, _, timeout = model.capture_sampled(recent, now)
             widths_us[channel] = width_ticks * self._tick_us
             timed_out[channel] = timeout

@@ -298,6 +298,30 @@ def test_a_coarser_pwm_tick_is_the_same_on_every_layer():
 
 
 @pytest.mark.cosim
+def test_the_pwm_capture_is_the_same_on_every_layer_after_a_long_flight():
+    """From 32 s of flight on, a time in seconds as a float no longer holds its µs exactly:
+    the compiled RTL and the TLM model still capture every pulse alike, each width new
+    (the first frame replays the 32 s before, disarmed)."""
+    from rig.chips.native import NativeSensorLayer
+
+    native = _started(NativeSensorLayer(motors=QUAD, pwm_hz=PWM_HZ))
+    tlm = _started(TlmSensorLayer(motors=QUAD))
+    out = PwmOutput(QUAD, PWM_HZ)
+    imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)
+    scoreboard = Scoreboard("compiled RTL vs TLM")
+    try:
+        for k in range(400):
+            now_us = 32_000_000 + 1000 * k
+            out.command([(k * 7 + motor * 13) % 101 / 100 for motor in range(QUAD)], armed=k > 0)
+            pulses = tuple(out.pulses(now_us + 1))
+            frame = ChipFrame(now_us, imu, mag=None, baro_d1_d2=None, read_mag=False,
+                              pulses=pulses)  # fmt: skip
+            scoreboard.check(f"frame at {now_us} µs", tlm.frame(frame), native.frame(frame))
+    finally:
+        native.close()
+
+
+@pytest.mark.cosim
 @pytest.mark.parametrize("layer", ["rtl_layer", "native_layer"])
 def test_a_pulse_off_the_pwm_period_is_a_one_line_error(layer, request):
     imu = Mpu6000Sample(0, 0, 0, 0, 0, 0, 0)

@@ -63,6 +63,25 @@ def test_capture_on_the_frame_grid_equals_the_whole_history():
         assert (widths[0], timed_out[0]) == (full.width_ticks, full.timeout), f"frame {frame}"
 
 
+@pytest.mark.parametrize("flown_s", [0, 32, 64, 1000, 3600])
+def test_a_pulse_reads_its_exact_width_first_at_its_fall_plus_the_latency(flown_s):
+    """Whole-µs pulses on the 1 µs tick, as the RTL layers replay them: each width is read
+    exactly, first at its fall plus the host port's latency, after any time of flight
+    (seconds as floats lose the µs from 32 s on, where a tick-late edge once showed)."""
+    capture = PwmCapture(1)
+    start_us = flown_s * 1_000_000
+    previous = None
+    for period in range(2000):
+        width_us = 1000 + 7 * (period % 143)  # widths 1000..1994 µs, each new
+        pulse = Pulse(0, start_us, width_us)
+        seen_us = start_us + width_us + HOST_LATENCY
+        before = capture.capture([pulse], seen_us - 1)[0][0]
+        assert before == (0.0 if previous is None else previous), start_us
+        widths, timed_out = capture.capture([], seen_us)
+        assert (widths[0], timed_out[0]) == (width_us, False), start_us
+        previous, start_us = width_us, start_us + 2500
+
+
 def test_width_measured_within_one_tick_and_timeout_after_100_ms():
     capture = PwmCapture(2)
     pulses = [Pulse(0, k * 2500, 1500) for k in range(8)]
