@@ -68,7 +68,11 @@ class PwmCaptureModel:
 
     def sampled(self, rise_s: float, fall_s: float, first_edge_s: float = 0.0) -> tuple[int, int]:
         """The clock edges that first sample a pulse's rise and its fall (equal: a pulse
-        between two samples, which the core never sees)."""
+        between two samples, which the core never sees).
+
+        In float seconds an edge is exact while the time keeps its tick: up to about 32 s
+        at 1 MHz. A caller on a longer timeline computes the edges in integers and hands
+        them to :meth:`capture_sampled` (the rig's ``PwmCapture`` does)."""
         return self._edge(rise_s, first_edge_s), self._edge(fall_s, first_edge_s)
 
     def last_edge(self, at_s: float, first_edge_s: float = 0.0) -> int:
