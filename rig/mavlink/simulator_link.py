@@ -140,7 +140,8 @@ class SimulatorLink:
         self.stats = LinkStats()
         self.mav = mavlink.MAVLink(None, RIG_SYSTEM_ID, RIG_COMPONENT_ID)
         self.mav.robust_parsing = True  # garbage is counted, never an exception mid-run
-        #: Interval the autopilot asked for HIL_STATE_QUATERNION (µs), None = not asked.
+        #: Interval the autopilot asked for HIL_STATE_QUATERNION (µs), None = not asked (or
+        #: stopped).
         self.state_interval_us: int | None = None
         self.peer_heartbeat: mavlink.MAVLink_heartbeat_message | None = None
         self.lockstep = False
@@ -379,7 +380,10 @@ class SimulatorLink:
         elif kind == "COMMAND_LONG":
             is_interval = message.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
             if is_interval and int(message.param1) == mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION:
-                self.state_interval_us = int(message.param2)
+                # MAVLink: -1 stops the stream; 0 asks for a default rate, which a
+                # simulator has none of (PX4 asks for 5000 µs)
+                interval_us = int(message.param2)
+                self.state_interval_us = interval_us if interval_us > 0 else None
         elif kind == "BAD_DATA":
             self.stats.malformed += 1
 

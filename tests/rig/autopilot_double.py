@@ -21,7 +21,8 @@ Behaviours:
   its outputs twice in one lockstep step).
 
 ``--answer-delay-ms D`` holds each answer D ms: an autopilot that computes longer than the
-rig's own work between sending a frame and asking for its answer.
+rig's own work between sending a frame and asking for its answer. ``--state-interval-us I``
+asks for HIL_STATE_QUATERNION every I µs instead (MAVLink: -1 stops it, 0 a default rate).
 
 Each received frame is appended to ``--record`` (one JSON line: msg type and fields), so a
 test can check what reached the autopilot.
@@ -71,6 +72,7 @@ def main() -> None:
     parser.add_argument("--record", default=None)
     parser.add_argument("--ignore-sigint", action="store_true", help="a hung shutdown")
     parser.add_argument("--answer-delay-ms", type=float, default=0.0)
+    parser.add_argument("--state-interval-us", type=int, default=5000)
     args = parser.parse_args()
     if args.ignore_sigint:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -84,7 +86,7 @@ def main() -> None:
         ).pack(mav)
         + mav.command_long_encode(
             0, 0, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-            mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, 5000, 0, 0, 0, 0, 0,
+            mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, args.state_interval_us, 0, 0, 0, 0, 0,
         ).pack(mav)
     )  # fmt: skip
     try:

@@ -22,7 +22,7 @@ import pyulog
 
 from rig.errors import AutopilotStalled, ScenarioError
 from rig.lockstep.autopilots import AUTOPILOT_STOP_GRACE_S
-from rig.lockstep.loop import RunOptions, run_scenario
+from rig.lockstep.loop import RunOptions, next_slot_us, run_scenario
 from rig.mavlink.px4_api import HilSensorFields, Ports, mavlink
 from rig.mavlink.simulator_link import LinkTimeouts
 from rig.scenarios.scenario import scenario_from_dict
@@ -238,6 +238,40 @@ def test_same_seed_gives_identical_rig_log(tmp_path, free_instance):
     assert not np.array_equal(
         data(first, "sensor_combined")["gyro_rad[0]"], data(other, "sensor_combined")["gyro_rad[0]"]
     )
+
+
+@pytest.mark.parametrize(("frame_us", "interval_us", "per_second"),
+                         [(1000, 5000, 200), (4000, 5000, 200), (2500, 5000, 200),
+                          (4000, 3000, 250), (1000, 300, 1000)])  # fmt: skip
+def test_a_stream_keeps_its_rate_on_average_at_any_frame_rate(frame_us, interval_us, per_second):
+    """A message goes with the first frame at or after its slot, the slots a fixed grid from
+    the first message: the asked rate on average, capped at one a frame."""
+    sent, due = [], None
+    for time_us in range(37_000, 37_000 + 2_000_000, frame_us):  # the first at any frame
+        if due is None or time_us >= due:
+            slot = time_us if due is None else due
+            due = next_slot_us(due, time_us, interval_us)
+            sent.append(time_us)
+            assert slot <= time_us < slot + max(frame_us, interval_us)  # with its slot's frame
+    assert len(sent) == 2 * per_second
+
+
+def test_ground_truth_at_250_hz_frames_comes_at_the_200_hz_px4_asks_for(tmp_path, free_instance):
+    """5000 µs asked at 4000 µs frames: four frames in five carry HIL_STATE_QUATERNION."""
+    _, _, received = fly(tmp_path, free_instance, duration_s=2.0, rates={"imu_hz": 250})
+    state_times = [m["time_usec"] for m in received if m["mavpackettype"] == "HIL_STATE_QUATERNION"]
+    assert set(np.diff(state_times)) == {4000, 8000}
+    span_s = (state_times[-1] - state_times[0]) / 1e6
+    assert len(state_times) - 1 == pytest.approx(200 * span_s, abs=1)
+
+
+@pytest.mark.parametrize("interval_us", [-1, 0])
+def test_no_ground_truth_when_the_autopilot_stops_it_or_names_no_rate(
+    tmp_path, free_instance, interval_us
+):
+    _, _, received = fly(tmp_path, free_instance, "--state-interval-us", str(interval_us))
+    assert {m["mavpackettype"] for m in received} >= {"HIL_SENSOR"}
+    assert not [m for m in received if m["mavpackettype"] == "HIL_STATE_QUATERNION"]
 
 
 def test_reading_the_sensors_while_the_autopilot_computes_changes_nothing(
