@@ -196,7 +196,8 @@ class PwmCapture:
             fall_us = start_us + width_us
             # The first edge at or after each time: a ceiling division.
             rise_edge = -(-start_us * 1_000_000 // tick_ps)
-            recents[channel].append((rise_edge, -(-fall_us * 1_000_000 // tick_ps)))
+            fall_edge = -(-fall_us * 1_000_000 // tick_ps)
+            recents[channel].append((rise_edge, fall_edge))
             last_us[channel] = (start_us, fall_us)
             seen_fall_us = fall_us + latency_us  # seen by a read
             if seen_fall_us < next_change_us[channel]:
