@@ -1,5 +1,13 @@
 """Child processes the rig starts in their own session (autopilots, campaign cases): how
-one is stopped and how its end is told, in one place."""
+one is started, stopped and how its end is told, in one place.
+
+Each child starts through this module's launcher (``python -m rig.processes PID ARGV…``),
+which sets the child up and then ``exec``\\ s it. A ``preexec_fn`` could do that set-up,
+but Python would run it between ``fork`` and ``exec``, in a copy of a process whose other
+threads may hold locks mid-call: the rig often runs in a thread beside others (MAVSDK's
+gRPC in the tests, the live view's server, Dask), and that can deadlock or crash. Without
+one, :mod:`subprocess` starts the child with ``vfork``, which runs nothing of the parent's.
+"""
 
 from __future__ import annotations
 
@@ -8,33 +16,71 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import IO, NoReturn
 
 #: ``prctl`` option: the signal a process gets when its parent dies (linux/prctl.h).
 _PR_SET_PDEATHSIG = 1
-#: The C library, loaded here in the parent: the forked child (``preexec_fn``) must not
-#: look it up, which would start ``ldconfig`` between fork and exec.
-_LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
 
 
-def restore_sigint() -> None:
-    """``preexec_fn`` of a child the rig stops with SIGINT (autopilots, campaign cases):
-    SIGINT back to its default action. A shell ignores SIGINT in what it starts in the
-    background (``nohup … &``, CI jobs, cron) and a child inherits that across exec: the
-    rig's SIGINT would then do nothing, and the child be killed before closing its log."""
-    if _LIBC is not None:  # libc's signal(): no Python-level thread checks between fork and exec
-        _LIBC.signal(signal.SIGINT, signal.SIG_DFL)
-    else:
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
+def start_child(argv: Sequence[str], *, cwd: Path | None = None,
+                env: dict[str, str] | None = None, stdin: int | IO[bytes] | None = None,
+                stdout: int | IO[bytes] | None = None,
+                stderr: int | IO[bytes] | None = None) -> subprocess.Popen[bytes]:  # fmt: skip
+    """Start ``argv`` in a session of its own (a Ctrl-C at the rig's terminal reaches the
+    rig alone, which stops its children in order), through the launcher, which
+    ``exec``\\ s it as the same process. Returns once it has: the pid is then the child's,
+    as with :class:`subprocess.Popen`, which also raises :class:`OSError` alike when
+    ``argv`` cannot be run.
+
+    The launcher gives the child what it needs to be stopped cleanly, whatever the rig
+    inherited:
+
+    - SIGINT at its default action. A shell ignores SIGINT in what it starts in the
+      background (``nohup … &``, CI jobs, cron), and a child inherits that across
+      ``exec``: the rig's SIGINT would do nothing, and the child be killed before
+      closing its log.
+    - Linux: SIGKILL when the rig dies, even by SIGKILL itself (the kernel's parent-death
+      signal, sent when the thread that started the child ends: the rig stops its children
+      before then). PX4 never exits on its own once its simulator is gone, and a
+      reference autopilot would connect to the next rig on its ports. Elsewhere the rig
+      still stops its children on every way out it controls.
+    """
+    # as subprocess does: a pipe closed on exec, which carries the errno if exec fails
+    exec_read, exec_write = os.pipe()
+    try:
+        launcher = [sys.executable, "-m", "rig.processes", str(os.getpid()), str(exec_write)]
+        process = subprocess.Popen([*launcher, *argv], cwd=cwd, env=env, stdin=stdin,
+                                   stdout=stdout, stderr=stderr, start_new_session=True,
+                                   pass_fds=(exec_write,))  # fmt: skip
+    finally:
+        os.close(exec_write)
+    with os.fdopen(exec_read, "rb") as exec_failure:
+        failure = exec_failure.read()
+    if failure:
+        process.wait()
+        code, _, reason = failure.decode().partition(" ")
+        raise OSError(int(code), reason, argv[0])
+    return process
 
 
-def die_with_parent() -> None:
-    """``preexec_fn`` for a child that must not outlive the rig (PX4 never exits on its
-    own once its simulator is gone): SIGKILL when the rig dies, even by SIGKILL itself.
-    Linux only; elsewhere nothing (the rig still stops its children on every way out
-    it controls). SIGINT is restored too (:func:`restore_sigint`): PX4 is stopped with it."""
-    restore_sigint()
-    if _LIBC is not None:
-        _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+def _launch(parent: int, exec_write: int, argv: list[str]) -> NoReturn:
+    """The launcher's work in the child: SIGINT to its default, the parent-death signal,
+    then ``exec`` (the same process, so the rig's :class:`subprocess.Popen` is the child's),
+    or the errno and reason on ``exec_write`` for :func:`start_child` to raise."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # the rig died before prctl: nothing would stop this child
+        raise SystemExit(1)
+    os.set_inheritable(exec_write, False)  # closed by a successful exec
+    try:
+        os.execvp(argv[0], argv)
+    except OSError as error:
+        os.write(exec_write, f"{error.errno} {error.strerror}".encode())
+        raise SystemExit(127) from None
 
 
 def stop_process_group(process: subprocess.Popen[bytes], grace_s: float) -> bool:
@@ -59,3 +105,7 @@ def exit_description(process: subprocess.Popen[bytes]) -> str | None:
     if code is None:
         return None
     return f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+
+
+if __name__ == "__main__":
+    _launch(int(sys.argv[1]), int(sys.argv[2]), sys.argv[3:])

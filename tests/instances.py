@@ -20,7 +20,8 @@ def worker_instances(first: int, count: int) -> range:
     share = count // workers
     if share == 0:
         raise RuntimeError(f"{workers} test workers cannot share {count} instances from {first}")
-    start = first + int(worker.removeprefix("gw")) * share
+    # a worker that replaces a crashed one is numbered on (gw2 of 2): it takes a slice again
+    start = first + int(worker.removeprefix("gw")) % workers * share
     return range(start, start + share)
 
 

@@ -59,7 +59,7 @@ import numpy as np
 from quad_model.vehicle import Vehicle
 from rig.errors import RigError
 from rig.mavlink.px4_api import mavlink
-from rig.processes import die_with_parent, exit_description, stop_process_group
+from rig.processes import exit_description, start_child, stop_process_group
 
 #: The environment variable naming the user's PX4 build (or PX4-Autopilot checkout).
 PX4_DIR_ENV = "PX4_DIR"
@@ -536,12 +536,11 @@ class Px4Sitl:
         search_path = f"{self.bin_dir.resolve()}:{os.environ.get('PATH', '')}"
         environment = dict(os.environ, PX4_SYS_AUTOSTART=str(AIRFRAME), PATH=search_path)
         with self.console_path.open("wb") as console:
-            self._process = subprocess.Popen(
+            self._process = start_child(
                 [str(self.bin_dir.resolve() / "px4"), "-d", "-i", str(self.instance),
                  "-w", str(self.work_dir.resolve()), str(self.build.etc)],
                 cwd=self.work_dir, env=environment, stdin=subprocess.DEVNULL,
-                stdout=console, stderr=subprocess.STDOUT, start_new_session=True,
-                preexec_fn=die_with_parent,
+                stdout=console, stderr=subprocess.STDOUT,
             )  # fmt: skip
 
     def starting(self) -> bool:

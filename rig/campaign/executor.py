@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import multiprocessing
 import os
 import subprocess
 import sys
@@ -20,7 +21,7 @@ import tomli_w
 from rig.campaign.expansion import CaseSpec, expand
 from rig.campaign.results import RESULTS_DB, CaseResult, ResultsDb
 from rig.campaign.schema import CASE_LOGS, Campaign, CampaignError
-from rig.processes import restore_sigint, stop_process_group
+from rig.processes import start_child, stop_process_group
 
 #: Grace after SIGINT for a timed-out case to close its logs and stop its autopilot.
 STOP_GRACE_S = 10.0
@@ -39,13 +40,8 @@ def run_case(spec: CaseSpec) -> CaseResult:
     (run_dir / "case.json").write_text(json.dumps(asdict(spec), indent=1, default=str))
     started = time.monotonic()
     with open(run_dir / "case.log", "wb") as output:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "rig.campaign.case", str(run_dir)],
-            stdout=output,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-            preexec_fn=restore_sigint,
-        )
+        process = start_child([sys.executable, "-m", "rig.campaign.case", str(run_dir)],
+                              stdout=output, stderr=subprocess.STDOUT)  # fmt: skip
         try:
             process.wait(timeout=spec.timeout_s)
             hung = False
@@ -141,9 +137,15 @@ def campaign_executor(
     scheduler: str | None = None, workers: int | None = None
 ) -> Iterator[Executor]:
     """A local process pool of ``workers`` (default: the cores this process may use), or
-    the Dask cluster at ``scheduler`` (``tcp://HOST:8786``) through its executor."""
+    the Dask cluster at ``scheduler`` (``tcp://HOST:8786``) through its executor.
+
+    The pool's workers come from a fork server, not a fork of this process: the caller
+    may have threads (a progress display, a rig flying), and a forked copy of them can
+    deadlock or crash the worker."""
     if scheduler is None:
-        with ProcessPoolExecutor(max_workers=workers or len(os.sched_getaffinity(0))) as pool:
+        workers = workers or len(os.sched_getaffinity(0))
+        context = multiprocessing.get_context("forkserver")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
             yield pool
         return
     from dask.distributed import Client  # imported on demand: Dask is slow to import

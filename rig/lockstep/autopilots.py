@@ -17,7 +17,7 @@ from rig.autopilots.px4 import Px4Sitl, airframe_parameters, find_px4, px4_param
 from rig.autopilots.reference.params import is_parameter
 from rig.mavlink.px4_api import Ports
 from rig.mavlink.simulator_link import SimulatorLink
-from rig.processes import exit_description, restore_sigint, stop_process_group
+from rig.processes import exit_description, start_child, stop_process_group
 
 #: Seconds the reference autopilot gets to close its log after SIGINT.
 AUTOPILOT_STOP_GRACE_S = 5.0
@@ -75,8 +75,7 @@ class ReferenceAutopilotRun:
         self._process: subprocess.Popen[bytes] | None = None
 
     def connect(self, link: SimulatorLink) -> None:
-        self._process = subprocess.Popen(list(self._argv), start_new_session=True,
-                                         preexec_fn=restore_sigint)  # fmt: skip
+        self._process = start_child(self._argv)
         link.accept("the reference autopilot (python -m rig.autopilots.reference)",
                     answers_every_frame=True, poll_answers=True)  # fmt: skip
 

@@ -1,9 +1,12 @@
 """The ``rig`` command: one-line errors, and Ctrl-C leaving readable logs."""
 
+import contextlib
+import resource
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
@@ -12,8 +15,21 @@ import pyulog
 from rig.campaign.results import CaseResult
 from rig.cli import main
 from rig.mavlink.px4_api import free_instance as find_free_instance
-from rig.processes import restore_sigint
 from tests.instances import worker_instances
+
+
+@contextlib.contextmanager
+def sigint_in_children(ignored: bool) -> Iterator[None]:
+    """SIGINT in the processes started inside: ignored, as a shell starts a background job,
+    or at its default, as from a terminal (a handler of Python's is the default after
+    ``exec``). Set here for the moment rather than in a ``preexec_fn``, which would run
+    Python in a forked copy of this process and its threads (other tests' rigs, gRPC)."""
+    action = signal.SIG_IGN if ignored else signal.default_int_handler
+    previous = signal.signal(signal.SIGINT, action)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_missing_scenario_is_one_line_on_stderr(capsys, tmp_path):
@@ -43,12 +59,12 @@ def test_unknown_vehicle_is_a_scenario_error(capsys, tmp_path):
 @pytest.mark.closed_loop
 def test_ctrl_c_stops_cleanly_with_readable_logs(tmp_path, free_instance):
     out = tmp_path / "run"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--instance",
-         str(free_instance()), "--out", str(out)],
-        stderr=subprocess.PIPE, text=True,
-        preexec_fn=restore_sigint,  # as from a terminal, also when pytest runs in the background
-    )  # fmt: skip
+    with sigint_in_children(ignored=False):  # also when pytest runs in the background
+        process = subprocess.Popen(
+            [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--instance",
+             str(free_instance()), "--out", str(out)],
+            stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
     deadline = time.monotonic() + 180  # generous: a loaded CI machine compiles numba first
     while not ((out / "rig.ulg").is_file() and (out / "rig.ulg").stat().st_size > 200_000):
         if time.monotonic() > deadline or process.poll() is not None:
@@ -148,33 +164,25 @@ def test_campaign_announces_its_name_and_runs_to_the_report(capsys, tmp_path, mo
     assert (out / "report.html").is_file()
 
 
-def _limit_file_size(limit_bytes: int):
-    """For the child: files cannot grow past ``limit_bytes`` (EFBIG, as a full disk's ENOSPC)."""
-
-    def limit() -> None:
-        import resource
-
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write fails instead of killing
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
-
-    return limit
-
-
 @pytest.mark.closed_loop
 def test_a_full_disk_ends_the_run_in_one_line_with_whole_logs(tmp_path, free_instance):
     """The disk fills mid-flight (a 3 MB file-size limit on the rig and its autopilot): the
     run stops with one line, and each log ends on its last whole message."""
     out = tmp_path / "run"
-    process = subprocess.run(
+    rig = subprocess.Popen(
         [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--instance",
          str(free_instance()), "--out", str(out)],
-        capture_output=True, text=True, timeout=600, preexec_fn=_limit_file_size(3 << 20),
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
-    assert process.returncode == 1, process.stderr
-    assert "Traceback" not in process.stderr
-    last = process.stderr.splitlines()[-1]
-    assert last.startswith("rig: error: "), process.stderr
-    assert "File too large" in process.stderr  # the rig's or the autopilot's own line
+    # set from here, as the rig's logs have not grown yet: its children inherit the limit,
+    # and Python ignores SIGXFSZ, so a write fails (EFBIG) where a full disk's gives ENOSPC
+    resource.prlimit(rig.pid, resource.RLIMIT_FSIZE, (3 << 20, 3 << 20))
+    _, stderr = rig.communicate(timeout=600)
+    assert rig.returncode == 1, stderr
+    assert "Traceback" not in stderr
+    last = stderr.splitlines()[-1]
+    assert last.startswith("rig: error: "), stderr
+    assert "File too large" in stderr  # the rig's or the autopilot's own line
     for name in ("rig.ulg", "autopilot.ulg"):
         log = pyulog.ULog(str(out / name))
         assert not log.file_corruption, name
@@ -187,13 +195,14 @@ def test_a_rig_started_in_the_background_still_stops_its_autopilot_cleanly(tmp_p
     CI); the autopilot inherited that, ignored the rig's SIGINT at the end of the run and
     was killed before it wrote its last buffer (a 1-hour soak lost its last 2 s)."""
     out = tmp_path / "run"
-    process = subprocess.run(
-        [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--duration", "3",
-         "--instance", str(free_instance()), "--out", str(out)],
-        capture_output=True, text=True, timeout=300,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
-    )  # fmt: skip
-    assert process.returncode == 0, process.stderr
+    with sigint_in_children(ignored=True):
+        rig = subprocess.Popen(
+            [sys.executable, "-m", "rig", "run", "takeoff_hover_land", "--duration", "3",
+             "--instance", str(free_instance()), "--out", str(out)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+    _, stderr = rig.communicate(timeout=300)
+    assert rig.returncode == 0, stderr
     rig_log = pyulog.ULog(str(out / "rig.ulg"), [])
     assert rig_log.logged_messages[-1].message == "run completed: 3000 frames"
     status = pyulog.ULog(str(out / "autopilot.ulg"), ["vehicle_status"])
