@@ -57,7 +57,12 @@ def start_child(argv: Sequence[str], *, cwd: Path | None = None,
     finally:
         os.close(exec_write)
     with os.fdopen(exec_read, "rb") as exec_failure:
-        failure = exec_failure.read()
+        try:
+            failure = exec_failure.read()
+        except BaseException:  # Ctrl-C, SIGTERM: the launcher, stopped or slow, is no child yet
+            process.kill()
+            process.wait()
+            raise
     if failure:
         process.wait()
         code, _, reason = failure.decode().partition(" ")

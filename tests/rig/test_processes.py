@@ -1,8 +1,10 @@
 """The launcher every child of the rig starts through (``rig.processes.start_child``)."""
 
+import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -77,3 +79,41 @@ def test_the_child_is_the_process_the_rig_holds(tmp_path):
     out, _ = child.communicate(b"\n", timeout=30)
     assert int(out) == child.pid
     assert exit_description(child) == "exit code 3"
+
+
+class _Interrupted(Exception):
+    pass
+
+
+def _raise_interrupted(signum, frame):
+    raise _Interrupted
+
+
+def test_an_interrupted_start_leaves_no_launcher_behind(tmp_path):
+    """Ctrl-C (here SIGUSR1) while the launcher has not yet ``exec``\\ ed, as when it is
+    stopped: the rig holds no child to stop yet, so the launcher must not outlive the call."""
+    (tmp_path / "sitecustomize.py").write_text(
+        "import os, signal\nos.kill(os.getpid(), signal.SIGSTOP)\n"
+    )
+    previous = signal.signal(signal.SIGUSR1, _raise_interrupted)
+    main = threading.main_thread().ident
+    assert main is not None
+    timer = threading.Timer(1.0, signal.pthread_kill, (main, signal.SIGUSR1))
+    timer.start()
+    try:
+        with pytest.raises(_Interrupted):  # the launcher stops itself before it can exec
+            start_child(["sh", "-c", "sleep 60", str(tmp_path)],
+                        env={**os.environ, "PYTHONPATH": str(tmp_path)})  # fmt: skip
+    finally:
+        timer.join()
+        signal.signal(signal.SIGUSR1, previous)
+    left = [pid for pid in filter(str.isdigit, os.listdir("/proc"))
+            if _alive(int(pid)) and str(tmp_path).encode() in _cmdline(pid)]  # fmt: skip
+    assert not left
+
+
+def _cmdline(pid: str) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
