@@ -30,9 +30,8 @@ def start_child(argv: Sequence[str], *, cwd: Path | None = None,
                 stderr: int | IO[bytes] | None = None) -> subprocess.Popen[bytes]:  # fmt: skip
     """Start ``argv`` in a session of its own (a Ctrl-C at the rig's terminal reaches the
     rig alone, which stops its children in order), through the launcher, which
-    ``exec``\\ s it as the same process. Returns once it has: the pid is then the child's,
-    as with :class:`subprocess.Popen`, which also raises :class:`OSError` alike when
-    ``argv`` cannot be run.
+    ``exec``\\ s it as the same process. Returns once it has, as :class:`subprocess.Popen`
+    does, and raises :class:`OSError` as it does when ``argv`` cannot be run.
 
     The launcher gives the child what it needs to be stopped cleanly, whatever the rig
     inherited:
@@ -49,14 +48,14 @@ def start_child(argv: Sequence[str], *, cwd: Path | None = None,
     """
     # as subprocess does: a pipe closed on exec, which carries the errno if exec fails
     exec_read, exec_write = os.pipe()
-    try:
-        launcher = [sys.executable, "-m", "rig.processes", str(os.getpid()), str(exec_write)]
-        process = subprocess.Popen([*launcher, *argv], cwd=cwd, env=env, stdin=stdin,
-                                   stdout=stdout, stderr=stderr, start_new_session=True,
-                                   pass_fds=(exec_write,))  # fmt: skip
-    finally:
-        os.close(exec_write)
     with os.fdopen(exec_read, "rb") as exec_failure:
+        try:
+            launcher = [sys.executable, "-m", "rig.processes", str(os.getpid()), str(exec_write)]
+            process = subprocess.Popen([*launcher, *argv], cwd=cwd, env=env, stdin=stdin,
+                                       stdout=stdout, stderr=stderr, start_new_session=True,
+                                       pass_fds=(exec_write,))  # fmt: skip
+        finally:
+            os.close(exec_write)
         try:
             failure = exec_failure.read()
         except BaseException:  # Ctrl-C, SIGTERM: the launcher, stopped or slow, is no child yet
