@@ -1,12 +1,10 @@
 """The ``rig`` command: one-line errors, and Ctrl-C leaving readable logs."""
 
-import contextlib
 import resource
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
@@ -16,20 +14,7 @@ from rig.campaign.results import CaseResult
 from rig.cli import main
 from rig.mavlink.px4_api import free_instance as find_free_instance
 from tests.instances import worker_instances
-
-
-@contextlib.contextmanager
-def sigint_in_children(ignored: bool) -> Iterator[None]:
-    """SIGINT in the processes started inside: ignored, as a shell starts a background job,
-    or at its default, as from a terminal (a handler of Python's is the default after
-    ``exec``). Set here for the moment rather than in a ``preexec_fn``, which would run
-    Python in a forked copy of this process and its threads (other tests' rigs, gRPC)."""
-    action = signal.SIG_IGN if ignored else signal.default_int_handler
-    previous = signal.signal(signal.SIGINT, action)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+from tests.sigint import sigint_in_children
 
 
 def test_missing_scenario_is_one_line_on_stderr(capsys, tmp_path):

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from rig.processes import exit_description, start_child
+from tests.sigint import sigint_in_children
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 
@@ -18,11 +19,8 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="re
 def _sigint_ignored_in(argv_start) -> bool:
     """Whether ``cat /proc/self/status``, started by ``argv_start`` from this process while
     it ignores SIGINT (a background job's lot), ignores SIGINT too."""
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
+    with sigint_in_children(ignored=True):
         child = argv_start(["cat", "/proc/self/status"], stdout=subprocess.PIPE)
-    finally:
-        signal.signal(signal.SIGINT, previous)
     status, _ = child.communicate(timeout=30)
     ignored = next(line for line in status.decode().splitlines() if line.startswith("SigIgn:"))
     return bool(int(ignored.split()[1], 16) & 1 << (signal.SIGINT - 1))
